@@ -1,0 +1,63 @@
+#include "cli_common.h"
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <mutex>
+
+#include <unistd.h>
+
+#include <paps/core/error.h>
+
+namespace paps::cli {
+
+Arguments Arguments::parse(int argc, char** argv, int first, const std::vector<std::string>& flags) {
+  Arguments a;
+  for (int i = first; i < argc; ++i) {
+    std::string s = argv[i];
+    if (s.rfind("--", 0) == 0 && s.size() > 2) {
+      const std::string name = s.substr(2);
+      const bool is_flag = std::find(flags.begin(), flags.end(), name) != flags.end();
+      if (is_flag) { a.options[name] = "1"; continue; }
+      if (i + 1 >= argc) throw InvalidParameter(name, "(missing)", "a value after --" + name);
+      a.options[name] = argv[++i];
+    } else {
+      a.positional.push_back(s);
+    }
+  }
+  return a;
+}
+
+double Arguments::number(const std::string& name, double fallback) const {
+  const auto it = options.find(name);
+  if (it == options.end()) return fallback;
+  char* end = nullptr;
+  const double v = std::strtod(it->second.c_str(), &end);
+  if (end == it->second.c_str() || *end != '\0') throw InvalidParameter(name, it->second, "a number");
+  return v;
+}
+
+std::string Arguments::text(const std::string& name, const std::string& fallback) const {
+  const auto it = options.find(name);
+  return it == options.end() ? fallback : it->second;
+}
+
+void Arguments::allowOnly(const std::vector<std::string>& known) const {
+  for (const auto& [name, value] : options)
+    if (std::find(known.begin(), known.end(), name) == known.end())
+      throw InvalidParameter(name, value, "a known option (see paps --help)");
+}
+
+ProgressCallback progressBar(bool quiet) {
+  if (quiet || !isatty(fileno(stderr))) return {};
+  return [](const std::string& stage, float f) {
+    const int width = 30, filled = static_cast<int>(f * width + 0.5f);
+    std::fprintf(stderr, "\r%-18s [%.*s%*s] %3d%%", stage.c_str(), filled,
+                 "##############################", width - filled, "", static_cast<int>(f * 100 + 0.5f));
+    if (f >= 1.f) std::fprintf(stderr, "\n");
+    std::fflush(stderr);
+    return true;
+  };
+}
+
+}  // namespace paps::cli

@@ -1,0 +1,28 @@
+#pragma once
+// Small shared pieces of the `paps` command line: argument parsing and a progress bar.
+#include <map>
+#include <string>
+#include <vector>
+
+#include <paps/core/progress.h>
+
+namespace paps::cli {
+
+/// Positional arguments and --name value options. Flags without a value map to "1".
+struct Arguments {
+  std::vector<std::string> positional;
+  std::map<std::string, std::string> options;
+
+  static Arguments parse(int argc, char** argv, int first, const std::vector<std::string>& flags);
+  bool has(const std::string& name) const { return options.count(name) > 0; }
+  /// Value of --name as a number; throws paps::InvalidParameter when it is not one.
+  double number(const std::string& name, double fallback) const;
+  std::string text(const std::string& name, const std::string& fallback) const;
+  /// Throws paps::InvalidParameter for an option not in `known`.
+  void allowOnly(const std::vector<std::string>& known) const;
+};
+
+/// A progress bar on stderr (only when stderr is a terminal or `force` is set).
+ProgressCallback progressBar(bool quiet);
+
+}  // namespace paps::cli

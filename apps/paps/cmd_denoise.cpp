@@ -1,0 +1,79 @@
+// paps denoise IN OUT [options]
+#include <cstdio>
+
+#include <paps/core/cloud_io.h>
+#include <paps/core/error.h>
+#include <paps/filters/point_bilateral_filter.h>
+#include <paps/filters/similarity_denoising.h>
+
+#include "cli_common.h"
+#include "commands.h"
+
+namespace paps::cli {
+
+const char* kDenoiseUsage =
+    "usage: paps denoise IN OUT [options]\n"
+    "  IN, OUT                .pcd or .ply; every field of IN is kept, only x y z move\n"
+    "  --method M             similarity (default) or bilateral\n"
+    "  --radius R             neighbourhood radius in metres (default: from --neighbours)\n"
+    "  --neighbours N         mean neighbour count that sets the radius (default 30)\n"
+    "  --grid N               descriptor grid N x N (default 4)\n"
+    "  --sigma S              similarity scale in metres (default: from the descriptors)\n"
+    "  --sigma-scale F        multiplier of the automatic sigma^2 (default 1)\n"
+    "  --smoothing N          mean-curvature-motion iterations (default 10)\n"
+    "  --patches K            similar patches averaged (default 16)\n"
+    "  --iterations N         bilateral passes (default 1)\n"
+    "  --quiet                no progress bar\n";
+
+int runDenoise(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help"});
+  if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
+  a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
+               "patches", "iterations", "quiet"});
+  if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
+  const std::string& in_path = a.positional[0];
+  const std::string& out_path = a.positional[1];
+  const std::string method = a.text("method", "similarity");
+  if (method != "similarity" && method != "bilateral")
+    throw InvalidParameter("method", method, "similarity or bilateral");
+
+  pcl::PCLPointCloud2 cloud = loadCloud(in_path);
+  const Positions in = positionsOf(cloud);
+  std::printf("read %s: %zu points (%zu finite)\n", in_path.c_str(), in.size(), countFinite(in));
+  const ProgressCallback progress = progressBar(a.has("quiet"));
+  Positions out;
+  if (method == "similarity") {
+    SimilarityDenoisingParameters p;
+    p.radius = static_cast<float>(a.number("radius", 0));
+    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    p.grid_size = static_cast<int>(a.number("grid", p.grid_size));
+    p.sigma = static_cast<float>(a.number("sigma", 0));
+    p.sigma_scale = static_cast<float>(a.number("sigma-scale", p.sigma_scale));
+    p.smoothing_iterations = static_cast<int>(a.number("smoothing", p.smoothing_iterations));
+    p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
+    SimilarityDenoisingReport r;
+    out = denoiseBySimilarity(in, p, &r, {}, progress);
+    std::printf("similarity denoising: radius %g m%s (mean %.1f neighbours), grid %dx%d, sigma %g m%s, "
+                "%d smoothing iterations, %d similar patches\n",
+                r.radius, p.radius > 0 ? "" : " (chosen)", r.mean_neighbours, p.grid_size, p.grid_size,
+                r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches);
+    std::printf("moved %zu points; %zu NaN points passed through\n", r.moved, r.non_finite);
+    if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours and were left in place\n", r.isolated);
+  } else {
+    PointBilateralParameters p;
+    p.radius = static_cast<float>(a.number("radius", 0));
+    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    p.iterations = static_cast<int>(a.number("iterations", p.iterations));
+    PointBilateralReport r;
+    out = bilateralFilterPositions(in, p, &r, {}, progress);
+    std::printf("bilateral filter: radius %g m%s, %d passes; moved %zu points\n", r.radius,
+                p.radius > 0 ? "" : " (chosen)", p.iterations, r.moved);
+    if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours and were left in place\n", r.isolated);
+  }
+  writePositions(out, cloud);
+  saveCloudAtomic(out_path, cloud);
+  std::printf("wrote %s\n", out_path.c_str());
+  return 0;
+}
+
+}  // namespace paps::cli

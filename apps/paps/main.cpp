@@ -1,0 +1,36 @@
+// The `paps` command line: one subcommand per algorithm, one clear error line on failure.
+#include <cstdio>
+#include <cstring>
+#include <exception>
+
+#include <paps/core/error.h>
+
+#include "commands.h"
+
+namespace {
+const char* kUsage =
+    "PAPS: patch-aware processing of surfaces\n"
+    "usage: paps COMMAND ...\n"
+    "  denoise IN OUT [options]      similarity-based denoising (or --method bilateral)\n"
+    "  bench denoise [options]       ours vs PCL MLS and the bilateral filter, in one run\n"
+    "Run 'paps COMMAND --help' for the options of a command.\n";
+}
+
+int main(int argc, char** argv) {
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
+    std::fputs(kUsage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  try {
+    if (!std::strcmp(argv[1], "denoise")) return paps::cli::runDenoise(argc, argv);
+    if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
+    std::fprintf(stderr, "paps: unknown command '%s'\n%s", argv[1], kUsage);
+    return 2;
+  } catch (const paps::Error& e) {
+    std::fprintf(stderr, "paps: error: %s\n", e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "paps: unexpected error: %s\n", e.what());
+    return 1;
+  }
+}

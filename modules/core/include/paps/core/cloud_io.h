@@ -1,0 +1,29 @@
+#pragma once
+// Reading and writing clouds with every field kept: a stage reads x, y, z out of the blob,
+// and writes the moved positions back into it, so intensity, colour, normals... survive.
+// Writes are atomic: a temporary file beside the target, then a rename.
+#include <string>
+
+#include <pcl/PCLPointCloud2.h>
+
+#include <paps/core/positions.h>
+
+namespace paps {
+
+/// Loads a .pcd or .ply file. Throws IoError naming the path when it is missing, unreadable,
+/// of another format, or has no x/y/z fields.
+pcl::PCLPointCloud2 loadCloud(const std::string& path);
+
+/// Writes a .pcd (binary) or .ply (binary) file atomically. Throws IoError on failure; the
+/// target is then untouched and no temporary file is left.
+void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud);
+
+/// x, y, z of every point of a blob (float32 or float64 fields).
+Positions positionsOf(const pcl::PCLPointCloud2& cloud);
+/// Writes positions back into the x, y, z fields of a blob of the same size; is_dense follows.
+void writePositions(const Positions& p, pcl::PCLPointCloud2& cloud);
+
+/// Loads a cloud straight into positions (any file loadCloud accepts).
+Positions loadPositions(const std::string& path);
+
+}  // namespace paps

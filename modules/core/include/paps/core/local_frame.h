@@ -1,0 +1,45 @@
+#pragma once
+// Local frames (manuscript 2.1.2): normal by PCA, principal directions from the local normal
+// covariance matrix, consistent normal orientation, and the two frame orientations.
+#include <cstddef>
+#include <vector>
+
+#include <paps/core/neighbourhood.h>
+
+namespace paps {
+
+/// An orthonormal right-handed frame (t1, t2, n). t1 is the direction of largest normal
+/// variation (maximal principal direction), n the unit normal.
+struct LocalFrame {
+  Eigen::Vector3f t1{Eigen::Vector3f::UnitX()}, t2{Eigen::Vector3f::UnitY()}, n{Eigen::Vector3f::UnitZ()};
+
+  /// World offset -> (u, v, h) coordinates in the frame.
+  Eigen::Vector3f toLocal(const Eigen::Vector3f& d) const { return {t1.dot(d), t2.dot(d), n.dot(d)}; }
+  /// (u, v, h) -> world offset.
+  Eigen::Vector3f toWorld(const Eigen::Vector3f& l) const { return l.x() * t1 + l.y() * t2 + l.z() * n; }
+  /// The other admissible frame: the same normal, principal directions turned by 180 degrees.
+  LocalFrame rotatedHalfTurn() const { return {-t1, -t2, n}; }
+  bool valid() const { return isFinite(n); }
+};
+using LocalFrames = std::vector<LocalFrame>;
+
+/// Unit normals by PCA of each neighbour list; NaN where a point has fewer than 3 neighbours
+/// or they are collinear. Orientation is arbitrary until one of the orient* calls.
+Normals estimateNormals(const Positions& points, const NeighbourGraph& graph);
+
+/// Flips each normal to face `viewpoint` (e.g. the cloud's sensor origin). Returns flips.
+std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
+                                 const Eigen::Vector3f& viewpoint);
+
+/// Consistent orientation without a viewpoint: propagation over the neighbour graph along
+/// the most parallel normals first (Hoppe et al. 1992), one component at a time, each seeded
+/// at its highest point with the normal pointing up (+z). Deterministic. Returns flips.
+std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
+                                       const NeighbourGraph& graph);
+
+/// Principal frames: for each point, t1 is the eigenvector of largest eigenvalue of the
+/// covariance of the neighbours' normals, projected on the tangent plane. Where the normals
+/// do not vary (a plane), t1 is any tangent direction chosen deterministically.
+LocalFrames estimatePrincipalFrames(const Normals& normals, const NeighbourGraph& graph);
+
+}  // namespace paps

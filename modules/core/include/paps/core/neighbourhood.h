@@ -1,0 +1,88 @@
+#pragma once
+// Neighbourhoods on pcl::search: a spatial index over positions, fixed neighbour lists
+// (radius or k nearest) stored once in compressed rows, and a radius chosen from a target
+// mean neighbour count so that users need not know the scale of their data.
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <paps/core/positions.h>
+#include <paps/core/progress.h>
+
+namespace paps {
+
+/// Kd-tree over the finite points of a Positions array. Queries are const and thread-safe;
+/// returned indices refer to the original array, sorted by increasing distance.
+class SpatialIndex {
+ public:
+  explicit SpatialIndex(const Positions& points);
+  ~SpatialIndex();
+  SpatialIndex(const SpatialIndex&) = delete;
+  SpatialIndex& operator=(const SpatialIndex&) = delete;
+
+  /// Points within `radius` (metres) of q, at most `max_count` (0: all). Returns the count.
+  int radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<int>& indices,
+                   std::vector<float>& sq_distances, int max_count = 0) const;
+  /// The k points nearest to q. Returns the count (fewer when the index holds fewer).
+  int nearestK(const Eigen::Vector3f& q, int k, std::vector<int>& indices,
+               std::vector<float>& sq_distances) const;
+  /// Number of indexed (finite) points.
+  std::size_t size() const { return finite_.size(); }
+
+ private:
+  std::vector<int> finite_;  // index in the tree -> index in the original array
+  struct Tree;
+  std::unique_ptr<Tree> tree_;
+};
+
+/// Fixed neighbour lists of every point, self included (first, at distance 0).
+/// Non-finite points have empty lists.
+class NeighbourGraph {
+ public:
+  /// All finite points within `radius` (metres), at most `max_count` per point (0: all).
+  static NeighbourGraph byRadius(const Positions& points, const SpatialIndex& index, float radius,
+                                 int max_count = 0, const ProgressCallback& progress = {});
+  /// The k nearest finite points (self included).
+  static NeighbourGraph byCount(const Positions& points, const SpatialIndex& index, int k,
+                                const ProgressCallback& progress = {});
+
+  std::size_t size() const { return offsets_.empty() ? 0 : offsets_.size() - 1; }
+  /// Number of neighbours of point i (self included).
+  int count(std::size_t i) const { return offsets_[i + 1] - offsets_[i]; }
+  const int* begin(std::size_t i) const { return indices_.data() + offsets_[i]; }
+  const int* end(std::size_t i) const { return indices_.data() + offsets_[i + 1]; }
+  /// Mean neighbour count over points that have any.
+  double meanCount() const;
+
+ private:
+  std::vector<std::int64_t> offsets_;
+  std::vector<int> indices_;
+  friend class NeighbourGraphBuilder;
+};
+
+/// Radius (metres) at which a ball around a point holds on average `target_count` points
+/// (self included), measured on a deterministic sample of at most `samples` points.
+/// Throws InvalidInput when there are fewer than 2 finite points.
+float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& index,
+                                  int target_count, int samples = 2000);
+
+}  // namespace paps
+
+namespace paps {
+
+/// A spatial index, the radius in use and the neighbour lists at that radius: what every
+/// local stage builds first.
+struct RadiusNeighbourhood {
+  std::unique_ptr<SpatialIndex> index;
+  float radius = 0.f;
+  NeighbourGraph graph;
+};
+
+/// Builds a RadiusNeighbourhood. radius > 0 is used as given; radius == 0 picks the radius
+/// holding `target_neighbours` on average. At most `max_count` neighbours per point (0: all).
+/// Throws InvalidInput when fewer than 2 points are finite.
+RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
+                                             int target_neighbours, int max_count = 0,
+                                             const ProgressCallback& progress = {});
+
+}  // namespace paps

@@ -1,0 +1,77 @@
+#pragma once
+// Positions: the one representation of point coordinates inside the non-template core.
+// Template stages copy xyz from pcl::PointCloud<PointT> into it, run the compiled core, and
+// write positions back, so the heavy code is compiled once, not once per point type.
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+#include <pcl/point_cloud.h>
+#include <pcl/types.h>
+
+namespace paps {
+
+using Positions = std::vector<Eigen::Vector3f>;
+using Normals = std::vector<Eigen::Vector3f>;
+
+inline bool isFinite(const Eigen::Vector3f& p) {
+  return std::isfinite(p.x()) && std::isfinite(p.y()) && std::isfinite(p.z());
+}
+
+/// Copies x, y, z of every point (non-finite points keep their NaN/Inf).
+template <typename PointT>
+Positions positionsOf(const pcl::PointCloud<PointT>& cloud) {
+  Positions out(cloud.size());
+  for (std::size_t i = 0; i < cloud.size(); ++i) out[i] = cloud[i].getVector3fMap();
+  return out;
+}
+
+/// Number of points with finite coordinates.
+inline std::size_t countFinite(const Positions& p) {
+  std::size_t n = 0;
+  for (const auto& x : p) n += isFinite(x);
+  return n;
+}
+
+/// Axis-aligned bounding box diagonal of the finite points (0 if none).
+inline float boundingBoxDiagonal(const Positions& p) {
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
+  bool any = false;
+  for (const auto& x : p)
+    if (isFinite(x)) { lo = lo.cwiseMin(x); hi = hi.cwiseMax(x); any = true; }
+  return any ? (hi - lo).norm() : 0.f;
+}
+
+/// Writes positions into the xyz of a cloud, resizing it (other fields of new points are
+/// default-constructed). Keeps is_dense honest.
+template <typename PointT>
+void writePositions(const Positions& p, pcl::PointCloud<PointT>& cloud) {
+  cloud.resize(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) cloud[i].getVector3fMap() = p[i];
+  cloud.width = static_cast<std::uint32_t>(p.size());
+  cloud.height = 1;
+  cloud.is_dense = countFinite(p) == p.size();
+}
+
+/// The shape every point-moving pcl::Filter shares: copy the input (all fields, organisation),
+/// let `move(positions, movable)` return new positions for the points in `indices`, write
+/// them back and keep is_dense honest. Input empty -> InvalidInput (thrown by the caller's
+/// check in move, or here).
+template <typename PointT, typename MoveFn>
+void applyPositionFilter(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices,
+                         pcl::PointCloud<PointT>& output, MoveFn move) {
+  std::vector<std::uint8_t> movable(input.size(), 0);
+  for (const auto i : indices) movable[i] = 1;
+  const Positions out = move(positionsOf(input), movable);
+  output = input;
+  bool dense = true;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    output[i].getVector3fMap() = out[i];
+    dense = dense && isFinite(out[i]);
+  }
+  output.is_dense = dense;
+}
+
+}  // namespace paps

@@ -1,0 +1,162 @@
+#include <paps/core/cloud_io.h>
+
+#include <cstdio>
+#include <cstring>
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+
+#include <unistd.h>
+
+#include <pcl/io/pcd_io.h>
+#include <pcl/io/ply_io.h>
+
+#include <paps/core/error.h>
+
+namespace paps {
+
+namespace {
+
+std::string extensionOf(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (auto& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+struct XyzFields {
+  int offset[3];
+  std::uint8_t datatype[3];
+};
+
+XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
+  XyzFields f{};
+  const char* names[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    const auto it = std::find_if(cloud.fields.begin(), cloud.fields.end(),
+                                 [&](const pcl::PCLPointField& pf) { return pf.name == names[a]; });
+    if (it == cloud.fields.end())
+      throw InvalidInput(std::string("the cloud has no '") + names[a] + "' field");
+    if (it->datatype != pcl::PCLPointField::FLOAT32 && it->datatype != pcl::PCLPointField::FLOAT64)
+      throw InvalidInput(std::string("field '") + names[a] + "' is not float32 or float64");
+    f.offset[a] = static_cast<int>(it->offset);
+    f.datatype[a] = it->datatype;
+  }
+  return f;
+}
+
+}  // namespace
+
+pcl::PCLPointCloud2 loadCloud(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw IoError("cannot read '" + path + "': no such file");
+  {
+    std::ifstream probe(path, std::ios::binary);
+    if (!probe) throw IoError("cannot read '" + path + "': permission denied or unreadable");
+  }
+  const std::string ext = extensionOf(path);
+  pcl::PCLPointCloud2 cloud;
+  int rc = -1;
+  // PCL's readers print their own complaint to stderr; our exception is the one clear line.
+  const auto level = pcl::console::getVerbosityLevel();
+  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
+  if (ext == ".pcd") {
+    pcl::PCDReader reader;
+    rc = reader.read(path, cloud);
+  } else if (ext == ".ply") {
+    pcl::PLYReader reader;
+    rc = reader.read(path, cloud);
+  } else {
+    pcl::console::setVerbosityLevel(level);
+    throw IoError("cannot read '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
+  }
+  pcl::console::setVerbosityLevel(level);
+  if (rc < 0) throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file");
+  if (cloud.data.size() < static_cast<std::size_t>(cloud.row_step) * cloud.height)
+    throw IoError("cannot read '" + path + "': truncated data");
+  try {
+    findXyz(cloud);
+  } catch (const InvalidInput& e) {
+    throw IoError("cannot use '" + path + "': " + e.what());
+  }
+  return cloud;
+}
+
+void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) {
+  const std::string ext = extensionOf(path);
+  if (ext != ".pcd" && ext != ".ply")
+    throw IoError("cannot write '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
+  const std::filesystem::path target(path);
+  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
+  std::error_code ec;
+  if (!std::filesystem::is_directory(dir, ec))
+    throw IoError("cannot write '" + path + "': folder '" + dir.string() + "' does not exist");
+  // The temporary keeps the extension: PCL's writers choose the format from it.
+  const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" +
+                                  std::to_string(::getpid()) + ext)).string();
+  int rc = -1;
+  const Eigen::Vector4f origin = Eigen::Vector4f::Zero();
+  const Eigen::Quaternionf orient = Eigen::Quaternionf::Identity();
+  if (ext == ".pcd") {
+    pcl::PCDWriter w;
+    rc = w.writeBinary(tmp, cloud, origin, orient);
+  } else {
+    pcl::PLYWriter w;
+    rc = w.writeBinary(tmp, cloud, origin, orient, false);
+  }
+  if (rc < 0) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError("cannot write '" + path + "': the writer failed");
+  }
+  std::filesystem::rename(tmp, target, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError("cannot write '" + path + "': " + ec.message());
+  }
+}
+
+Positions positionsOf(const pcl::PCLPointCloud2& cloud) {
+  const XyzFields f = findXyz(cloud);
+  const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
+  Positions out(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::uint8_t* base = cloud.data.data() + i * cloud.point_step;
+    for (int a = 0; a < 3; ++a) {
+      if (f.datatype[a] == pcl::PCLPointField::FLOAT32) {
+        float v;
+        std::memcpy(&v, base + f.offset[a], 4);
+        out[i][a] = v;
+      } else {
+        double v;
+        std::memcpy(&v, base + f.offset[a], 8);
+        out[i][a] = static_cast<float>(v);
+      }
+    }
+  }
+  return out;
+}
+
+void writePositions(const Positions& p, pcl::PCLPointCloud2& cloud) {
+  const XyzFields f = findXyz(cloud);
+  const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
+  if (p.size() != n) throw InvalidInput("positions and cloud differ in size");
+  bool dense = true;
+  for (std::size_t i = 0; i < n; ++i) {
+    std::uint8_t* base = cloud.data.data() + i * cloud.point_step;
+    dense = dense && isFinite(p[i]);
+    for (int a = 0; a < 3; ++a) {
+      if (f.datatype[a] == pcl::PCLPointField::FLOAT32) {
+        const float v = p[i][a];
+        std::memcpy(base + f.offset[a], &v, 4);
+      } else {
+        const double v = p[i][a];
+        std::memcpy(base + f.offset[a], &v, 8);
+      }
+    }
+  }
+  cloud.is_dense = dense;
+}
+
+Positions loadPositions(const std::string& path) { return positionsOf(loadCloud(path)); }
+
+}  // namespace paps

@@ -1,0 +1,145 @@
+#include <paps/core/local_frame.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <limits>
+#include <queue>
+#include <tuple>
+
+#include <Eigen/Eigenvalues>
+
+namespace paps {
+
+namespace {
+const Eigen::Vector3f kNaN3 = Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN());
+
+// A tangent direction chosen only from n, so that flat regions get a reproducible frame.
+Eigen::Vector3f anyTangent(const Eigen::Vector3f& n) {
+  const Eigen::Vector3f a = std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY();
+  return (a - a.dot(n) * n).normalized();
+}
+}  // namespace
+
+Normals estimateNormals(const Positions& points, const NeighbourGraph& graph) {
+  Normals normals(points.size(), kNaN3);
+  const std::int64_t n = static_cast<std::int64_t>(points.size());
+#pragma omp parallel for schedule(dynamic, 512)
+  for (std::int64_t i = 0; i < n; ++i) {
+    const int count = graph.count(i);
+    if (count < 3) continue;
+    // Double precision and centring keep PCA accurate for scans far from the origin.
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const int* j = graph.begin(i); j != graph.end(i); ++j) mean += points[*j].cast<double>();
+    mean /= count;
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
+      const Eigen::Vector3d d = points[*j].cast<double>() - mean;
+      cov.noalias() += d * d.transpose();
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    const Eigen::Vector3d ev = eig.eigenvalues();
+    if (!(ev(1) > 1e-12 * std::max(1.0, ev(2)))) continue;  // collinear or coincident
+    normals[i] = eig.eigenvectors().col(0).cast<float>().normalized();
+  }
+  return normals;
+}
+
+std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
+                                 const Eigen::Vector3f& viewpoint) {
+  std::size_t flips = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(normals[i]) || !isFinite(points[i])) continue;
+    if (normals[i].dot(viewpoint - points[i]) < 0) { normals[i] = -normals[i]; ++flips; }
+  }
+  return flips;
+}
+
+std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
+                                       const NeighbourGraph& graph) {
+  const std::size_t n = points.size();
+  std::vector<int> order;
+  order.reserve(n);
+  for (std::size_t i = 0; i < n; ++i)
+    if (isFinite(normals[i])) order.push_back(static_cast<int>(i));
+  // Highest point first; ties broken by index for determinism.
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    return points[a].z() != points[b].z() ? points[a].z() > points[b].z() : a < b;
+  });
+  std::vector<std::uint8_t> done(n, 0);
+  // Priority: least parallel last. (cost, target, source), cost = 1 - |ni.nj|.
+  using Item = std::tuple<float, int, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  std::size_t flips = 0;
+  auto pushNeighbours = [&](int i) {
+    for (const int* j = graph.begin(i); j != graph.end(i); ++j)
+      if (!done[*j] && isFinite(normals[*j]))
+        heap.emplace(1.f - std::abs(normals[i].dot(normals[*j])), *j, i);
+  };
+  for (int seed : order) {
+    if (done[seed]) continue;
+    if (normals[seed].z() < 0) { normals[seed] = -normals[seed]; ++flips; }
+    done[seed] = 1;
+    pushNeighbours(seed);
+    while (!heap.empty()) {
+      const auto [cost, j, from] = heap.top();
+      heap.pop();
+      if (done[j]) continue;
+      done[j] = 1;
+      if (normals[j].dot(normals[from]) < 0) { normals[j] = -normals[j]; ++flips; }
+      pushNeighbours(j);
+    }
+  }
+  return flips;
+}
+
+LocalFrames estimatePrincipalFrames(const Normals& normals, const NeighbourGraph& graph) {
+  LocalFrames frames(normals.size());
+  const std::int64_t n = static_cast<std::int64_t>(normals.size());
+#pragma omp parallel for schedule(dynamic, 512)
+  for (std::int64_t i = 0; i < n; ++i) {
+    LocalFrame& f = frames[i];
+    const Eigen::Vector3f ni = normals[i];
+    if (!isFinite(ni)) { f.t1 = f.t2 = f.n = kNaN3; continue; }
+    // Covariance of the neighbours' normals (sign-aligned with ni), restricted to the
+    // tangent plane: its main axis is the direction in which the normal turns fastest.
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    int m = 0;
+    for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
+      if (!isFinite(normals[*j])) continue;
+      Eigen::Vector3d nj = normals[*j].cast<double>();
+      if (nj.dot(ni.cast<double>()) < 0) nj = -nj;
+      mean += nj;
+      ++m;
+    }
+    Eigen::Vector3f t1 = anyTangent(ni);
+    if (m >= 3) {
+      mean /= m;
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
+        if (!isFinite(normals[*j])) continue;
+        Eigen::Vector3d nj = normals[*j].cast<double>();
+        if (nj.dot(ni.cast<double>()) < 0) nj = -nj;
+        const Eigen::Vector3d d = nj - mean;
+        cov.noalias() += d * d.transpose();
+      }
+      const Eigen::Matrix3d P = Eigen::Matrix3d::Identity() - ni.cast<double>() * ni.cast<double>().transpose();
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(P * cov * P);
+      if (eig.eigenvalues()(2) > 1e-14 * m) {
+        Eigen::Vector3f d = eig.eigenvectors().col(2).cast<float>();
+        d -= d.dot(ni) * ni;
+        if (d.norm() > 1e-6f) {
+          t1 = d.normalized();
+          // Eigenvectors have no sign: pick the one closest to the deterministic tangent.
+          if (t1.dot(anyTangent(ni)) < 0) t1 = -t1;
+        }
+      }
+    }
+    f.n = ni;
+    f.t1 = t1;
+    f.t2 = ni.cross(t1);
+  }
+  return frames;
+}
+
+}  // namespace paps

@@ -1,0 +1,186 @@
+#include <paps/core/neighbourhood.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+
+namespace paps {
+
+struct SpatialIndex::Tree : pcl::KdTreeFLANN<pcl::PointXYZ> {
+  Tree() : pcl::KdTreeFLANN<pcl::PointXYZ>(/*sorted=*/true) {}
+};
+
+SpatialIndex::SpatialIndex(const Positions& points) {
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  cloud->reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(points[i])) continue;
+    finite_.push_back(static_cast<int>(i));
+    cloud->push_back(pcl::PointXYZ(points[i].x(), points[i].y(), points[i].z()));
+  }
+  tree_ = std::make_unique<Tree>();
+  if (!cloud->empty()) tree_->setInputCloud(cloud);
+}
+
+SpatialIndex::~SpatialIndex() = default;
+
+int SpatialIndex::radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<int>& indices,
+                               std::vector<float>& sq_distances, int max_count) const {
+  indices.clear();
+  sq_distances.clear();
+  if (finite_.empty() || !isFinite(q)) return 0;
+  pcl::PointXYZ p(q.x(), q.y(), q.z());
+  pcl::Indices idx;
+  const int n = tree_->radiusSearch(p, radius, idx, sq_distances, max_count > 0 ? max_count : 0);
+  indices.resize(n);
+  for (int i = 0; i < n; ++i) indices[i] = finite_[idx[i]];
+  return n;
+}
+
+int SpatialIndex::nearestK(const Eigen::Vector3f& q, int k, std::vector<int>& indices,
+                           std::vector<float>& sq_distances) const {
+  indices.clear();
+  sq_distances.clear();
+  if (finite_.empty() || !isFinite(q) || k <= 0) return 0;
+  k = std::min<int>(k, static_cast<int>(finite_.size()));
+  pcl::PointXYZ p(q.x(), q.y(), q.z());
+  pcl::Indices idx;
+  const int n = tree_->nearestKSearch(p, k, idx, sq_distances);
+  indices.resize(n);
+  for (int i = 0; i < n; ++i) indices[i] = finite_[idx[i]];
+  return n;
+}
+
+// Builds the compressed rows in parallel: each thread fills per-point lists, then one pass
+// concatenates them in point order, so the result does not depend on the thread count.
+class NeighbourGraphBuilder {
+ public:
+  template <typename Query>
+  static NeighbourGraph build(const Positions& points, const ProgressCallback& progress,
+                              const char* stage, Query query) {
+    const std::int64_t n = static_cast<std::int64_t>(points.size());
+    std::vector<std::vector<int>> lists(points.size());
+    ProgressReporter report(progress, stage, points.size());
+#pragma omp parallel
+    {
+      std::vector<int> idx;
+      std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t i = 0; i < n; ++i) {
+        if (report.cancelled()) continue;
+        if (isFinite(points[i])) {
+          query(points[i], idx, d2);
+          // Self first, even among exact duplicates.
+          auto self = std::find(idx.begin(), idx.end(), static_cast<int>(i));
+          if (self != idx.end()) std::rotate(idx.begin(), self, self + 1);
+          lists[i] = idx;
+        }
+        report.advance();
+      }
+    }
+    report.throwIfCancelled();
+    report.finish();
+    NeighbourGraph g;
+    g.offsets_.resize(points.size() + 1, 0);
+    for (std::size_t i = 0; i < points.size(); ++i) g.offsets_[i + 1] = g.offsets_[i] + lists[i].size();
+    g.indices_.resize(g.offsets_.back());
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      std::copy(lists[i].begin(), lists[i].end(), g.indices_.begin() + g.offsets_[i]);
+      std::vector<int>().swap(lists[i]);
+    }
+    return g;
+  }
+};
+
+NeighbourGraph NeighbourGraph::byRadius(const Positions& points, const SpatialIndex& index,
+                                        float radius, int max_count, const ProgressCallback& progress) {
+  requirePositive("radius", radius);
+  return NeighbourGraphBuilder::build(points, progress, "neighbours",
+      [&](const Eigen::Vector3f& q, std::vector<int>& idx, std::vector<float>& d2) {
+        index.radiusSearch(q, radius, idx, d2, max_count);
+      });
+}
+
+NeighbourGraph NeighbourGraph::byCount(const Positions& points, const SpatialIndex& index, int k,
+                                       const ProgressCallback& progress) {
+  requirePositive("k", k);
+  return NeighbourGraphBuilder::build(points, progress, "neighbours",
+      [&](const Eigen::Vector3f& q, std::vector<int>& idx, std::vector<float>& d2) {
+        index.nearestK(q, k, idx, d2);
+      });
+}
+
+double NeighbourGraph::meanCount() const {
+  std::size_t pts = 0, total = 0;
+  for (std::size_t i = 0; i < size(); ++i)
+    if (count(i) > 0) { ++pts; total += count(i); }
+  return pts ? static_cast<double>(total) / pts : 0.0;
+}
+
+float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& index,
+                                  int target_count, int samples) {
+  requireInRange("target_count", target_count, 2, 100000);
+  requirePositive("samples", samples);
+  if (index.size() < 2) throw InvalidInput("fewer than 2 finite points: cannot choose a radius");
+  std::vector<int> finite;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (isFinite(points[i])) finite.push_back(static_cast<int>(i));
+  const std::size_t m = std::min<std::size_t>(samples, finite.size());
+  const double stride = static_cast<double>(finite.size()) / m;  // deterministic, spread out
+  std::vector<int> idx;
+  std::vector<float> d2;
+  std::vector<float> kth;
+  kth.reserve(m);
+  for (std::size_t s = 0; s < m; ++s) {
+    const int i = finite[static_cast<std::size_t>(s * stride)];
+    const int n = index.nearestK(points[i], target_count, idx, d2);
+    if (n > 1) kth.push_back(std::sqrt(d2[n - 1]));
+  }
+  std::nth_element(kth.begin(), kth.begin() + kth.size() / 2, kth.end());
+  float r = kth[kth.size() / 2];
+  if (!(r > 0)) {
+    // Duplicates dominate: fall back to a fraction of the extent.
+    r = boundingBoxDiagonal(points) * 1e-3f;
+    if (!(r > 0)) throw InvalidInput("all points are identical: cannot choose a radius");
+  }
+  // The k-th neighbour distance overshoots the mean count near borders and undershoots in
+  // dense spots; correct twice by the surface law count ~ r^2.
+  for (int iter = 0; iter < 2; ++iter) {
+    double total = 0;
+    std::size_t used = 0;
+    for (std::size_t s = 0; s < m; s += std::max<std::size_t>(1, m / 500)) {
+      const int i = finite[static_cast<std::size_t>(s * stride)];
+      total += index.radiusSearch(points[i], r, idx, d2);
+      ++used;
+    }
+    const double mean = total / used;
+    if (mean <= 0) break;
+    const double scale = std::sqrt(target_count / mean);
+    r *= static_cast<float>(std::clamp(scale, 0.5, 2.0));
+  }
+  return r;
+}
+
+}  // namespace paps
+
+namespace paps {
+
+RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
+                                             int target_neighbours, int max_count,
+                                             const ProgressCallback& progress) {
+  if (radius < 0 || !std::isfinite(radius))
+    throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
+  RadiusNeighbourhood nb;
+  nb.index = std::make_unique<SpatialIndex>(points);
+  if (nb.index->size() == 0) throw InvalidInput("no finite point in the cloud");
+  if (nb.index->size() < 2) throw InvalidInput("only one finite point: no neighbourhood exists");
+  nb.radius = radius > 0 ? radius : radiusForMeanNeighbourCount(points, *nb.index, target_neighbours);
+  nb.graph = NeighbourGraph::byRadius(points, *nb.index, nb.radius, max_count, progress);
+  return nb;
+}
+
+}  // namespace paps

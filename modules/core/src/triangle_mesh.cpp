@@ -1,0 +1,94 @@
+#include <paps/core/triangle_mesh.h>
+
+#include <algorithm>
+#include <cctype>
+#include <filesystem>
+#include <fstream>
+
+#include <pcl/PolygonMesh.h>
+#include <pcl/conversions.h>
+#include <pcl/io/obj_io.h>
+#include <pcl/io/ply_io.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+
+namespace paps {
+
+double TriangleMesh::area() const {
+  // Accumulate in double: large meshes have many small triangles.
+  double sum = 0;
+  for (const auto& t : triangles) {
+    const Eigen::Vector3d a = vertices[t[0]].cast<double>();
+    const Eigen::Vector3d b = vertices[t[1]].cast<double>();
+    const Eigen::Vector3d c = vertices[t[2]].cast<double>();
+    sum += 0.5 * (b - a).cross(c - a).norm();
+  }
+  return sum;
+}
+
+void TriangleMesh::append(const TriangleMesh& other) {
+  const int offset = static_cast<int>(vertices.size());
+  vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
+  triangles.reserve(triangles.size() + other.triangles.size());
+  for (const auto& t : other.triangles) triangles.push_back(t + Eigen::Vector3i::Constant(offset));
+}
+
+TriangleMesh toTriangleMesh(const pcl::PolygonMesh& mesh) {
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  pcl::fromPCLPointCloud2(mesh.cloud, cloud);
+
+  TriangleMesh out;
+  out.vertices = positionsOf(cloud);
+  const std::size_t n = out.vertices.size();
+  out.triangles.reserve(mesh.polygons.size());
+  for (std::size_t f = 0; f < mesh.polygons.size(); ++f) {
+    const auto& v = mesh.polygons[f].vertices;
+    for (const auto index : v)
+      if (static_cast<std::size_t>(index) >= n)
+        throw InvalidInput("polygon " + std::to_string(f) + " refers to vertex " +
+                           std::to_string(index) + " but the mesh has " + std::to_string(n) +
+                           " vertices");
+    // Polygons with fewer than 3 vertices carry no area; larger ones are fanned from the first.
+    for (std::size_t k = 1; k + 1 < v.size(); ++k)
+      out.triangles.emplace_back(static_cast<int>(v[0]), static_cast<int>(v[k]),
+                                 static_cast<int>(v[k + 1]));
+  }
+  return out;
+}
+
+TriangleMesh loadTriangleMesh(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec))
+    throw IoError("cannot read mesh '" + path + "': no such file");
+  if (!std::filesystem::is_regular_file(path, ec))
+    throw IoError("cannot read mesh '" + path + "': not a regular file");
+  if (!std::ifstream(path).good()) throw IoError("cannot read mesh '" + path + "': not readable");
+
+  std::string ext = std::filesystem::path(path).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+
+  // PCL's own readers, not the VTK ones: fewer dependencies and they keep faces as written.
+  pcl::PolygonMesh mesh;
+  int status = -1;
+  if (ext == ".ply")
+    status = pcl::io::loadPLYFile(path, mesh);
+  else if (ext == ".obj")
+    status = pcl::io::loadOBJFile(path, mesh);
+  else
+    throw IoError("cannot read mesh '" + path + "': unsupported extension '" + ext +
+                  "' (expected .ply or .obj)");
+  if (status < 0) throw IoError("cannot read mesh '" + path + "': the file could not be parsed");
+
+  TriangleMesh out;
+  try {
+    out = toTriangleMesh(mesh);
+  } catch (const InvalidInput& e) {
+    throw IoError("cannot read mesh '" + path + "': " + e.what());
+  }
+  if (out.triangles.empty()) throw IoError("cannot read mesh '" + path + "': it has no faces");
+  return out;
+}
+
+}  // namespace paps

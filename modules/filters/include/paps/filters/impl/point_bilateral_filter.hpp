@@ -1,0 +1,16 @@
+#pragma once
+#include <paps/core/error.h>
+#include <paps/filters/point_bilateral_filter.h>
+
+namespace paps {
+
+template <typename PointT>
+void PointBilateralFilter<PointT>::applyFilter(PointCloud& output) {
+  if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
+  applyPositionFilter(*this->input_, *this->indices_, output,
+                      [&](const Positions& in, const std::vector<std::uint8_t>& movable) {
+                        return bilateralFilterPositions(in, params_, &report_, movable, progress_);
+                      });
+}
+
+}  // namespace paps

@@ -1,0 +1,103 @@
+#pragma once
+// Similarity-based non-local denoising of point sets (manuscript 2.2.2).
+//
+// S = S_smooth + V: the cloud is smoothed by iterated mean-curvature motion, the residual
+// V = p - p_S carries noise, detail and sharp features. Every point gets a plane+height
+// descriptor in its principal frame (both frame orientations are indexed); V is then
+// averaged, in the local frames, over the k most similar descriptors found anywhere on the
+// shape, with weights exp(-d^2 / sigma^2).
+#include <cstddef>
+#include <string>
+
+#include <pcl/filters/filter.h>
+
+#include <paps/core/positions.h>
+#include <paps/core/progress.h>
+
+namespace paps {
+
+/// Parameters of similarity denoising. Zero means "choose from the data".
+struct SimilarityDenoisingParameters {
+  /// Neighbourhood radius in metres (> 0), or 0: chosen so a ball holds `target_neighbours`.
+  float radius = 0.f;
+  /// Mean neighbour count used to choose the radius (3 to 1000). Manuscript: 30.
+  int target_neighbours = 30;
+  /// Descriptor grid is grid_size x grid_size (1 to 16). Manuscript: 3 or 4.
+  int grid_size = 4;
+  /// Similarity scale in metres (> 0), or 0: sigma^2 is the median over points of the mean
+  /// squared descriptor distance to their similar patches, times `sigma_scale`.
+  float sigma = 0.f;
+  /// Multiplier of the automatic sigma^2 (> 0). Measured default, see docs/denoising.md.
+  float sigma_scale = 1.f;
+  /// Mean-curvature-motion iterations that separate S_smooth from V (1 to 1000).
+  int smoothing_iterations = 10;
+  /// Number of most similar patches averaged, the point's own included (1 to 1000).
+  int similar_patches = 16;
+  /// Index both frame orientations of every patch (manuscript 2.1.2).
+  bool both_orientations = true;
+  /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.
+  bool use_viewpoint = false;
+  Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();
+  /// Throws InvalidParameter naming the first bad value.
+  void validate() const;
+};
+
+/// What a run chose and met.
+struct SimilarityDenoisingReport {
+  float radius = 0.f;              ///< radius used (metres)
+  float sigma = 0.f;               ///< similarity scale used (metres)
+  double mean_neighbours = 0.0;    ///< mean neighbour count at that radius
+  std::size_t moved = 0;           ///< points denoised
+  std::size_t isolated = 0;        ///< finite points left in place: fewer than 4 neighbours
+  std::size_t non_finite = 0;      ///< NaN/Inf points passed through
+};
+
+/// Denoises `points` (non-finite entries pass through). Only points with `movable[i]` set
+/// (all when empty) move; all finite points serve as neighbours and similar patches.
+/// Deterministic for any thread count. Throws InvalidInput when no point is finite.
+Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
+                              SimilarityDenoisingReport* report = nullptr,
+                              const std::vector<std::uint8_t>& movable = {},
+                              const ProgressCallback& progress = {});
+
+/// The pcl::Filter stage. The output has the input's size and fields; only the positions of
+/// the points in the indices move. NaN points pass through; is_dense is kept honest.
+template <typename PointT>
+class SimilarityDenoising : public pcl::Filter<PointT> {
+  using Base = pcl::Filter<PointT>;
+  using PointCloud = typename Base::PointCloud;
+
+ public:
+  using Ptr = pcl::shared_ptr<SimilarityDenoising<PointT>>;
+  using ConstPtr = pcl::shared_ptr<const SimilarityDenoising<PointT>>;
+
+  SimilarityDenoising() { this->filter_name_ = "SimilarityDenoising"; }
+
+  void setParameters(const SimilarityDenoisingParameters& p) { p.validate(); params_ = p; }
+  const SimilarityDenoisingParameters& getParameters() const { return params_; }
+  /// Radius in metres; 0 chooses it from the target neighbour count.
+  void setRadius(float r);
+  void setTargetNeighbours(int n);
+  void setGridSize(int n);
+  /// Similarity scale in metres; 0 chooses it from the descriptor statistics.
+  void setSigma(float s);
+  void setSmoothingIterations(int n);
+  void setSimilarPatches(int k);
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+  /// What the last run chose (radius, sigma) and how many points it could not move.
+  const SimilarityDenoisingReport& getReport() const { return report_; }
+
+ protected:
+  void applyFilter(PointCloud& output) override;
+
+ private:
+  SimilarityDenoisingParameters params_;
+  SimilarityDenoisingReport report_;
+  ProgressCallback progress_;
+};
+
+}  // namespace paps
+
+#ifdef PAPS_NO_PRECOMPILE
+#include <paps/filters/impl/similarity_denoising.hpp>
+#endif

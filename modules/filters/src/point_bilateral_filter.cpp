@@ -1,0 +1,98 @@
+#include <paps/filters/point_bilateral_filter.h>
+#include <paps/filters/impl/point_bilateral_filter.hpp>
+
+#include <cmath>
+
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+#include <paps/core/local_frame.h>
+#include <paps/core/neighbourhood.h>
+
+namespace paps {
+
+void PointBilateralParameters::validate() const {
+  if (!(radius >= 0) || !std::isfinite(radius))
+    throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
+  requireInRange("target_neighbours", target_neighbours, 3, 1000);
+  requirePositive("sigma_c_fraction", sigma_c_fraction);
+  if (!(sigma_s >= 0) || !std::isfinite(sigma_s))
+    throw InvalidParameter("sigma_s", detail::toString(sigma_s), "0 (automatic) or a finite value > 0");
+  requireInRange("iterations", iterations, 1, 100);
+}
+
+Positions bilateralFilterPositions(const Positions& points, const PointBilateralParameters& params,
+                                   PointBilateralReport* report_out,
+                                   const std::vector<std::uint8_t>& movable,
+                                   const ProgressCallback& progress) {
+  params.validate();
+  PointBilateralReport report;
+  const std::size_t n = points.size();
+  if (n == 0) throw InvalidInput("the input cloud is empty");
+  if (!movable.empty() && movable.size() != n)
+    throw InvalidParameter("movable", detail::toString(movable.size()), "one flag per point");
+  const std::size_t finite = countFinite(points);
+  report.non_finite = n - finite;
+  if (finite == 0) throw InvalidInput("no finite point in the cloud (all NaN or Inf)");
+  if (finite == 1) {
+    report.isolated = 1;
+    if (report_out) *report_out = report;
+    return points;
+  }
+  const int cap = std::max(64, 4 * params.target_neighbours);
+  RadiusNeighbourhood nb =
+      buildRadiusNeighbourhood(points, params.radius, params.target_neighbours, cap, progress);
+  report.radius = nb.radius;
+  const float inv2c = 1.f / (2.f * std::pow(params.sigma_c_fraction * nb.radius, 2.f));
+  Positions cur = points, next = points;
+  const std::int64_t sn = static_cast<std::int64_t>(n);
+  ProgressReporter rep(progress, "bilateral", static_cast<std::size_t>(params.iterations) * n);
+  for (int it = 0; it < params.iterations; ++it) {
+    // Neighbour lists stay those of the input; normals follow the filtered surface.
+    const Normals normals = estimateNormals(cur, nb.graph);
+    std::size_t moved = 0, isolated = 0;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved, isolated)
+    for (std::int64_t i = 0; i < sn; ++i) {
+      rep.advance();
+      if (!isFinite(cur[i]) || (!movable.empty() && !movable[i])) continue;
+      if (!isFinite(normals[i]) || nb.graph.count(i) < 4) { ++isolated; continue; }
+      const Eigen::Vector3f& p = cur[i];
+      const Eigen::Vector3f& nrm = normals[i];
+      float inv2s;
+      if (params.sigma_s > 0) {
+        inv2s = 1.f / (2.f * params.sigma_s * params.sigma_s);
+      } else {
+        double s2 = 0;
+        for (const int* j = nb.graph.begin(i); j != nb.graph.end(i); ++j) s2 += std::pow(nrm.dot(cur[*j] - p), 2.f);
+        s2 /= nb.graph.count(i);
+        inv2s = s2 > 0 ? static_cast<float>(1.0 / (2.0 * s2)) : 0.f;
+      }
+      float num = 0, den = 0;
+      for (const int* j = nb.graph.begin(i); j != nb.graph.end(i); ++j) {
+        const Eigen::Vector3f d = cur[*j] - p;
+        const float h = nrm.dot(d);
+        const float w = std::exp(-d.squaredNorm() * inv2c - h * h * inv2s);
+        num += w * h;
+        den += w;
+      }
+      next[i] = den > 0 ? Eigen::Vector3f(p + (num / den) * nrm) : p;
+      ++moved;
+    }
+    rep.throwIfCancelled();
+    std::swap(cur, next);
+    next = cur;
+    report.moved = moved;
+    report.isolated = isolated;
+  }
+  rep.finish();
+  if (report_out) *report_out = report;
+  return cur;
+}
+
+template class PointBilateralFilter<pcl::PointXYZ>;
+template class PointBilateralFilter<pcl::PointXYZI>;
+template class PointBilateralFilter<pcl::PointNormal>;
+template class PointBilateralFilter<pcl::PointXYZRGB>;
+template class PointBilateralFilter<pcl::PointXYZRGBNormal>;
+
+}  // namespace paps

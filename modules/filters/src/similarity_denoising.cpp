@@ -1,0 +1,250 @@
+#include <paps/filters/similarity_denoising.h>
+#include <paps/filters/impl/similarity_denoising.hpp>
+
+#include <algorithm>
+#include <cmath>
+
+#include <pcl/point_types.h>
+
+#include <paps/core/descriptor_index.h>
+#include <paps/core/error.h>
+#include <paps/core/local_frame.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/plane_height_patch.h>
+
+namespace paps {
+
+void SimilarityDenoisingParameters::validate() const {
+  if (!(radius >= 0) || !std::isfinite(radius))
+    throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
+  requireInRange("target_neighbours", target_neighbours, 3, 1000);
+  requireInRange("grid_size", grid_size, 1, 16);
+  if (!(sigma >= 0) || !std::isfinite(sigma))
+    throw InvalidParameter("sigma", detail::toString(sigma), "0 (automatic) or a finite value > 0");
+  requirePositive("sigma_scale", sigma_scale);
+  requireInRange("smoothing_iterations", smoothing_iterations, 1, 1000);
+  requireInRange("similar_patches", similar_patches, 1, 1000);
+  if (use_viewpoint && !isFinite(viewpoint))
+    throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
+}
+
+namespace {
+
+// Fewer neighbours than this (self included) and a point has no usable frame.
+constexpr int kMinNeighbours = 4;
+
+// Iterated mean-curvature motion: each point moves along its normal to the plane through
+// the centroid of its neighbours. Moving along the normal only keeps the one-to-one
+// correspondence p <-> p_S that the residual V = p - p_S needs. Normals are refitted on the
+// moving surface and kept on the side they started on.
+Positions meanCurvatureMotion(const Positions& points, const NeighbourGraph& graph,
+                              Normals& normals, const std::vector<std::uint8_t>& usable,
+                              int iterations, const ProgressCallback& progress) {
+  Positions cur = points, next = points;
+  const std::int64_t n = static_cast<std::int64_t>(points.size());
+  ProgressReporter report(progress, "smoothing", static_cast<std::size_t>(iterations));
+  for (int it = 0; it < iterations; ++it) {
+#pragma omp parallel for schedule(dynamic, 1024)
+    for (std::int64_t i = 0; i < n; ++i) {
+      if (!usable[i]) continue;
+      Eigen::Vector3f c = Eigen::Vector3f::Zero();
+      for (const int* j = graph.begin(i); j != graph.end(i); ++j) c += cur[*j] - cur[i];
+      c /= static_cast<float>(graph.count(i));
+      next[i] = cur[i] + c.dot(normals[i]) * normals[i];
+    }
+    std::swap(cur, next);
+    Normals refit = estimateNormals(cur, graph);
+#pragma omp parallel for schedule(static)
+    for (std::int64_t i = 0; i < n; ++i) {
+      if (!usable[i] || !isFinite(refit[i])) continue;
+      normals[i] = refit[i].dot(normals[i]) < 0 ? Eigen::Vector3f(-refit[i]) : refit[i];
+    }
+    report.advance();
+    report.throwIfCancelled();
+  }
+  report.finish();
+  return cur;
+}
+
+// Permutation of the pattern samples under a half-turn (u, v) -> (-u, -v); empty when the
+// pattern is not symmetric, in which case the second orientation is described again.
+std::vector<int> halfTurnPermutation(const SamplingPattern& pattern) {
+  std::vector<int> perm(pattern.size());
+  for (std::size_t s = 0; s < pattern.size(); ++s) {
+    int best = -1;
+    for (std::size_t t = 0; t < pattern.size(); ++t)
+      if ((pattern.samples[t] + pattern.samples[s]).norm() < 1e-4f) best = static_cast<int>(t);
+    if (best < 0) return {};
+    perm[s] = best;
+  }
+  return perm;
+}
+
+}  // namespace
+
+Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
+                              SimilarityDenoisingReport* report_out,
+                              const std::vector<std::uint8_t>& movable,
+                              const ProgressCallback& progress) {
+  params.validate();
+  SimilarityDenoisingReport report;
+  const std::size_t n = points.size();
+  if (n == 0) throw InvalidInput("the input cloud is empty");
+  if (!movable.empty() && movable.size() != n)
+    throw InvalidParameter("movable", detail::toString(movable.size()), "one flag per point");
+  const std::size_t finite = countFinite(points);
+  report.non_finite = n - finite;
+  if (finite == 0) throw InvalidInput("no finite point in the cloud (all NaN or Inf)");
+  if (finite == 1) {
+    report.isolated = 1;
+    if (report_out) *report_out = report;
+    return points;
+  }
+
+  // 1. Neighbourhoods, capped so that a too large radius cannot explode the cost.
+  const int cap = std::max(64, 4 * params.target_neighbours);
+  RadiusNeighbourhood nb =
+      buildRadiusNeighbourhood(points, params.radius, params.target_neighbours, cap, progress);
+  report.radius = nb.radius;
+  report.mean_neighbours = nb.graph.meanCount();
+  const NeighbourGraph& graph = nb.graph;
+
+  // 2. Normals of S, oriented, then S = S_smooth + V.
+  Normals normals = estimateNormals(points, graph);
+  if (params.use_viewpoint) orientNormalsTowards(points, normals, params.viewpoint);
+  else orientNormalsByPropagation(points, normals, graph);
+  std::vector<std::uint8_t> usable(n, 0);
+  for (std::size_t i = 0; i < n; ++i) {
+    usable[i] = isFinite(points[i]) && graph.count(i) >= kMinNeighbours && isFinite(normals[i]);
+    if (isFinite(points[i]) && !usable[i]) ++report.isolated;
+  }
+  const Positions smooth =
+      meanCurvatureMotion(points, graph, normals, usable, params.smoothing_iterations, progress);
+
+  // 3. Principal frames on S_smooth and plane+height descriptors of S in them.
+  const LocalFrames frames = estimatePrincipalFrames(normals, graph);
+  const PlaneHeightPatch patch(SamplingPattern::grid(params.grid_size), nb.radius);
+  const std::size_t dims = patch.size();
+  const std::vector<int> perm = halfTurnPermutation(patch.pattern());
+  const int orientations = params.both_orientations ? 2 : 1;
+  std::vector<int> rows_of_point(n, -1), point_of_row;
+  for (std::size_t i = 0; i < n; ++i)
+    if (usable[i]) {
+      rows_of_point[i] = static_cast<int>(point_of_row.size());
+      for (int o = 0; o < orientations; ++o) point_of_row.push_back(static_cast<int>(i));
+    }
+  const std::size_t rows = point_of_row.size();
+  std::vector<float> desc(rows * dims);
+  {
+    ProgressReporter rep(progress, "descriptors", n);
+    const std::int64_t sn = static_cast<std::int64_t>(n);
+#pragma omp parallel
+    {
+      std::vector<std::uint8_t> valid(dims);
+#pragma omp for schedule(dynamic, 1024)
+      for (std::int64_t i = 0; i < sn; ++i) {
+        rep.advance();
+        if (!usable[i] || rep.cancelled()) continue;
+        float* d0 = &desc[rows_of_point[i] * dims];
+        patch.describe(frames[i], smooth[i], points, graph.begin(i), graph.count(i), d0, valid.data());
+        if (orientations == 2) {
+          float* d1 = d0 + dims;
+          if (!perm.empty()) for (std::size_t s = 0; s < dims; ++s) d1[s] = d0[perm[s]];
+          else patch.describe(frames[i].rotatedHalfTurn(), smooth[i], points, graph.begin(i),
+                              graph.count(i), d1, valid.data());
+        }
+      }
+    }
+    rep.throwIfCancelled();
+    rep.finish();
+  }
+
+  // 4. The k most similar patches of every movable point (its own rows excluded: the point
+  //    itself enters with the largest weight of the others, as in non-local means).
+  const int k = params.similar_patches - 1;
+  const DescriptorIndex index(desc.data(), rows, dims);
+  std::vector<int> match(n * std::max(k, 1), -1);
+  std::vector<float> match_d2(n * std::max(k, 1), 0.f);
+  std::vector<float> mean_d2(n, -1.f);
+  auto isMoving = [&](std::size_t i) { return usable[i] && (movable.empty() || movable[i]); };
+  if (k > 0) {
+    ProgressReporter rep(progress, "similarity search", n);
+    const std::int64_t sn = static_cast<std::int64_t>(n);
+#pragma omp parallel
+    {
+      std::vector<int> idx;
+      std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t i = 0; i < sn; ++i) {
+        rep.advance();
+        if (!isMoving(i) || rep.cancelled()) continue;
+        index.nearestK(&desc[rows_of_point[i] * dims], k + orientations, idx, d2);
+        int m = 0;
+        double sum = 0;
+        for (std::size_t t = 0; t < idx.size() && m < k; ++t) {
+          if (point_of_row[idx[t]] == static_cast<int>(i)) continue;
+          match[i * k + m] = idx[t];
+          match_d2[i * k + m] = d2[t];
+          sum += d2[t];
+          ++m;
+        }
+        if (m > 0) mean_d2[i] = static_cast<float>(sum / m);
+      }
+    }
+    rep.throwIfCancelled();
+    rep.finish();
+  }
+
+  // sigma^2 from the data: the median over points of the mean squared distance to their
+  // similar patches, so that a typical match weighs exp(-1) at sigma_scale = 1.
+  float sigma2 = params.sigma * params.sigma;
+  if (!(sigma2 > 0)) {
+    std::vector<float> m;
+    for (float v : mean_d2) if (v >= 0) m.push_back(v);
+    if (!m.empty()) {
+      std::nth_element(m.begin(), m.begin() + m.size() / 2, m.end());
+      sigma2 = m[m.size() / 2] * params.sigma_scale;
+    }
+    if (!(sigma2 > 0)) sigma2 = 1e-12f * nb.radius * nb.radius + 1e-30f;
+  }
+  report.sigma = std::sqrt(sigma2);
+
+  // 5. The three sums of 2.2.2: V of the similar points, read in their own frames (turned
+  //    by half a turn for the second orientation), averaged and re-expressed in p's frame.
+  Positions out = points;
+  const std::int64_t sn = static_cast<std::int64_t>(n);
+  std::size_t moved = 0;
+#pragma omp parallel for schedule(static) reduction(+ : moved)
+  for (std::int64_t i = 0; i < sn; ++i) {
+    if (!isMoving(i)) continue;
+    Eigen::Vector3d acc = Eigen::Vector3d::Zero();
+    double w_sum = 0, w_max = 0;
+    for (int m = 0; m < k; ++m) {
+      const int row = match[i * k + m];
+      if (row < 0) break;
+      const int q = point_of_row[row];
+      const bool turned = orientations == 2 && (row & 1);
+      const LocalFrame fq = turned ? frames[q].rotatedHalfTurn() : frames[q];
+      const double w = std::exp(-static_cast<double>(match_d2[i * k + m]) / sigma2);
+      acc += w * fq.toLocal(points[q] - smooth[q]).cast<double>();
+      w_sum += w;
+      w_max = std::max(w_max, w);
+    }
+    const double w_self = w_sum > 0 ? w_max : 1.0;
+    acc += w_self * frames[i].toLocal(points[i] - smooth[i]).cast<double>();
+    w_sum += w_self;
+    out[i] = smooth[i] + frames[i].toWorld((acc / w_sum).cast<float>());
+    ++moved;
+  }
+  report.moved = moved;
+  if (report_out) *report_out = report;
+  return out;
+}
+
+template class SimilarityDenoising<pcl::PointXYZ>;
+template class SimilarityDenoising<pcl::PointXYZI>;
+template class SimilarityDenoising<pcl::PointNormal>;
+template class SimilarityDenoising<pcl::PointXYZRGB>;
+template class SimilarityDenoising<pcl::PointXYZRGBNormal>;
+
+}  // namespace paps

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <chrono>
+#include <memory>
 #include <mutex>
 
 #include <unistd.h>
@@ -48,7 +50,20 @@ void Arguments::allowOnly(const std::vector<std::string>& known) const {
       throw InvalidParameter(name, value, "a known option (see paps --help)");
 }
 
-ProgressCallback progressBar(bool quiet) {
+ProgressCallback progressBar(bool quiet, bool timings) {
+  if (timings) {
+    // One line per finished stage with its wall time, for profiling runs and logs.
+    auto start = std::make_shared<std::chrono::steady_clock::time_point>(std::chrono::steady_clock::now());
+    auto printed = std::make_shared<bool>(false);
+    return [start, printed](const std::string& stage, float f) {
+      const auto now = std::chrono::steady_clock::now();
+      if (f <= 0.f) { *start = now; *printed = false; }
+      if (f >= 1.f && !*printed && (*printed = true))
+        std::fprintf(stderr, "  %-18s %8.2f s\n", stage.c_str(),
+                     std::chrono::duration<double>(now - *start).count());
+      return true;
+    };
+  }
   if (quiet || !isatty(fileno(stderr))) return {};
   return [](const std::string& stage, float f) {
     const int width = 30, filled = static_cast<int>(f * width + 0.5f);

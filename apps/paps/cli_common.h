@@ -22,7 +22,8 @@ struct Arguments {
   void allowOnly(const std::vector<std::string>& known) const;
 };
 
-/// A progress bar on stderr (only when stderr is a terminal or `force` is set).
-ProgressCallback progressBar(bool quiet);
+/// A progress bar on stderr when it is a terminal and not `quiet`; with `timings`, one line
+/// per finished stage with its wall time instead.
+ProgressCallback progressBar(bool quiet, bool timings = false);
 
 }  // namespace paps::cli

@@ -22,14 +22,16 @@ const char* kDenoiseUsage =
     "  --sigma-scale F        multiplier of the automatic sigma^2 (default 1)\n"
     "  --smoothing N          mean-curvature-motion iterations (default 10)\n"
     "  --patches K            similar patches averaged (default 16)\n"
+    "  --checks N             descriptors compared per similarity query (default 256, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
-    "  --quiet                no progress bar\n";
+    "  --quiet                no progress bar\n"
+    "  --timings              print the wall time of each stage\n";
 
 int runDenoise(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
-               "patches", "iterations", "quiet"});
+               "patches", "iterations", "quiet", "timings", "checks"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
@@ -40,7 +42,7 @@ int runDenoise(int argc, char** argv) {
   pcl::PCLPointCloud2 cloud = loadCloud(in_path);
   const Positions in = positionsOf(cloud);
   std::printf("read %s: %zu points (%zu finite)\n", in_path.c_str(), in.size(), countFinite(in));
-  const ProgressCallback progress = progressBar(a.has("quiet"));
+  const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   Positions out;
   if (method == "similarity") {
     SimilarityDenoisingParameters p;
@@ -51,6 +53,7 @@ int runDenoise(int argc, char** argv) {
     p.sigma_scale = static_cast<float>(a.number("sigma-scale", p.sigma_scale));
     p.smoothing_iterations = static_cast<int>(a.number("smoothing", p.smoothing_iterations));
     p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
+    p.search_checks = static_cast<int>(a.number("checks", p.search_checks));
     SimilarityDenoisingReport r;
     out = denoiseBySimilarity(in, p, &r, {}, progress);
     std::printf("similarity denoising: radius %g m%s (mean %.1f neighbours), grid %dx%d, sigma %g m%s, "

@@ -1,45 +1,123 @@
 #include <paps/core/descriptor_index.h>
 
 #include <algorithm>
-
-#include <flann/flann.hpp>
+#include <limits>
+#include <numeric>
+#include <queue>
 
 #include <paps/core/error.h>
 
 namespace paps {
 
-struct DescriptorIndex::Impl {
-  flann::Matrix<float> data;
-  std::unique_ptr<flann::Index<flann::L2<float>>> index;
-};
-
-DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_t dims)
-    : impl_(std::make_unique<Impl>()), rows_(rows), dims_(dims) {
-  requirePositive("dims", dims);
-  if (rows == 0) return;
-  impl_->data = flann::Matrix<float>(const_cast<float*>(data), rows, dims);
-  // Single exact kd-tree: deterministic, no random trees.
-  impl_->index = std::make_unique<flann::Index<flann::L2<float>>>(
-      impl_->data, flann::KDTreeSingleIndexParams(15));
-  impl_->index->buildIndex();
+namespace {
+constexpr int kLeafSize = 12;
 }
 
-DescriptorIndex::~DescriptorIndex() = default;
+DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_t dims, int max_checks)
+    : rows_(rows), dims_(dims), max_checks_(max_checks) {
+  requirePositive("dims", dims);
+  if (max_checks < 0) throw InvalidParameter("max_checks", detail::toString(max_checks), "0 (exact) or > 0");
+  order_.resize(rows);
+  std::iota(order_.begin(), order_.end(), 0);
+  // Build on a copy indexed through order_, then lay the rows out in leaf order so that a
+  // leaf scan reads contiguous memory.
+  data_.assign(data, data + rows * dims);
+  if (rows > 0) build(0, static_cast<int>(rows));
+  std::vector<float> laid(rows * dims);
+  for (std::size_t r = 0; r < rows; ++r)
+    std::copy_n(data + static_cast<std::size_t>(order_[r]) * dims, dims, laid.begin() + r * dims);
+  data_.swap(laid);
+}
+
+int DescriptorIndex::build(int begin, int end) {
+  const int id = static_cast<int>(nodes_.size());
+  nodes_.push_back({-1, 0.f, begin, end});
+  if (end - begin <= kLeafSize) return id;
+  // Split the dimension of largest spread at the median (ties by index: deterministic).
+  int best = 0;
+  float best_spread = -1.f;
+  for (std::size_t d = 0; d < dims_; ++d) {
+    float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+    for (int i = begin; i < end; ++i) {
+      const float v = data_[static_cast<std::size_t>(order_[i]) * dims_ + d];
+      lo = std::min(lo, v);
+      hi = std::max(hi, v);
+    }
+    if (hi - lo > best_spread) { best_spread = hi - lo; best = static_cast<int>(d); }
+  }
+  if (!(best_spread > 0)) return id;  // all equal: keep as one leaf
+  const int mid = begin + (end - begin) / 2;
+  auto key = [&](int r) { return data_[static_cast<std::size_t>(r) * dims_ + best]; };
+  std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
+                   [&](int a, int b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
+  const float split = key(order_[mid]);
+  const int left = build(begin, mid);
+  const int right = build(mid, end);
+  nodes_[id] = {best, split, left, right};
+  return id;
+}
 
 int DescriptorIndex::nearestK(const float* query, int k, std::vector<int>& indices,
                               std::vector<float>& sq_distances) const {
+  indices.clear();
+  sq_distances.clear();
   k = std::min<int>(k, static_cast<int>(rows_));
-  indices.resize(std::max(k, 0));
-  sq_distances.resize(std::max(k, 0));
   if (k <= 0) return 0;
-  flann::Matrix<float> q(const_cast<float*>(query), 1, dims_);
-  flann::Matrix<int> idx(indices.data(), 1, k);
-  flann::Matrix<float> dist(sq_distances.data(), 1, k);
-  flann::SearchParams params(flann::FLANN_CHECKS_UNLIMITED, 0, true);
-  const int found = impl_->index->knnSearch(q, idx, dist, k, params);
-  indices.resize(found);
-  sq_distances.resize(found);
-  return found;
+  // Max-heap of the best k (distance, row).
+  std::vector<std::pair<float, int>> best;
+  best.reserve(k + 1);
+  auto worst = [&]() {
+    return static_cast<int>(best.size()) < k ? std::numeric_limits<float>::infinity() : best.front().first;
+  };
+  // Min-heap of branches to revisit, by lower bound on distance (one-axis bound, as in
+  // best-bin-first).
+  using Branch = std::pair<float, int>;
+  std::priority_queue<Branch, std::vector<Branch>, std::greater<Branch>> branches;
+  branches.emplace(0.f, 0);
+  int checks = 0;
+  while (!branches.empty()) {
+    const auto [bound, start] = branches.top();
+    branches.pop();
+    if (bound > worst()) break;
+    if (max_checks_ > 0 && checks >= max_checks_ && static_cast<int>(best.size()) >= k) break;
+    int node = start;
+    float node_bound = bound;
+    // Descend to a leaf, queueing the far sides.
+    while (nodes_[node].split_dim >= 0) {
+      const Node& nd = nodes_[node];
+      const float diff = query[nd.split_dim] - nd.split_val;
+      const int near = diff <= 0 ? nd.left : nd.right;
+      const int far = diff <= 0 ? nd.right : nd.left;
+      const float far_bound = std::max(node_bound, diff * diff);
+      if (far_bound <= worst()) branches.emplace(far_bound, far);
+      node = near;
+    }
+    const Node& leaf = nodes_[node];
+    for (int i = leaf.left; i < leaf.right; ++i) {
+      const float* row = &data_[static_cast<std::size_t>(i) * dims_];
+      float d2 = 0.f;
+      for (std::size_t d = 0; d < dims_; ++d) {
+        const float t = row[d] - query[d];
+        d2 += t * t;
+      }
+      ++checks;
+      const std::pair<float, int> cand(d2, order_[i]);
+      if (static_cast<int>(best.size()) < k) {
+        best.push_back(cand);
+        std::push_heap(best.begin(), best.end());
+      } else if (cand < best.front()) {
+        std::pop_heap(best.begin(), best.end());
+        best.back() = cand;
+        std::push_heap(best.begin(), best.end());
+      }
+    }
+  }
+  std::sort_heap(best.begin(), best.end());
+  for (const auto& [d2, r] : best) {
+    indices.push_back(r);
+    sq_distances.push_back(d2);
+  }
+  return static_cast<int>(indices.size());
 }
 
 }  // namespace paps

@@ -24,6 +24,7 @@ void SimilarityDenoisingParameters::validate() const {
   requirePositive("sigma_scale", sigma_scale);
   requireInRange("smoothing_iterations", smoothing_iterations, 1, 1000);
   requireInRange("similar_patches", similar_patches, 1, 1000);
+  requireInRange("search_checks", search_checks, 0, 1000000);
   if (use_viewpoint && !isFinite(viewpoint))
     throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
 }
@@ -162,7 +163,7 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   // 4. The k most similar patches of every movable point (its own rows excluded: the point
   //    itself enters with the largest weight of the others, as in non-local means).
   const int k = params.similar_patches - 1;
-  const DescriptorIndex index(desc.data(), rows, dims);
+  const DescriptorIndex index(desc.data(), rows, dims, params.search_checks);
   std::vector<int> match(n * std::max(k, 1), -1);
   std::vector<float> match_d2(n * std::max(k, 1), 0.f);
   std::vector<float> mean_d2(n, -1.f);

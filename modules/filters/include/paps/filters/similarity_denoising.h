@@ -33,6 +33,9 @@ struct SimilarityDenoisingParameters {
   int smoothing_iterations = 10;
   /// Number of most similar patches averaged, the point's own included (1 to 1000).
   int similar_patches = 16;
+  /// Descriptors compared per similarity query at most (0: exact search, slow on noisy
+  /// data). Measured default, see docs/denoising.md.
+  int search_checks = 256;
   /// Index both frame orientations of every patch (manuscript 2.1.2).
   bool both_orientations = true;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.

@@ -5,6 +5,7 @@
 
 #include <paps/core/error.h>
 
+#include "bench_worker.h"
 #include "commands.h"
 
 namespace {
@@ -24,6 +25,7 @@ int main(int argc, char** argv) {
   try {
     if (!std::strcmp(argv[1], "denoise")) return paps::cli::runDenoise(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
+    if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);
     std::fprintf(stderr, "paps: unknown command '%s'\n%s", argv[1], kUsage);
     return 2;
   } catch (const paps::Error& e) {

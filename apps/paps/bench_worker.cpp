@@ -1,0 +1,135 @@
+#include "bench_worker.h"
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <pcl/point_types.h>
+#include <pcl/surface/mls.h>
+#include <pcl/search/kdtree.h>
+
+#include <paps/core/error.h>
+#include <paps/filters/point_bilateral_filter.h>
+#include <paps/filters/similarity_denoising.h>
+
+namespace paps::cli {
+
+void writeRaw(const std::string& path, const Positions& p) {
+  std::ofstream f(path, std::ios::binary);
+  const std::uint64_t n = p.size();
+  f.write(reinterpret_cast<const char*>(&n), sizeof n);
+  f.write(reinterpret_cast<const char*>(p.data()), static_cast<std::streamsize>(n * sizeof(Eigen::Vector3f)));
+  if (!f) throw IoError("cannot write scratch file '" + path + "'");
+}
+
+Positions readRaw(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::uint64_t n = 0;
+  f.read(reinterpret_cast<char*>(&n), sizeof n);
+  if (!f || n > (1ull << 32)) throw IoError("cannot read scratch file '" + path + "'");
+  Positions p(n);
+  f.read(reinterpret_cast<char*>(p.data()), static_cast<std::streamsize>(n * sizeof(Eigen::Vector3f)));
+  if (!f) throw IoError("truncated scratch file '" + path + "'");
+  return p;
+}
+
+WorkerResult runWorker(const std::string& scratch_dir, const std::string& method,
+                       const Positions& input, const std::map<std::string, double>& params) {
+  const std::string in = scratch_dir + "/worker_in.bin", out = scratch_dir + "/worker_out.bin",
+                    log = scratch_dir + "/worker_log.txt";
+  writeRaw(in, input);
+  std::remove(out.c_str());
+  std::vector<std::string> args = {"/proc/self/exe", "bench-worker", method, in, out, log};
+  for (const auto& [k, v] : params) {
+    std::ostringstream s;
+    s.precision(9);
+    s << k << "=" << v;
+    args.push_back(s.str());
+  }
+  WorkerResult r;
+  const pid_t pid = fork();
+  if (pid == 0) {
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv("/proc/self/exe", argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  rusage usage{};
+  wait4(pid, &status, 0, &usage);
+  r.peak_mb = usage.ru_maxrss / 1024.0;
+  std::ifstream lf(log);
+  std::string line;
+  while (std::getline(lf, line)) {
+    if (line.rfind("seconds ", 0) == 0) r.seconds = std::atof(line.c_str() + 8);
+    else if (line.rfind("error ", 0) == 0) r.message = line.substr(6);
+  }
+  r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
+  if (r.ok) r.output = readRaw(out);
+  return r;
+}
+
+int runBenchWorker(int argc, char** argv) {
+  if (argc < 6) return 2;
+  const std::string method = argv[2], in = argv[3], out = argv[4], log = argv[5];
+  std::map<std::string, double> p;
+  for (int i = 6; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto eq = a.find('=');
+    p[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
+  }
+  auto get = [&](const char* k, double d) { return p.count(k) ? p[k] : d; };
+  std::ofstream lf(log);
+  try {
+    const Positions input = readRaw(in);
+    Positions output;
+    const auto t0 = std::chrono::steady_clock::now();
+    if (method == "ours") {
+      SimilarityDenoisingParameters q;
+      q.radius = static_cast<float>(get("radius", 0));
+      q.sigma_scale = static_cast<float>(get("sigma_scale", q.sigma_scale));
+      q.similar_patches = static_cast<int>(get("patches", q.similar_patches));
+      q.smoothing_iterations = static_cast<int>(get("smoothing", q.smoothing_iterations));
+      q.grid_size = static_cast<int>(get("grid", q.grid_size));
+      q.search_checks = static_cast<int>(get("checks", q.search_checks));
+      output = denoiseBySimilarity(input, q);
+    } else if (method == "bilateral") {
+      PointBilateralParameters q;
+      q.radius = static_cast<float>(get("radius", 0));
+      q.iterations = static_cast<int>(get("iterations", 1));
+      output = bilateralFilterPositions(input, q);
+    } else if (method == "mls") {
+      auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+      writePositions(input, *cloud);
+      pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ> mls;
+      mls.setInputCloud(cloud);
+      mls.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+      mls.setPolynomialOrder(static_cast<int>(get("order", 2)));
+      mls.setSearchRadius(get("radius", 0));
+      mls.setComputeNormals(false);
+      mls.setNumberOfThreads(static_cast<unsigned>(get("threads", 2)));
+      pcl::PointCloud<pcl::PointXYZ> result;
+      mls.process(result);
+      output = positionsOf(result);
+    } else {
+      throw InvalidParameter("method", method, "ours, bilateral or mls");
+    }
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    writeRaw(out, output);
+    lf << "seconds " << s << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    lf << "error " << e.what() << "\n";
+    return 1;
+  }
+}
+
+}  // namespace paps::cli

@@ -1,0 +1,30 @@
+#pragma once
+// Runs one method on one input in a child process, so that each row of a bench table gets
+// its own peak memory (wait4's ru_maxrss) and a crash in one method cannot take the bench down.
+#include <map>
+#include <string>
+
+#include <paps/core/positions.h>
+
+namespace paps::cli {
+
+struct WorkerResult {
+  bool ok = false;
+  double seconds = 0;      // algorithm wall time, measured in the child around the call only
+  double peak_mb = 0;      // peak resident memory of the child
+  std::string message;     // child's error line when !ok
+  Positions output;
+};
+
+/// Saves `input` to a scratch file and runs `paps bench-worker METHOD ...` on it.
+WorkerResult runWorker(const std::string& scratch_dir, const std::string& method,
+                       const Positions& input, const std::map<std::string, double>& params);
+
+/// Entry of the hidden `paps bench-worker` command.
+int runBenchWorker(int argc, char** argv);
+
+/// Raw float dumps, for the scratch files only.
+void writeRaw(const std::string& path, const Positions& p);
+Positions readRaw(const std::string& path);
+
+}  // namespace paps::cli

@@ -1,0 +1,98 @@
+#include "render.h"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Eigenvalues>
+#include <pcl/io/png_io.h>
+
+#include <paps/core/error.h>
+#include <paps/core/local_frame.h>
+#include <paps/core/neighbourhood.h>
+
+namespace paps::cli {
+
+View View::fit(const Positions& points, float tilt_degrees) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  std::size_t n = 0;
+  for (const auto& p : points)
+    if (isFinite(p)) { mean += p.cast<double>(); ++n; }
+  if (n == 0) throw InvalidInput("nothing to render");
+  mean /= n;
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& p : points)
+    if (isFinite(p)) { const Eigen::Vector3d d = p.cast<double>() - mean; cov += d * d.transpose(); }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  Eigen::Matrix3f a;
+  a.row(0) = eig.eigenvectors().col(2).cast<float>().transpose();
+  a.row(2) = eig.eigenvectors().col(0).cast<float>().transpose();
+  if (a(2, 2) < 0) a.row(2) = -a.row(2);  // look from +z when it is ambiguous
+  a.row(1) = a.row(2).cross(a.row(0));
+  const float t = tilt_degrees * 3.14159265f / 180.f;
+  const Eigen::Matrix3f tilt = Eigen::AngleAxisf(t, Eigen::Vector3f::UnitX()).toRotationMatrix();
+  View v;
+  v.axes = tilt * a;
+  v.lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::max());
+  v.hi = -v.lo;
+  for (const auto& p : points)
+    if (isFinite(p)) {
+      const Eigen::Vector3f s = v.axes * p;
+      v.lo = v.lo.cwiseMin(s.head<2>());
+      v.hi = v.hi.cwiseMax(s.head<2>());
+    }
+  return v;
+}
+
+namespace {
+
+// Splats every point as a 2x2 pixel block with a z-buffer, colour from `colour(i)`.
+template <typename ColourFn>
+void splat(const Positions& points, const View& view, int width, const std::string& png, ColourFn colour) {
+  const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
+  const int height = std::max(1, static_cast<int>(width * ext.y() / ext.x()));
+  std::vector<unsigned char> rgb(static_cast<std::size_t>(width) * height * 3, 255);
+  std::vector<float> depth(static_cast<std::size_t>(width) * height, -std::numeric_limits<float>::max());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(points[i])) continue;
+    const Eigen::Vector3f s = view.axes * points[i];
+    const int x = static_cast<int>((s.x() - view.lo.x()) / ext.x() * (width - 2));
+    const int y = static_cast<int>((view.hi.y() - s.y()) / ext.y() * (height - 2));
+    const Eigen::Vector3f c = colour(i);
+    for (int dy = 0; dy < 2; ++dy)
+      for (int dx = 0; dx < 2; ++dx) {
+        const std::size_t k = static_cast<std::size_t>(y + dy) * width + (x + dx);
+        if (x + dx >= width || y + dy >= height || s.z() <= depth[k]) continue;
+        depth[k] = s.z();
+        for (int ch = 0; ch < 3; ++ch)
+          rgb[3 * k + ch] = static_cast<unsigned char>(std::clamp(c[ch], 0.f, 1.f) * 255.f);
+      }
+  }
+  pcl::io::saveRgbPNGFile(png, rgb.data(), width, height);
+}
+
+}  // namespace
+
+void renderShaded(const Positions& points, const View& view, int width, const std::string& png) {
+  SpatialIndex index(points);
+  const NeighbourGraph g = NeighbourGraph::byCount(points, index, 12);
+  const Normals normals = estimateNormals(points, g);
+  const Eigen::Vector3f light = view.axes.transpose() * Eigen::Vector3f(-0.4f, 0.5f, 0.77f).normalized();
+  splat(points, view, width, png, [&](std::size_t i) {
+    const float l = isFinite(normals[i]) ? std::abs(normals[i].dot(light)) : 0.5f;
+    return Eigen::Vector3f::Constant(0.15f + 0.85f * l);
+  });
+}
+
+void renderValues(const Positions& points, const std::vector<double>& values, double vmax,
+                  const View& view, int width, const std::string& png) {
+  splat(points, view, width, png, [&](std::size_t i) {
+    if (!std::isfinite(values[i])) return Eigen::Vector3f(0.6f, 0.6f, 0.6f);
+    const float t = static_cast<float>(std::clamp(values[i] / vmax, 0.0, 1.0));
+    // Blue -> cyan -> yellow -> red.
+    return Eigen::Vector3f(std::clamp(2.f * t, 0.f, 1.f) , 1.f - std::abs(2.f * t - 1.f) * 0.8f,
+                           std::clamp(1.f - 2.f * t, 0.f, 1.f));
+  });
+}
+
+}  // namespace paps::cli

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Installs what is missing, builds everything and runs all tests (unit tests, CLI tests and
+# the find_package(PAPS) consumer project).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/install_deps.sh
+bash scripts/build.sh
+export PAPS_SAMPLES="${PAPS_SAMPLES:-$HOME/.cache/paps/samples}"
+bash scripts/fetch_samples.sh >/dev/null || echo "warning: sample scans unavailable; tests that need them skip"
+cd build
+ctest --output-on-failure -j"$(nproc)"

@@ -62,11 +62,13 @@ struct Method {
 std::vector<Method> sweep(float r, bool quick) {
   std::vector<Method> m;
   m.push_back({"ours", "default", {{"radius", r}}, true});
-  for (double s : {0.5, 2.0})
-    m.push_back({"ours", "sigma_scale " + fmt("%g", s), {{"radius", r}, {"sigma_scale", s}}, false});
-  for (double k : quick ? std::vector<double>{32} : std::vector<double>{32, 64})
-    m.push_back({"ours", "patches " + fmt("%g", k), {{"radius", r}, {"patches", k}}, false});
-  if (!quick) m.push_back({"ours", "patches 64 sigma_scale 2", {{"radius", r}, {"patches", 64}, {"sigma_scale", 2}}, false});
+  m.push_back({"ours", "manuscript (guide 0, k 16, ss 1)", {{"radius", r}, {"guide", 0}, {"patches", 16}, {"sigma_scale", 1}}, false});
+  m.push_back({"ours", "passes 2", {{"radius", r}, {"passes", 2}}, false});
+  m.push_back({"ours", "radius x2", {{"radius", 2 * r}}, false});
+  if (!quick) {
+    m.push_back({"ours", "radius x2 passes 2", {{"radius", 2 * r}, {"passes", 2}}, false});
+    m.push_back({"ours", "radius x3", {{"radius", 3 * r}}, false});
+  }
   for (double f : quick ? std::vector<double>{1, 2} : std::vector<double>{1, 1.5, 2, 3})
     m.push_back({"mls", "radius x" + fmt("%g", f), {{"radius", r * f}, {"order", 2}, {"threads", 2}}, f == 1});
   for (double f : quick ? std::vector<double>{1, 2} : std::vector<double>{1, 1.5, 2})

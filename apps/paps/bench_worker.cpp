@@ -100,6 +100,8 @@ int runBenchWorker(int argc, char** argv) {
       q.smoothing_iterations = static_cast<int>(get("smoothing", q.smoothing_iterations));
       q.grid_size = static_cast<int>(get("grid", q.grid_size));
       q.search_checks = static_cast<int>(get("checks", q.search_checks));
+      q.passes = static_cast<int>(get("passes", q.passes));
+      q.descriptor_smoothing = static_cast<int>(get("guide", q.descriptor_smoothing));
       output = denoiseBySimilarity(input, q);
     } else if (method == "bilateral") {
       PointBilateralParameters q;

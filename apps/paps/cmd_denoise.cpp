@@ -19,9 +19,11 @@ const char* kDenoiseUsage =
     "  --neighbours N         mean neighbour count that sets the radius (default 30)\n"
     "  --grid N               descriptor grid N x N (default 4)\n"
     "  --sigma S              similarity scale in metres (default: from the descriptors)\n"
-    "  --sigma-scale F        multiplier of the automatic sigma^2 (default 1)\n"
+    "  --sigma-scale F        multiplier of the automatic sigma^2 (default 4)\n"
     "  --smoothing N          mean-curvature-motion iterations (default 10)\n"
-    "  --patches K            similar patches averaged (default 16)\n"
+    "  --guide N              smoothing iterations of the points descriptors are built from (default 3)\n"
+    "  --passes N             times the filter is applied (default 1)\n"
+    "  --patches K            similar patches averaged (default 32)\n"
     "  --checks N             descriptors compared per similarity query (default 256, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "  --quiet                no progress bar\n"
@@ -31,7 +33,7 @@ int runDenoise(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
-               "patches", "iterations", "quiet", "timings", "checks"});
+               "patches", "iterations", "quiet", "timings", "checks", "guide", "passes"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
@@ -54,6 +56,8 @@ int runDenoise(int argc, char** argv) {
     p.smoothing_iterations = static_cast<int>(a.number("smoothing", p.smoothing_iterations));
     p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
     p.search_checks = static_cast<int>(a.number("checks", p.search_checks));
+    p.descriptor_smoothing = static_cast<int>(a.number("guide", p.descriptor_smoothing));
+    p.passes = static_cast<int>(a.number("passes", p.passes));
     SimilarityDenoisingReport r;
     out = denoiseBySimilarity(in, p, &r, {}, progress);
     std::printf("similarity denoising: radius %g m%s (mean %.1f neighbours), grid %dx%d, sigma %g m%s, "

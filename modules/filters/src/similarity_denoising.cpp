@@ -23,6 +23,8 @@ void SimilarityDenoisingParameters::validate() const {
     throw InvalidParameter("sigma", detail::toString(sigma), "0 (automatic) or a finite value > 0");
   requirePositive("sigma_scale", sigma_scale);
   requireInRange("smoothing_iterations", smoothing_iterations, 1, 1000);
+  requireInRange("descriptor_smoothing", descriptor_smoothing, 0, 1000);
+  requireInRange("passes", passes, 1, 100);
   requireInRange("similar_patches", similar_patches, 1, 1000);
   requireInRange("search_checks", search_checks, 0, 1000000);
   if (use_viewpoint && !isFinite(viewpoint))
@@ -40,8 +42,10 @@ constexpr int kMinNeighbours = 4;
 // moving surface and kept on the side they started on.
 Positions meanCurvatureMotion(const Positions& points, const NeighbourGraph& graph,
                               Normals& normals, const std::vector<std::uint8_t>& usable,
-                              int iterations, const ProgressCallback& progress) {
+                              int iterations, int snapshot_at, Positions& snapshot,
+                              const ProgressCallback& progress) {
   Positions cur = points, next = points;
+  if (snapshot_at == 0) snapshot = points;
   const std::int64_t n = static_cast<std::int64_t>(points.size());
   ProgressReporter report(progress, "smoothing", static_cast<std::size_t>(iterations));
   for (int it = 0; it < iterations; ++it) {
@@ -60,9 +64,11 @@ Positions meanCurvatureMotion(const Positions& points, const NeighbourGraph& gra
       if (!usable[i] || !isFinite(refit[i])) continue;
       normals[i] = refit[i].dot(normals[i]) < 0 ? Eigen::Vector3f(-refit[i]) : refit[i];
     }
+    if (it + 1 == snapshot_at) snapshot = cur;
     report.advance();
     report.throwIfCancelled();
   }
+  if (snapshot_at > iterations) snapshot = cur;
   report.finish();
   return cur;
 }
@@ -83,11 +89,10 @@ std::vector<int> halfTurnPermutation(const SamplingPattern& pattern) {
 
 }  // namespace
 
-Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
-                              SimilarityDenoisingReport* report_out,
-                              const std::vector<std::uint8_t>& movable,
-                              const ProgressCallback& progress) {
-  params.validate();
+namespace {
+Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParameters& params,
+                      SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
+                      const ProgressCallback& progress) {
   SimilarityDenoisingReport report;
   const std::size_t n = points.size();
   if (n == 0) throw InvalidInput("the input cloud is empty");
@@ -119,11 +124,30 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
     usable[i] = isFinite(points[i]) && graph.count(i) >= kMinNeighbours && isFinite(normals[i]);
     if (isFinite(points[i]) && !usable[i]) ++report.isolated;
   }
-  const Positions smooth =
-      meanCurvatureMotion(points, graph, normals, usable, params.smoothing_iterations, progress);
+  Positions guide;
+  const Positions smooth = meanCurvatureMotion(points, graph, normals, usable, params.smoothing_iterations,
+                                               params.descriptor_smoothing, guide, progress);
 
   // 3. Principal frames on S_smooth and plane+height descriptors of S in them.
-  const LocalFrames frames = estimatePrincipalFrames(normals, graph);
+  // The principal directions come from the guide, which still carries the detail that S_smooth
+  // has lost (on S_smooth they would be noise); the normal and the height plane are S_smooth's.
+  LocalFrames frames;
+  {
+    Normals guide_normals = estimateNormals(guide, graph);
+    for (std::size_t i = 0; i < n; ++i)
+      if (isFinite(guide_normals[i]) && isFinite(normals[i]) && guide_normals[i].dot(normals[i]) < 0)
+        guide_normals[i] = -guide_normals[i];
+    frames = estimatePrincipalFrames(guide_normals, graph);
+    for (std::size_t i = 0; i < n; ++i) {
+      LocalFrame& f = frames[i];
+      if (!usable[i] || !f.valid()) continue;
+      Eigen::Vector3f t1 = f.t1 - f.t1.dot(normals[i]) * normals[i];
+      if (t1.norm() < 1e-6f) t1 = f.t2 - f.t2.dot(normals[i]) * normals[i];
+      f.n = normals[i];
+      f.t1 = t1.normalized();
+      f.t2 = f.n.cross(f.t1);
+    }
+  }
   const PlaneHeightPatch patch(SamplingPattern::grid(params.grid_size), nb.radius);
   const std::size_t dims = patch.size();
   const std::vector<int> perm = halfTurnPermutation(patch.pattern());
@@ -147,12 +171,14 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
         rep.advance();
         if (!usable[i] || rep.cancelled()) continue;
         float* d0 = &desc[rows_of_point[i] * dims];
-        patch.describe(frames[i], smooth[i], points, graph.begin(i), graph.count(i), d0, valid.data());
+        // The point itself is left out of its descriptor: otherwise patches that share its
+        // own noise would look most similar and the average would keep that noise.
+        patch.describe(frames[i], smooth[i], guide, graph.begin(i) + 1, graph.count(i) - 1, d0, valid.data());
         if (orientations == 2) {
           float* d1 = d0 + dims;
           if (!perm.empty()) for (std::size_t s = 0; s < dims; ++s) d1[s] = d0[perm[s]];
-          else patch.describe(frames[i].rotatedHalfTurn(), smooth[i], points, graph.begin(i),
-                              graph.count(i), d1, valid.data());
+          else patch.describe(frames[i].rotatedHalfTurn(), smooth[i], guide, graph.begin(i) + 1,
+                              graph.count(i) - 1, d1, valid.data());
         }
       }
     }
@@ -240,6 +266,25 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   report.moved = moved;
   if (report_out) *report_out = report;
   return out;
+}
+
+}  // namespace
+
+Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
+                              SimilarityDenoisingReport* report_out,
+                              const std::vector<std::uint8_t>& movable,
+                              const ProgressCallback& progress) {
+  params.validate();
+  Positions cur = points;
+  SimilarityDenoisingReport report;
+  for (int pass = 0; pass < params.passes; ++pass) {
+    // Later passes keep the radius of the first, so the scale does not drift.
+    SimilarityDenoisingParameters p = params;
+    if (pass > 0) p.radius = report.radius;
+    cur = denoiseOnce(cur, p, &report, movable, progress);
+  }
+  if (report_out) *report_out = report;
+  return cur;
 }
 
 template class SimilarityDenoising<pcl::PointXYZ>;

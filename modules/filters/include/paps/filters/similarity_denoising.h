@@ -28,11 +28,17 @@ struct SimilarityDenoisingParameters {
   /// squared descriptor distance to their similar patches, times `sigma_scale`.
   float sigma = 0.f;
   /// Multiplier of the automatic sigma^2 (> 0). Measured default, see docs/denoising.md.
-  float sigma_scale = 1.f;
+  float sigma_scale = 4.f;
   /// Mean-curvature-motion iterations that separate S_smooth from V (1 to 1000).
   int smoothing_iterations = 10;
+  /// Mean-curvature-motion iterations applied to the points the descriptors are built from
+  /// (0: the input itself, as in the manuscript). A lightly smoothed guide makes the
+  /// similarity robust to heavy noise; the residual that is averaged is always the input's.
+  int descriptor_smoothing = 3;
+  /// Times the whole filter is applied (1 to 100).
+  int passes = 1;
   /// Number of most similar patches averaged, the point's own included (1 to 1000).
-  int similar_patches = 16;
+  int similar_patches = 32;
   /// Descriptors compared per similarity query at most (0: exact search, slow on noisy
   /// data). Measured default, see docs/denoising.md.
   int search_checks = 256;

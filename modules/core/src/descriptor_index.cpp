@@ -10,7 +10,7 @@
 namespace paps {
 
 namespace {
-constexpr int kLeafSize = 12;
+constexpr int kLeafSize = 32;  // contiguous scans are cheap; tree steps are cache misses
 }
 
 DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_t dims, int max_checks)
@@ -45,7 +45,9 @@ int DescriptorIndex::build(int begin, int end) {
     }
     if (hi - lo > best_spread) { best_spread = hi - lo; best = static_cast<int>(d); }
   }
-  if (!(best_spread > 0)) return id;  // all equal: keep as one leaf
+  // All rows equal (e.g. empty patches): still split, by row, so that leaves stay small and
+  // the check budget bounds the search.
+  if (!(best_spread > 0)) best = 0;
   const int mid = begin + (end - begin) / 2;
   auto key = [&](int r) { return data_[static_cast<std::size_t>(r) * dims_ + best]; };
   std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
@@ -64,20 +66,27 @@ int DescriptorIndex::nearestK(const float* query, int k, std::vector<int>& indic
   k = std::min<int>(k, static_cast<int>(rows_));
   if (k <= 0) return 0;
   // Max-heap of the best k (distance, row).
-  std::vector<std::pair<float, int>> best;
-  best.reserve(k + 1);
+  // Per-thread scratch: no allocation per query.
+  thread_local std::vector<std::pair<float, int>> best;
+  best.clear();
   auto worst = [&]() {
     return static_cast<int>(best.size()) < k ? std::numeric_limits<float>::infinity() : best.front().first;
   };
   // Min-heap of branches to revisit, by lower bound on distance (one-axis bound, as in
   // best-bin-first).
   using Branch = std::pair<float, int>;
-  std::priority_queue<Branch, std::vector<Branch>, std::greater<Branch>> branches;
-  branches.emplace(0.f, 0);
+  thread_local std::vector<Branch> heap;
+  heap.clear();
+  auto pushBranch = [&](float b, int node) {
+    heap.emplace_back(b, node);
+    std::push_heap(heap.begin(), heap.end(), std::greater<Branch>());
+  };
+  pushBranch(0.f, 0);
   int checks = 0;
-  while (!branches.empty()) {
-    const auto [bound, start] = branches.top();
-    branches.pop();
+  while (!heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), std::greater<Branch>());
+    const auto [bound, start] = heap.back();
+    heap.pop_back();
     if (bound > worst()) break;
     if (max_checks_ > 0 && checks >= max_checks_ && static_cast<int>(best.size()) >= k) break;
     int node = start;
@@ -89,7 +98,7 @@ int DescriptorIndex::nearestK(const float* query, int k, std::vector<int>& indic
       const int near = diff <= 0 ? nd.left : nd.right;
       const int far = diff <= 0 ? nd.right : nd.left;
       const float far_bound = std::max(node_bound, diff * diff);
-      if (far_bound <= worst()) branches.emplace(far_bound, far);
+      if (far_bound <= worst()) pushBranch(far_bound, far);
       node = near;
     }
     const Node& leaf = nodes_[node];

@@ -74,9 +74,14 @@ class NeighbourGraphBuilder {
         if (report.cancelled()) continue;
         if (isFinite(points[i])) {
           query(points[i], idx, d2);
-          // Self first, even among exact duplicates.
+          // Self first, even among exact duplicates or when a capped search left it out.
           auto self = std::find(idx.begin(), idx.end(), static_cast<int>(i));
-          if (self != idx.end()) std::rotate(idx.begin(), self, self + 1);
+          if (self != idx.end()) {
+            std::rotate(idx.begin(), self, self + 1);
+          } else {
+            if (!idx.empty()) idx.pop_back();
+            idx.insert(idx.begin(), static_cast<int>(i));
+          }
           lists[i] = idx;
         }
         report.advance();

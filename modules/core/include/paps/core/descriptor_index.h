@@ -21,6 +21,9 @@ class DescriptorIndex {
   int nearestK(const float* query, int k, std::vector<int>& indices,
                std::vector<float>& sq_distances) const;
   std::size_t rows() const { return rows_; }
+  /// The rows in the order the tree stores them: similar rows are close in this order, so
+  /// querying the rows themselves in it keeps the tree and the data in cache.
+  const std::vector<int>& storageOrder() const { return order_; }
   std::size_t dims() const { return dims_; }
 
  private:

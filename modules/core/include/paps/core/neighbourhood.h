@@ -51,6 +51,20 @@ class NeighbourGraph {
   int count(std::size_t i) const { return offsets_[i + 1] - offsets_[i]; }
   const int* begin(std::size_t i) const { return indices_.data() + offsets_[i]; }
   const int* end(std::size_t i) const { return indices_.data() + offsets_[i + 1]; }
+  /// The same lists keeping only the neighbours j of i for which keep(i, j) holds; each
+  /// point stays first in its own list.
+  template <typename Keep>
+  NeighbourGraph filtered(Keep keep) const {
+    NeighbourGraph g;
+    g.offsets_.assign(offsets_.size(), 0);
+    g.indices_.reserve(indices_.size());
+    for (std::size_t i = 0; i < size(); ++i) {
+      for (const int* j = begin(i); j != end(i); ++j)
+        if (*j == static_cast<int>(i) || keep(static_cast<int>(i), *j)) g.indices_.push_back(*j);
+      g.offsets_[i + 1] = static_cast<std::int64_t>(g.indices_.size());
+    }
+    return g;
+  }
   /// Mean neighbour count over points that have any.
   double meanCount() const;
 

@@ -11,6 +11,8 @@
 #include <pcl/point_cloud.h>
 #include <pcl/types.h>
 
+#include <paps/core/error.h>
+
 namespace paps {
 
 using Positions = std::vector<Eigen::Vector3f>;
@@ -63,7 +65,12 @@ template <typename PointT, typename MoveFn>
 void applyPositionFilter(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices,
                          pcl::PointCloud<PointT>& output, MoveFn move) {
   std::vector<std::uint8_t> movable(input.size(), 0);
-  for (const auto i : indices) movable[i] = 1;
+  for (const auto i : indices) {
+    if (i < 0 || static_cast<std::size_t>(i) >= input.size())
+      throw InvalidParameter("indices", detail::toString(i),
+                             "indices in [0, " + detail::toString(input.size()) + ")");
+    movable[i] = 1;
+  }
   const Positions out = move(positionsOf(input), movable);
   output = input;
   bool dense = true;

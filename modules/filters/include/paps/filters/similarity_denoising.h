@@ -28,7 +28,7 @@ struct SimilarityDenoisingParameters {
   /// squared descriptor distance to their similar patches, times `sigma_scale`.
   float sigma = 0.f;
   /// Multiplier of the automatic sigma^2 (> 0). Measured default, see docs/denoising.md.
-  float sigma_scale = 4.f;
+  float sigma_scale = 2.f;
   /// Mean-curvature-motion iterations that separate S_smooth from V (1 to 1000).
   int smoothing_iterations = 10;
   /// Mean-curvature-motion iterations applied to the points the descriptors are built from
@@ -41,7 +41,7 @@ struct SimilarityDenoisingParameters {
   int similar_patches = 32;
   /// Descriptors compared per similarity query at most (0: exact search, slow on noisy
   /// data). Measured default, see docs/denoising.md.
-  int search_checks = 256;
+  int search_checks = 128;
   /// Index both frame orientations of every patch (manuscript 2.1.2).
   bool both_orientations = true;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.

@@ -3,4 +3,10 @@ namespace paps::cli {
 extern const char* kDenoiseUsage;
 int runDenoise(int argc, char** argv);
 int runBench(int argc, char** argv);
+int runCurvature(int argc, char** argv);
+int runEnhance(int argc, char** argv);
+int runBenchCurvature(int argc, char** argv);
+int runCompress(int argc, char** argv);
+int runDecompress(int argc, char** argv);
+int runBenchCompress(int argc, char** argv);
 }  // namespace paps::cli

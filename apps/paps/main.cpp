@@ -14,6 +14,11 @@ const char* kUsage =
     "usage: paps COMMAND ...\n"
     "  denoise IN OUT [options]      similarity-based denoising (or --method bilateral)\n"
     "  bench denoise [options]       ours vs PCL MLS and the bilateral filter, in one run\n"
+    "  compress IN OUT.paps [opts]   self-similarity compression (sparse patches over a dictionary)\n"
+    "  decompress IN.paps OUT        decode a .paps file to .pcd or .ply\n"
+    "  bench compress [options]      ours vs Draco and the PCL octree coder: rate-distortion curves\n"
+    "  curvature IN OUT [options]    Wavejet normals and curvatures; enhance IN OUT: details\n"
+    "  bench curvature [options]     Wavejets vs PCL and CGAL jets on analytic surfaces and a scan\n"
     "Run 'paps COMMAND --help' for the options of a command.\n";
 }
 
@@ -24,6 +29,16 @@ int main(int argc, char** argv) {
   }
   try {
     if (!std::strcmp(argv[1], "denoise")) return paps::cli::runDenoise(argc, argv);
+#ifdef PAPS_HAVE_FEATURES
+    if (!std::strcmp(argv[1], "curvature")) return paps::cli::runCurvature(argc, argv);
+    if (!std::strcmp(argv[1], "enhance")) return paps::cli::runEnhance(argc, argv);
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "curvature")) return paps::cli::runBenchCurvature(argc, argv);
+#endif
+#ifdef PAPS_HAVE_COMPRESSION
+    if (!std::strcmp(argv[1], "compress")) return paps::cli::runCompress(argc, argv);
+    if (!std::strcmp(argv[1], "decompress")) return paps::cli::runDecompress(argc, argv);
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "compress")) return paps::cli::runBenchCompress(argc, argv);
+#endif
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);
     std::fprintf(stderr, "paps: unknown command '%s'\n%s", argv[1], kUsage);

@@ -362,11 +362,16 @@ TEST(TriangleMesh, LoadsObjWithQuads) {
   EXPECT_NEAR(m.area(), 4 + std::sqrt(2.0), 1e-6);  // the quad and a triangle of base 2, slant sqrt(2)
 }
 
-// The OpenCV surface-matching sample (PAPS_SAMPLE_MESH overrides the path); skipped if absent.
+// The OpenCV surface-matching sample fetched by scripts/fetch_samples.sh into $PAPS_SAMPLES
+// (PAPS_SAMPLE_MESH overrides the path); skipped if absent.
 TEST(TriangleMesh, LoadsRealPlyMesh) {
   const char* env = std::getenv("PAPS_SAMPLE_MESH");
-  const std::string path =
-      env ? env : "/tmp/samples/x/usr/share/doc/opencv-doc/examples/surface_matching/data/rs1_normals.ply";
+  const char* samples = std::getenv("PAPS_SAMPLES");
+  const char* home = std::getenv("HOME");
+  const std::string path = env ? std::string(env)
+                               : (samples ? std::string(samples)
+                                          : std::string(home ? home : ".") + "/.cache/paps/samples") +
+                                     "/rs1_normals.ply";
   if (!std::filesystem::exists(path)) GTEST_SKIP() << "no sample mesh at " << path;
   const TriangleMesh m = paps::loadTriangleMesh(path);
   if (!env) {

@@ -197,14 +197,6 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
         // own noise would look most similar and the average would keep that noise.
         patch.describe(frames[i], smooth[i], guide, describe_graph.begin(i) + 1, describe_graph.count(i) - 1,
                        d0, valid.data());
-        // The mean height is left out: it carries the offset of p_S from the surface, which
-        // would make patches that share p's smoothing error (and so its noise) look alike.
-        {
-          float mean = 0;
-          for (std::size_t s = 0; s < dims; ++s) mean += d0[s];
-          mean /= dims;
-          for (std::size_t s = 0; s < dims; ++s) d0[s] -= mean;
-        }
         if (orientations == 2) {
           float* d1 = d0 + dims;
           if (!perm.empty()) for (std::size_t s = 0; s < dims; ++s) d1[s] = d0[perm[s]];

@@ -20,7 +20,8 @@ std::vector<int> poissonDiskSubset(const Positions& points, float radius, std::u
 
 /// Same, visiting the points in the order given by `priority` (lower first) instead of a
 /// random order; ties broken by index. Lets a caller prefer some points (e.g. the
-/// best-supported ones when thinning a decoded cloud).
+/// best-supported ones when thinning a decoded cloud). An empty `priority` visits the points
+/// in index order, which is also much faster on large clouds (memory locality).
 std::vector<int> poissonDiskSubsetOrdered(const Positions& points, float radius,
                                           const std::vector<float>& priority);
 

@@ -1,0 +1,628 @@
+// paps bench curvature: Wavejets against pcl::NormalEstimation + PrincipalCurvaturesEstimation
+// and CGAL::Monge_via_jet_fitting, same neighbourhoods, on analytic surfaces with known
+// curvature and on a real scan mesh; plus the tilted-plane correction curve, the speed run and
+// renders of an enhanced scan. One run, one table.
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <cmath>
+#include <cstdio>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <omp.h>
+#include <Eigen/Eigenvalues>
+
+#include <pcl/features/normal_3d.h>
+#include <pcl/features/normal_3d_omp.h>
+#include <pcl/features/principal_curvatures.h>
+#include <pcl/io/png_io.h>
+#include <pcl/point_types.h>
+
+#ifdef PAPS_HAVE_CGAL
+#include <CGAL/Monge_via_jet_fitting.h>
+#include <CGAL/Simple_cartesian.h>
+#endif
+
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/random.h>
+#include <paps/core/triangle_mesh.h>
+#include <paps/features/wavejet.h>
+#include <paps/filters/wavejet_enhancement.h>
+
+#include "cli_common.h"
+#include "commands.h"
+
+namespace paps::cli {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+constexpr double kPi = 3.14159265358979323846;
+
+// Per-point estimate: unit normal and signed principal curvatures k1 >= k2 (w.r.t. the normal).
+struct Estimate {
+  Eigen::Vector3f n = Eigen::Vector3f::Constant(NAN);
+  float k1 = NAN, k2 = NAN;
+};
+struct Truth {
+  Eigen::Vector3f n;
+  float k1, k2;
+};
+
+// A height field z = f(x, y) with its derivatives up to order 2.
+struct Surface {
+  std::string name;
+  std::function<double(double, double)> f;
+  std::function<void(double, double, double d[5])> deriv;  // fx fy fxx fxy fyy
+};
+
+Truth truthOf(const Surface& s, double x, double y) {
+  double d[5];
+  s.deriv(x, y, d);
+  const double fx = d[0], fy = d[1];
+  const double e = 1 + fx * fx, f = fx * fy, g = 1 + fy * fy, w = std::sqrt(1 + fx * fx + fy * fy);
+  const double L = d[2] / w, M = d[3] / w, N = d[4] / w, det = e * g - f * f;
+  const double K = (L * N - M * M) / det, H = (e * N - 2 * f * M + g * L) / (2 * det);
+  const double disc = std::sqrt(std::max(0.0, H * H - K));
+  return {Eigen::Vector3d(-fx, -fy, 1).normalized().cast<float>(), float(H + disc), float(H - disc)};
+}
+
+std::vector<Surface> analyticSurfaces() {
+  std::vector<Surface> s;
+  const double rs = 1.6, rc = 1.2;
+  s.push_back({"sphere r=1.6", [=](double x, double y) { return std::sqrt(rs * rs - x * x - y * y); },
+               [=](double x, double y, double d[5]) {
+                 const double q = rs * rs - x * x - y * y, r = std::sqrt(q), r3 = q * r;
+                 d[0] = -x / r; d[1] = -y / r;
+                 d[2] = -(rs * rs - y * y) / r3; d[3] = -x * y / r3; d[4] = -(rs * rs - x * x) / r3;
+               }});
+  s.push_back({"cylinder r=1.2", [=](double x, double) { return std::sqrt(rc * rc - x * x); },
+               [=](double x, double, double d[5]) {
+                 const double q = rc * rc - x * x, r = std::sqrt(q);
+                 d[0] = -x / r; d[1] = 0; d[2] = -rc * rc / (q * r); d[3] = 0; d[4] = 0;
+               }});
+  s.push_back({"paraboloid", [](double x, double y) { return 0.5 * x * x + 0.25 * y * y; },
+               [](double x, double y, double d[5]) { d[0] = x; d[1] = 0.5 * y; d[2] = 1; d[3] = 0; d[4] = 0.5; }});
+  s.push_back({"saddle", [](double x, double y) { return 0.4 * x * x - 0.3 * y * y; },
+               [](double x, double y, double d[5]) { d[0] = 0.8 * x; d[1] = -0.6 * y; d[2] = 0.8; d[3] = 0; d[4] = -0.6; }});
+  s.push_back({"monkey saddle", [](double x, double y) { return 0.3 * (x * x * x - 3 * x * y * y); },
+               [](double x, double y, double d[5]) {
+                 d[0] = 0.3 * (3 * x * x - 3 * y * y); d[1] = -1.8 * x * y;
+                 d[2] = 1.8 * x; d[3] = -1.8 * y; d[4] = -1.8 * x;
+               }});
+  s.push_back({"x^4+y^4", [](double x, double y) { return 0.5 * (x * x * x * x + y * y * y * y); },
+               [](double x, double y, double d[5]) {
+                 d[0] = 2 * x * x * x; d[1] = 2 * y * y * y; d[2] = 6 * x * x; d[3] = 0; d[4] = 6 * y * y;
+               }});
+  return s;
+}
+
+// Irregular sampling of [-1, 1]^2: density grows threefold from x = -1 to x = 1.
+void sampleSurface(const Surface& s, std::size_t count, std::uint64_t seed, Positions& p, std::vector<Truth>& t) {
+  Random rng(seed);
+  p.clear(); t.clear();
+  while (p.size() < count) {
+    const double x = rng.uniform(-1, 1), y = rng.uniform(-1, 1);
+    if (rng.uniform() > 0.3 + 0.7 * (x + 1) / 2) continue;
+    p.emplace_back(float(x), float(y), float(s.f(x, y)));
+    t.push_back(truthOf(s, x, y));
+  }
+}
+
+struct Errors {
+  double normal_deg = NAN;   // mean normal angle error (degrees)
+  double curv_rel = NAN;     // RMSE of (k1, k2) / RMS of the true (k1, k2)
+  std::size_t missing = 0;   // evaluated points without an estimate
+};
+
+Errors score(const std::vector<Estimate>& est, const std::vector<Truth>& truth, const std::vector<int>& eval,
+             bool unsigned_magnitudes) {
+  double ang = 0, se = 0, st = 0;
+  std::size_t n = 0, miss = 0;
+  for (const int i : eval) {
+    const Estimate& e = est[i];
+    if (!std::isfinite(e.k1) || !isFinite(e.n)) { ++miss; continue; }
+    const Truth& t = truth[i];
+    ang += std::acos(std::min(1.0, double(std::abs(e.n.normalized().dot(t.n))))) * 180 / kPi;
+    double a1 = t.k1, a2 = t.k2;
+    if (unsigned_magnitudes) { a1 = std::max(std::abs(t.k1), std::abs(t.k2)); a2 = std::min(std::abs(t.k1), std::abs(t.k2)); }
+    se += (e.k1 - a1) * (e.k1 - a1) + (e.k2 - a2) * (e.k2 - a2);
+    st += a1 * a1 + a2 * a2;
+    ++n;
+  }
+  Errors r;
+  r.missing = miss;
+  if (n) { r.normal_deg = ang / n; r.curv_rel = std::sqrt(se / std::max(st, 1e-30)); }
+  return r;
+}
+
+// Orients every estimate like the reference normal (curvatures change sign with it).
+void orientLike(std::vector<Estimate>& est, const std::vector<Eigen::Vector3f>& ref) {
+  for (std::size_t i = 0; i < est.size(); ++i)
+    if (isFinite(est[i].n) && est[i].n.dot(ref[i]) < 0) {
+      est[i].n = -est[i].n;
+      const float k1 = est[i].k1;
+      est[i].k1 = -est[i].k2;
+      est[i].k2 = -k1;
+    }
+}
+
+// ---- the three methods, same radius ----
+
+std::vector<Estimate> runWavejets(const Positions& p, float radius, int order, const Normals& hints, double& secs,
+                                  WavejetReport* report = nullptr, bool select_order = false) {
+  WavejetParameters params;
+  params.order = order;
+  params.select_order = select_order;
+  const auto t0 = Clock::now();
+  const auto res = estimateWavejets(p, radius, params, report, nullptr, nullptr, &hints);
+  secs = since(t0);
+  std::vector<Estimate> out(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = {res[i].normal, res[i].k1, res[i].k2};
+  return out;
+}
+
+// PCL: normals by NormalEstimation, curvatures by PrincipalCurvaturesEstimation (unsigned,
+// variance of the projected normals: pc1 >= pc2). `calibrated` then holds
+// s sqrt(pc) with the least-squares best s against the true magnitudes (an oracle favour).
+std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, bool threads) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  cloud->resize(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) (*cloud)[i].getVector3fMap() = p[i];
+  pcl::PointCloud<pcl::Normal>::Ptr normals(new pcl::PointCloud<pcl::Normal>);
+  pcl::PointCloud<pcl::PrincipalCurvatures> pcs;
+  const auto t0 = Clock::now();
+  if (threads) {
+    pcl::NormalEstimationOMP<pcl::PointXYZ, pcl::Normal> ne(omp_get_max_threads());
+    ne.setInputCloud(cloud);
+    ne.setRadiusSearch(radius);
+    ne.compute(*normals);
+  } else {
+    pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+    ne.setInputCloud(cloud);
+    ne.setRadiusSearch(radius);
+    ne.compute(*normals);
+  }
+  pcl::PrincipalCurvaturesEstimation<pcl::PointXYZ, pcl::Normal, pcl::PrincipalCurvatures> pc;
+  pc.setInputCloud(cloud);
+  pc.setInputNormals(normals);
+  pc.setRadiusSearch(radius);
+  pc.compute(pcs);
+  secs = since(t0);
+  std::vector<Estimate> out(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = {(*normals)[i].getNormalVector3fMap(), pcs[i].pc1, pcs[i].pc2};
+  return out;
+}
+
+std::vector<Estimate> calibratePcl(std::vector<Estimate> est, const std::vector<Truth>& truth, const std::vector<int>& eval) {
+  double num = 0, den = 0;
+  for (const int i : eval) {
+    if (!std::isfinite(est[i].k1)) continue;
+    const double a1 = std::max(std::abs(truth[i].k1), std::abs(truth[i].k2));
+    const double a2 = std::min(std::abs(truth[i].k1), std::abs(truth[i].k2));
+    const double s1 = std::sqrt(std::max(0.f, est[i].k1)), s2 = std::sqrt(std::max(0.f, est[i].k2));
+    num += s1 * a1 + s2 * a2;
+    den += s1 * s1 + s2 * s2;
+  }
+  const double s = den > 0 ? num / den : 0;
+  for (auto& e : est) { e.k1 = float(s * std::sqrt(std::max(0.f, e.k1))); e.k2 = float(s * std::sqrt(std::max(0.f, e.k2))); }
+  return est;
+}
+
+#ifdef PAPS_HAVE_CGAL
+std::vector<Estimate> runCgal(const Positions& p, float radius, int order, double& secs) {
+  using K = CGAL::Simple_cartesian<double>;
+  using Fitting = CGAL::Monge_via_jet_fitting<K>;
+  std::vector<Estimate> out(p.size());
+  const auto t0 = Clock::now();
+  SpatialIndex index(p);
+  const int need = (order + 1) * (order + 2) / 2;
+  const std::int64_t n = static_cast<std::int64_t>(p.size());
+#pragma omp parallel
+  {
+    std::vector<int> idx;
+    std::vector<float> d2;
+    std::vector<K::Point_3> pts;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t i = 0; i < n; ++i) {
+      const int c = index.radiusSearch(p[i], radius, idx, d2);  // self first
+      if (c < need) continue;
+      pts.clear();
+      for (int j = 0; j < c; ++j) pts.emplace_back(p[idx[j]].x(), p[idx[j]].y(), p[idx[j]].z());
+      Fitting fit;
+      const Fitting::Monge_form m = fit(pts.begin(), pts.end(), order, 2);
+      const K::Vector_3 nn = m.normal_direction();
+      out[i].n = Eigen::Vector3f(float(nn.x()), float(nn.y()), float(nn.z()));
+      const double k1 = m.principal_curvatures(0), k2 = m.principal_curvatures(1);
+      out[i].k1 = float(std::max(k1, k2));
+      out[i].k2 = float(std::min(k1, k2));
+    }
+  }
+  secs = since(t0);
+  return out;
+}
+#endif
+
+// ---- reference curvature of a scan mesh (per-face second fundamental form from the vertex
+// normals, after Rusinkiewicz 2004, accumulated on vertices, then averaged over a ball) ----
+
+std::vector<Eigen::Matrix3d> vertexShapeTensors(const TriangleMesh& mesh, const Normals& vn) {
+  std::vector<Eigen::Matrix3d> t(mesh.vertices.size(), Eigen::Matrix3d::Zero());
+  std::vector<double> w(mesh.vertices.size(), 0.0);
+  for (const auto& tri : mesh.triangles) {
+    const Eigen::Vector3d v[3] = {mesh.vertices[tri[0]].cast<double>(), mesh.vertices[tri[1]].cast<double>(),
+                                  mesh.vertices[tri[2]].cast<double>()};
+    const Eigen::Vector3d n[3] = {vn[tri[0]].cast<double>(), vn[tri[1]].cast<double>(), vn[tri[2]].cast<double>()};
+    Eigen::Vector3d nf = (v[1] - v[0]).cross(v[2] - v[0]);
+    const double area = 0.5 * nf.norm();
+    if (!(area > 0)) continue;
+    nf.normalize();
+    const Eigen::Vector3d u = (v[1] - v[0]).normalized(), vv = nf.cross(u);
+    Eigen::Matrix<double, 6, 3> A;
+    Eigen::Matrix<double, 6, 1> b;
+    for (int k = 0; k < 3; ++k) {
+      const int a = (k + 1) % 3, c = (k + 2) % 3;
+      const Eigen::Vector3d e = v[c] - v[a], dn = n[c] - n[a];
+      const double eu = e.dot(u), ev = e.dot(vv);
+      A.row(2 * k) << eu, ev, 0;
+      b[2 * k] = dn.dot(u);
+      A.row(2 * k + 1) << 0, eu, ev;
+      b[2 * k + 1] = dn.dot(vv);
+    }
+    const Eigen::Vector3d s = A.colPivHouseholderQr().solve(b);  // dn = S e, S = [[s0 s1][s1 s2]]
+    const Eigen::Matrix3d T = s[0] * u * u.transpose() + s[1] * (u * vv.transpose() + vv * u.transpose()) +
+                              s[2] * vv * vv.transpose();
+    for (int k = 0; k < 3; ++k) { t[tri[k]] += area * T; w[tri[k]] += area; }
+  }
+  for (std::size_t i = 0; i < t.size(); ++i)
+    if (w[i] > 0) t[i] /= w[i];
+  return t;
+}
+
+// ---- small renderer: orthographic splats, z-buffer, Lambert shading by the given normals ----
+
+void renderPanels(const std::vector<std::pair<Positions, Normals>>& panels, int width, const std::string& png) {
+  // View: along the mean normal of the first panel, fitted to its bounding box.
+  const Positions& p0 = panels[0].first;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  std::size_t c = 0;
+  for (const auto& x : p0) if (isFinite(x)) { mean += x.cast<double>(); ++c; }
+  mean /= double(c);
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& x : p0) if (isFinite(x)) { const Eigen::Vector3d d = x.cast<double>() - mean; cov += d * d.transpose(); }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+  Eigen::Vector3d ax = eig.eigenvectors().col(2), ay = eig.eigenvectors().col(1), az = ax.cross(ay);
+  // Look from the side the normals face.
+  double facing = 0;
+  for (std::size_t i = 0; i < p0.size(); i += 16) if (isFinite(panels[0].second[i])) facing += panels[0].second[i].cast<double>().dot(az);
+  if (facing < 0) { az = -az; ay = -ay; }
+  double lo[2] = {1e30, 1e30}, hi[2] = {-1e30, -1e30};
+  for (const auto& x : p0) if (isFinite(x)) {
+    const Eigen::Vector3d d = x.cast<double>() - mean;
+    lo[0] = std::min(lo[0], d.dot(ax)); hi[0] = std::max(hi[0], d.dot(ax));
+    lo[1] = std::min(lo[1], d.dot(ay)); hi[1] = std::max(hi[1], d.dot(ay));
+  }
+  const int w = width, h = std::max(16, int(width * (hi[1] - lo[1]) / (hi[0] - lo[0])));
+  const double scale = (w - 1) / (hi[0] - lo[0]);
+  const int splat = std::max(1, int(std::ceil(1.6 * scale * std::sqrt((hi[0] - lo[0]) * (hi[1] - lo[1]) / double(c)))));
+  const Eigen::Vector3d light = (az + 0.5 * ay - 0.4 * ax).normalized();
+  const int total_w = w * int(panels.size());
+  std::vector<unsigned char> rgb(std::size_t(total_w) * h * 3, 255);
+  for (std::size_t k = 0; k < panels.size(); ++k) {
+    std::vector<float> zbuf(std::size_t(w) * h, -1e30f);
+    const Positions& p = panels[k].first;
+    const Normals& n = panels[k].second;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (!isFinite(p[i]) || !isFinite(n[i])) continue;
+      const Eigen::Vector3d d = p[i].cast<double>() - mean;
+      const int px = int((d.dot(ax) - lo[0]) * scale), py = int((hi[1] - d.dot(ay)) * scale);
+      const float z = float(d.dot(az));
+      Eigen::Vector3d nn = n[i].cast<double>().normalized();
+      if (nn.dot(az) < 0) nn = -nn;
+      const double shade = 0.15 + 0.85 * std::max(0.0, nn.dot(light));
+      for (int dy = -splat; dy <= splat; ++dy)
+        for (int dx = -splat; dx <= splat; ++dx) {
+          if (dx * dx + dy * dy > splat * splat) continue;
+          const int x = px + dx, y = py + dy;
+          if (x < 0 || y < 0 || x >= w || y >= h) continue;
+          float& zb = zbuf[std::size_t(y) * w + x];
+          if (z <= zb) continue;
+          zb = z;
+          const unsigned char v = static_cast<unsigned char>(255 * shade);
+          unsigned char* o = &rgb[(std::size_t(y) * total_w + k * w + x) * 3];
+          o[0] = o[1] = o[2] = v;
+        }
+    }
+  }
+  pcl::io::saveRgbPNGFile(png, rgb.data(), total_w, h);
+}
+
+const char* kBenchCurvatureUsage =
+    "usage: paps bench curvature [options]\n"
+    "  --points N         samples per analytic surface (default 20000)\n"
+    "  --neighbours N     mean neighbour count that sets the radius (default 50)\n"
+    "  --order K          Wavejet order = CGAL jet fitting degree (default 4)\n"
+    "  --scan PATH        scan mesh (.ply with faces and normals; default rs1_normals.ply of the\n"
+    "                     samples, skipped when missing)\n"
+    "  --scan-step N      evaluate on every N-th scan vertex (default 4)\n"
+    "  --speed-points N   size of the speed run (default 1000000, 0: skip)\n"
+    "  --out DIR          where the PNG renders go (default .)\n";
+
+}  // namespace
+
+int runBenchCurvature(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
+  if (a.has("help")) { std::fputs(kBenchCurvatureUsage, stdout); return 0; }
+  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "help"});
+  const std::size_t npts = static_cast<std::size_t>(a.number("points", 20000));
+  const int neighbours = static_cast<int>(a.number("neighbours", 50));
+  const int order = static_cast<int>(a.number("order", 4));
+  const std::size_t speed_points = static_cast<std::size_t>(a.number("speed-points", 1000000));
+  const std::string out_dir = a.text("out", ".");
+  const std::string scan = a.text("scan", "/tmp/samples/x/usr/share/doc/opencv-doc/examples/surface_matching/data/rs1_normals.ply");
+  const int scan_step = static_cast<int>(a.number("scan-step", 4));
+  requireInRange("points", static_cast<double>(npts), 1000.0, 1e7);
+  requireInRange("order", order, 2, 10);
+  requireInRange("scan-step", scan_step, 1, 1000);
+#ifndef PAPS_HAVE_CGAL
+  std::printf("note: built without CGAL, the jet-fitting column is empty\n");
+#endif
+  const int threads = omp_get_max_threads();
+  std::printf("paps bench curvature: order %d, ~%d neighbours, %zu irregular samples per surface, %d threads\n",
+              order, neighbours, npts, threads);
+
+  // ---- 1. analytic surfaces x noise ----
+  std::printf("\n## Analytic surfaces (noise sigma in %% of R_phi; evaluated on points farther than 0.8 from the border)\n");
+  std::printf("curvature error = RMSE(k1, k2) / RMS(true k1, k2); normal error = mean angle (deg)\n");
+  std::printf("PCL raw = pc1, pc2 of PrincipalCurvaturesEstimation against |k|; PCL cal. = s*sqrt(pc) with the oracle best s\n\n");
+  std::printf("ours = fixed order K; ours sel. = order chosen in [2, K] per point by GCV (--select-order)\n\n");
+  std::printf("| surface | noise | R_phi | ours curv | ours sel. curv | CGAL curv | PCL cal. curv | PCL raw curv | ours normal | ours sel. normal | CGAL normal | PCL normal | ours s | CGAL s | PCL s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  const double noise_levels[] = {0.0, 0.0025, 0.005, 0.01};
+  double worst_ratio_pcl = 0, worst_ratio_cgal = 0, worst_sel_pcl = 0, worst_raw_pcl = 0;
+  std::uint64_t seed = 1;
+  for (const Surface& s : analyticSurfaces()) {
+    Positions clean;
+    std::vector<Truth> truth;
+    sampleSurface(s, npts, seed++, clean, truth);
+    std::vector<int> eval;
+    for (std::size_t i = 0; i < clean.size(); ++i)
+      if (std::abs(clean[i].x()) < 0.8 && std::abs(clean[i].y()) < 0.8) eval.push_back(int(i));
+    SpatialIndex idx0(clean);
+    const float radius = radiusForMeanNeighbourCount(clean, idx0, neighbours);
+    Normals tn(clean.size());
+    for (std::size_t i = 0; i < clean.size(); ++i) tn[i] = truth[i].n;
+    for (const double noise : noise_levels) {
+      Positions p = clean;
+      Random rng(seed * 7919 + std::uint64_t(noise * 1e6));
+      for (auto& x : p)
+        x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
+      double t_ours = 0, t_pcl = 0, t_cgal = NAN;
+      double t_sel = 0;
+      auto ours = runWavejets(p, radius, order, tn, t_ours);
+      auto sel = runWavejets(p, radius, order, tn, t_sel, nullptr, true);
+      auto pcl_est = runPcl(p, radius, t_pcl, true);
+      orientLike(ours, tn);
+      orientLike(sel, tn);
+      const Errors eo = score(ours, truth, eval, false);
+      const Errors es = score(sel, truth, eval, false);
+      const Errors ep = score(pcl_est, truth, eval, true);
+      const Errors epc = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
+      Errors ec;
+#ifdef PAPS_HAVE_CGAL
+      auto cg = runCgal(p, radius, order, t_cgal);
+      orientLike(cg, tn);
+      ec = score(cg, truth, eval, false);
+#endif
+      worst_ratio_pcl = std::max(worst_ratio_pcl, eo.curv_rel / epc.curv_rel);
+      worst_sel_pcl = std::max(worst_sel_pcl, es.curv_rel / epc.curv_rel);
+      worst_raw_pcl = std::max(worst_raw_pcl, eo.curv_rel / ep.curv_rel);
+      // Ratios to CGAL only where CGAL's error is measurable (> 1e-3).
+      if (ec.curv_rel > 1e-3) worst_ratio_cgal = std::max(worst_ratio_cgal, eo.curv_rel / ec.curv_rel);
+      std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f |\n",
+                  s.name.c_str(), noise * 100, radius, eo.curv_rel, es.curv_rel, ec.curv_rel, epc.curv_rel, ep.curv_rel,
+                  eo.normal_deg, es.normal_deg, ec.normal_deg, ep.normal_deg, t_ours, t_cgal, t_pcl);
+      std::fflush(stdout);
+    }
+  }
+  std::printf("\nworst ratios over the table: ours / PCL raw %.3f; ours / PCL calibrated %.3f; ours sel. / PCL calibrated "
+              "%.3f; ours / CGAL %.3f (where CGAL > 1e-3)\n", worst_raw_pcl, worst_ratio_pcl, worst_sel_pcl, worst_ratio_cgal);
+
+  // ---- 2. tilted parameterization plane ----
+  std::printf("\n## Tilted parameterization plane (no noise): normal error (deg) after correction, max over evaluated points\n");
+  std::printf("| surface | tilt | Cor. 1 once (no refit): mean / max | with refits (default): mean / max |\n|---|---|---|---|\n");
+  seed = 1;
+  for (const Surface& s : analyticSurfaces()) {
+    Positions p;
+    std::vector<Truth> truth;
+    sampleSurface(s, npts / 4, seed++, p, truth);
+    SpatialIndex index(p);
+    const float radius = radiusForMeanNeighbourCount(p, index, neighbours);
+    Normals tn(p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) tn[i] = truth[i].n;
+    for (const double tilt : {0.0, 5.0, 10.0, 15.0, 20.0}) {
+      Normals init(p.size());
+      Random rng(99);
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        const Eigen::Vector3f axis = tn[i].unitOrthogonal();
+        const float az = float(rng.uniform(0, 2 * kPi));
+        const Eigen::Vector3f ax2 = Eigen::AngleAxisf(az, tn[i]) * axis;
+        init[i] = Eigen::AngleAxisf(float(tilt * kPi / 180), ax2) * tn[i];
+      }
+      double mean[2] = {0, 0}, mx[2] = {0, 0};
+      std::size_t cnt = 0;
+      for (int mode = 0; mode < 2; ++mode) {
+        WavejetParameters params;
+        params.order = order;
+        if (mode == 0) { params.max_refits = 0; params.refit_angle = 90; }
+        const auto res = estimateWavejets(p, radius, params, nullptr, nullptr, &init, &tn);
+        cnt = 0;
+        for (std::size_t i = 0; i < p.size(); ++i) {
+          if (!(std::abs(p[i].x()) < 0.8 && std::abs(p[i].y()) < 0.8) || !res[i].valid()) continue;
+          const double e = std::acos(std::min(1.0, double(res[i].normal.dot(tn[i])))) * 180 / kPi;
+          mean[mode] += e; mx[mode] = std::max(mx[mode], e); ++cnt;
+        }
+        mean[mode] /= double(cnt);
+      }
+      std::printf("| %s | %.0f | %.4f / %.4f | %.4f / %.4f |\n", s.name.c_str(), tilt, mean[0], mx[0], mean[1], mx[1]);
+    }
+  }
+
+  // ---- 3. real scan ----
+  bool have_scan = false;
+  try {
+    const TriangleMesh mesh = loadTriangleMesh(scan);
+    have_scan = !mesh.triangles.empty();
+    if (have_scan) {
+      // Reference: the dense mesh. Vertex normals from the file would be unit after
+      // normalisation; we recompute area-weighted ones from the faces for consistency.
+      Normals vn(mesh.vertices.size(), Eigen::Vector3f::Zero());
+      for (const auto& t : mesh.triangles) {
+        const Eigen::Vector3f fn = (mesh.vertices[t[1]] - mesh.vertices[t[0]]).cross(mesh.vertices[t[2]] - mesh.vertices[t[0]]);
+        for (int k = 0; k < 3; ++k) vn[t[k]] += fn;
+      }
+      for (auto& n : vn) n.normalize();
+      const auto tensors = vertexShapeTensors(mesh, vn);
+      Positions p;
+      std::vector<int> dense_of;
+      for (std::size_t i = 0; i < mesh.vertices.size(); i += scan_step) { p.push_back(mesh.vertices[i]); dense_of.push_back(int(i)); }
+      SpatialIndex sidx(p);
+      const float radius = radiusForMeanNeighbourCount(p, sidx, neighbours);
+      // Reference at scale: average the dense tensors and normals over the ball of R_phi / 2.
+      SpatialIndex didx(mesh.vertices);
+      std::vector<Truth> truth(p.size());
+      Normals tn(p.size());
+      std::vector<int> eval;
+      {
+        std::vector<int> id; std::vector<float> d2;
+        for (std::size_t i = 0; i < p.size(); ++i) {
+          const int c = didx.radiusSearch(p[i], 0.5f * radius, id, d2);
+          Eigen::Matrix3d T = Eigen::Matrix3d::Zero();
+          Eigen::Vector3d n = Eigen::Vector3d::Zero();
+          for (int j = 0; j < c; ++j) { T += tensors[id[j]]; n += vn[id[j]].cast<double>(); }
+          n.normalize();
+          const Eigen::Vector3d u = n.unitOrthogonal(), v = n.cross(u);
+          Eigen::Matrix2d S;
+          S << u.dot(T * u), u.dot(T * v), v.dot(T * u), v.dot(T * v);
+          S /= std::max(c, 1);
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> e2(0.5 * (S + S.transpose()));
+          // dn = S de: a sphere with outward normals has S = +1/r; our sign is the opposite.
+          truth[i] = {n.cast<float>(), float(-e2.eigenvalues()[0]), float(-e2.eigenvalues()[1])};
+          tn[i] = truth[i].n;
+          if (c >= 8) eval.push_back(int(i));
+        }
+      }
+      // Leave out the border of the scan: points whose neighbourhood is lopsided.
+      {
+        std::vector<int> keep; std::vector<int> id; std::vector<float> d2;
+        for (const int i : eval) {
+          const int c = sidx.radiusSearch(p[i], radius, id, d2);
+          Eigen::Vector3f m = Eigen::Vector3f::Zero();
+          for (int j = 0; j < c; ++j) m += p[id[j]];
+          m /= float(c);
+          if ((m - p[i]).norm() < 0.25f * radius) keep.push_back(i);
+        }
+        eval.swap(keep);
+      }
+      double t_ours = 0, t_pcl = 0, t_cgal = NAN;
+      auto ours = runWavejets(p, radius, order, tn, t_ours);
+      orientLike(ours, tn);
+      double t_sel = 0;
+      auto sel = runWavejets(p, radius, order, tn, t_sel, nullptr, true);
+      orientLike(sel, tn);
+      const Errors es = score(sel, truth, eval, false);
+      auto pcl_est = runPcl(p, radius, t_pcl, true);
+      const Errors eo = score(ours, truth, eval, false), ep = score(pcl_est, truth, eval, true);
+      const Errors epc = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
+      Errors ec;
+#ifdef PAPS_HAVE_CGAL
+      auto cg = runCgal(p, radius, order, t_cgal);
+      orientLike(cg, tn);
+      ec = score(cg, truth, eval, false);
+#endif
+      std::printf("\n## Scan %s: %zu of %zu vertices (every %d-th), %zu evaluated (border left out); reference: dense\n"
+                  "## mesh, per-face second fundamental form from vertex normals, averaged over R_phi/2\n",
+                  scan.c_str(), p.size(), mesh.vertices.size(), scan_step, eval.size());
+      std::printf("| R_phi | ours curv | ours sel. curv | CGAL curv | PCL cal. curv | PCL raw curv | ours normal | ours sel. normal | CGAL normal | PCL normal | ours s | CGAL s | PCL s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      std::printf("| %.3f | %.4f | %.4f | %.4f | %.4f | %.3g | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f |\n", radius, eo.curv_rel,
+                  es.curv_rel, ec.curv_rel, epc.curv_rel, ep.curv_rel, eo.normal_deg, es.normal_deg, ec.normal_deg, ep.normal_deg,
+                  t_ours, t_cgal, t_pcl);
+
+      // Renders of the enhanced scan (full resolution): original, positions alpha0 = 2,
+      // normals alpha1 = 3 and alpha1 = 3i (skewed).
+      const Positions& dense = mesh.vertices;
+      Normals hints = vn;
+      WavejetEnhancementParameters ep2;
+      ep2.wavejet.order = 6;
+      ep2.target_neighbours = 60;
+      Normals corrected;
+      WavejetEnhancementReport r1, r2;
+      ep2.alpha0 = 1;
+      const Positions proj = enhancePositions(dense, ep2, &r1, {}, {}, &hints, &corrected);
+      ep2.alpha0 = 2.5f;
+      Normals nn2;
+      const Positions enh = enhancePositions(dense, ep2, &r2, {}, {}, &hints, &nn2);
+      // Shade the moved points with normals refitted on the moved cloud.
+      WavejetParameters wp;
+      wp.order = 4;
+      const auto refit = estimateWavejets(enh, r2.radius, wp, nullptr, nullptr, nullptr, &hints);
+      Normals enh_normals(enh.size());
+      for (std::size_t i = 0; i < enh.size(); ++i) enh_normals[i] = refit[i].normal;
+      ep2.alpha1 = {3.f, 0.f};
+      const Normals n3 = enhanceNormals(dense, ep2, nullptr, {}, &hints);
+      ep2.alpha1 = {1.f, 3.f};
+      const Normals n3i = enhanceNormals(dense, ep2, nullptr, {}, &hints);
+      const std::string png = out_dir + "/wavejets_enhanced_scan.png";
+      renderPanels({{dense, corrected}, {enh, enh_normals}, {dense, n3}, {dense, n3i}}, 480, png);
+      std::printf("\nrender: %s (original with Wavejet normals | positions alpha0 = 2.5 | normals alpha1 = 3 | "
+                  "normals alpha1 = 1+3i), order 6, R_phi %.3f, clamped %zu of %zu\n",
+                  png.c_str(), r2.radius, r2.clamped, dense.size());
+    }
+  } catch (const Error& e) {
+    std::printf("\nscan skipped: %s\n", e.what());
+  }
+  (void)have_scan;
+
+  // ---- 4. speed ----
+  if (speed_points > 0) {
+    const Surface s = analyticSurfaces()[4];
+    Positions p;
+    std::vector<Truth> truth;
+    sampleSurface(s, speed_points, 12345, p, truth);
+    SpatialIndex index(p);
+    const float radius = radiusForMeanNeighbourCount(p, index, neighbours);
+    WavejetParameters params;
+    params.order = order;
+    WavejetReport rep;
+    auto t0 = Clock::now();
+    const std::clock_t c0 = std::clock();
+    estimateWavejets(p, radius, params, &rep);
+    const double t_all = since(t0);
+    const double cpu_all = double(std::clock() - c0) / CLOCKS_PER_SEC;
+    std::printf("\n## Speed: %zu points (monkey saddle), order %d, mean %.1f neighbours, R_phi %.4f\n", p.size(), order,
+                rep.mean_neighbours, radius);
+    std::printf("ours, %d threads: %.2f s wall, %.2f s CPU over all threads (neighbour search and kd-tree build "
+                "included)\n", threads, t_all, cpu_all);
+    const std::size_t sub = std::min<std::size_t>(p.size(), 100000);
+    Positions ps(p.begin(), p.begin() + sub);
+    SpatialIndex is(ps);
+    const float rs = radiusForMeanNeighbourCount(ps, is, neighbours);
+    omp_set_num_threads(1);
+    double t1 = 0, tc = NAN, tp = 0;
+    Normals none(ps.size(), Eigen::Vector3f::Constant(NAN));
+    runWavejets(ps, rs, order, none, t1);
+#ifdef PAPS_HAVE_CGAL
+    runCgal(ps, rs, order, tc);
+#endif
+    runPcl(ps, rs, tp, false);
+    omp_set_num_threads(threads);
+    std::printf("1 thread, %zu points at ~%d neighbours: ours %.2f s, CGAL jet fitting (degree %d) %.2f s, PCL normals + "
+                "principal curvatures %.2f s\n", ps.size(), neighbours, t1, order, tc, tp);
+  }
+  return 0;
+}
+
+}  // namespace paps::cli

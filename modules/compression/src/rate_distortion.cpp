@@ -1,0 +1,83 @@
+#include <paps/compression/rate_distortion.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+
+namespace paps::compression {
+namespace {
+Positions finiteOnly(const Positions& p) {
+  Positions out;
+  out.reserve(p.size());
+  for (const auto& x : p)
+    if (isFinite(x)) out.push_back(x);
+  return out;
+}
+Eigen::Vector3f pcaNormal(const Positions& pts, const std::vector<int>& nb, int cnt, Eigen::Vector3f* centroid = nullptr) {
+  Eigen::Vector3f c = Eigen::Vector3f::Zero();
+  for (int j = 0; j < cnt; ++j) c += pts[nb[j]];
+  c /= float(cnt);
+  Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
+  for (int j = 0; j < cnt; ++j) { const Eigen::Vector3f d = pts[nb[j]] - c; cov += d * d.transpose(); }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
+  if (centroid) *centroid = c;
+  return es.eigenvectors().col(0);
+}
+double psnr(double peak, double mse) { return mse > 0 ? 10.0 * std::log10(peak * peak / mse) : 999.0; }
+}  // namespace
+
+CloudErrors compareClouds(const Positions& reference_in, const Positions& decoded_in, double tolerance,
+                          int normal_neighbours) {
+  const Positions ref = finiteOnly(reference_in), dec = finiteOnly(decoded_in);
+  if (ref.size() < 3 || dec.size() < 3) throw InvalidInput("comparing clouds needs 3 finite points in each");
+  SpatialIndex ri(ref), di(dec);
+  const long nr = long(ref.size()), nd = long(dec.size());
+  Normals rn(ref.size());
+  double a1 = 0, a2 = 0, b1 = 0, b2 = 0;
+  std::size_t above = 0;
+#pragma omp parallel
+  {
+    std::vector<int> nb;
+    std::vector<float> d2;
+#pragma omp for schedule(static)
+    for (long i = 0; i < nr; ++i) {
+      const int c = ri.nearestK(ref[i], std::min<long>(normal_neighbours, nr), nb, d2);
+      rn[i] = pcaNormal(ref, nb, c);
+    }
+#pragma omp for schedule(static) reduction(+ : a1, a2, above)
+    for (long i = 0; i < nr; ++i) {  // reference -> decoded
+      const int c = di.nearestK(ref[i], int(std::min<long>(8, nd)), nb, d2);
+      const Eigen::Vector3f e = ref[i] - dec[nb[0]];
+      a1 += e.squaredNorm();
+      const double p = e.dot(rn[i]);
+      a2 += p * p;
+      Eigen::Vector3f centroid;
+      const Eigen::Vector3f n = pcaNormal(dec, nb, c, &centroid);
+      const double dist = c >= 3 ? std::abs((ref[i] - centroid).dot(n)) : std::sqrt(d2[0]);
+      above += dist > tolerance;
+    }
+#pragma omp for schedule(static) reduction(+ : b1, b2)
+    for (long i = 0; i < nd; ++i) {  // decoded -> reference
+      ri.nearestK(dec[i], 1, nb, d2);
+      const Eigen::Vector3f e = dec[i] - ref[nb[0]];
+      b1 += e.squaredNorm();
+      const double p = e.dot(rn[nb[0]]);
+      b2 += p * p;
+    }
+  }
+  CloudErrors r;
+  r.peak = boundingBoxDiagonal(ref);
+  const double mse1 = std::max(a1 / nr, b1 / nd), mse2 = std::max(a2 / nr, b2 / nd);
+  r.d1_rmse = std::sqrt(mse1);
+  r.d2_rmse = std::sqrt(mse2);
+  r.d1_psnr = psnr(r.peak, mse1);
+  r.d2_psnr = psnr(r.peak, mse2);
+  r.share_above_tolerance = double(above) / double(nr);
+  return r;
+}
+
+}  // namespace paps::compression

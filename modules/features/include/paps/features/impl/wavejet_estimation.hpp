@@ -1,0 +1,90 @@
+#pragma once
+#include <cmath>
+#include <cstdint>
+
+#include <paps/core/error.h>
+#include <paps/features/wavejet_estimation.h>
+
+namespace paps {
+
+template <typename PointInT, typename PointOutT>
+bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
+  params_.validate();
+  if (!this->input_) throw InvalidInput("no input cloud set");
+  if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
+  if (this->search_radius_ != 0.0 && this->k_ != 0)
+    throw InvalidParameter("search", "radius and k", "either setRadiusSearch(R_phi) or setKSearch(k), not both");
+  if (this->search_radius_ == 0.0 && this->k_ == 0)
+    throw InvalidParameter("search", "none", "setRadiusSearch(R_phi > 0) or setKSearch(k > 0)");
+  if (this->k_ == 0) requirePositive("radius (R_phi)", this->search_radius_);
+  if (this->k_ < 0) throw InvalidParameter("k", detail::toString(this->k_), "k > 0");
+  const std::size_t n = this->surface_ ? this->surface_->size() : this->input_->size();
+  if (initial_normals_ && initial_normals_->size() != this->input_->size())
+    throw InvalidParameter("initial_normals", detail::toString(initial_normals_->size()), "one per input point");
+  if (orientation_ && orientation_->size() != this->input_->size())
+    throw InvalidParameter("orientation_hints", detail::toString(orientation_->size()), "one per input point");
+  (void)n;
+  if (!Base::initCompute()) throw InvalidInput("pcl::Feature::initCompute failed (see PCL's message)");
+  return true;
+}
+
+template <typename PointInT, typename PointOutT>
+void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& output) {
+  const Positions surface = positionsOf(*this->surface_);
+  const pcl::Indices& indices = *this->indices_;
+  const std::int64_t count = static_cast<std::int64_t>(indices.size());
+  coefficients_.clear();
+  if (keep_coefficients_) coefficients_.resize(indices.size());
+  std::vector<WavejetResult> results(indices.size());
+  std::vector<int> neighbour_count(indices.size(), 0);
+  const bool by_radius = this->k_ == 0;
+  const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(NAN);
+  ProgressReporter reporter(progress_, "wavejets", indices.size());
+#pragma omp parallel
+  {
+    WavejetWorkspacePtr ws = makeWavejetWorkspace();
+    pcl::Indices nn;
+    std::vector<float> d2;
+    std::vector<int> nn_int;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t i = 0; i < count; ++i) {
+      if (reporter.cancelled()) continue;
+      const auto idx = indices[i];
+      const Eigen::Vector3f p = (*this->input_)[idx].getVector3fMap();
+      if (isFinite(p) && this->searchForNeighbors(idx, this->search_parameter_, nn, d2) > 0) {
+        float radius = static_cast<float>(this->search_radius_);
+        if (!by_radius) {
+          float m = 0.f;
+          for (const float d : d2) m = std::max(m, d);
+          radius = std::sqrt(m);
+        }
+        nn_int.assign(nn.begin(), nn.end());
+        neighbour_count[i] = static_cast<int>(nn_int.size());
+        results[i] = fitWavejet(surface, nn_int.data(), static_cast<int>(nn_int.size()), p, radius, params_, *ws,
+                                initial_normals_ ? (*initial_normals_)[idx] : nan3,
+                                orientation_ ? (*orientation_)[idx] : nan3,
+                                keep_coefficients_ ? &coefficients_[i] : nullptr);
+      }
+      reporter.advance();
+    }
+  }
+  reporter.throwIfCancelled();
+  reporter.finish();
+  report_ = WavejetReport();
+  report_.radius = static_cast<float>(this->search_radius_);
+  double sum = 0;
+  bool dense = true;
+  for (std::int64_t i = 0; i < count; ++i) {
+    toPoint(results[i], output[i]);
+    if (!isFinite((*this->input_)[indices[i]].getVector3fMap())) { ++report_.non_finite; dense = false; continue; }
+    if (!results[i].valid()) { ++report_.too_few_neighbours; dense = false; continue; }
+    ++report_.fitted;
+    sum += neighbour_count[i];
+    report_.lowered += results[i].order < params_.order;
+    report_.not_converged += !results[i].converged;
+  }
+  report_.mean_neighbours = report_.fitted ? sum / report_.fitted : 0.0;
+  output.is_dense = dense;
+}
+
+}  // namespace paps

@@ -1,0 +1,84 @@
+#pragma once
+// WavejetEstimation: a pcl::Feature computing, for each input point, the Wavejet of its
+// neighbourhood (manuscript 2.4) and from it the corrected normal, principal curvatures and
+// direction, mean and Gaussian curvature (equations 2.9 to 2.13) and the integral
+// invariants a_0, a_1 (2.18).
+//
+//   paps::WavejetEstimation<pcl::PointXYZ> wj;
+//   wj.setInputCloud(cloud);
+//   wj.setRadiusSearch(0.01);      // R_phi in metres (or setKSearch(k): R_phi per point =
+//                                  // distance of the k-th neighbour)
+//   wj.setOrder(4);
+//   pcl::PointCloud<paps::PointWavejet> out;
+//   wj.compute(out);               // NaN outputs (is_dense false) where too few neighbours
+//
+// Bad parameters throw paps::InvalidParameter (naming the parameter and the value), an empty
+// input paps::InvalidInput: no silent empty output.
+#include <memory>
+#include <vector>
+
+#include <pcl/features/feature.h>
+
+#include <paps/features/point_types.h>
+#include <paps/features/wavejet.h>
+
+namespace paps {
+
+template <typename PointInT, typename PointOutT = PointWavejet>
+class WavejetEstimation : public pcl::Feature<PointInT, PointOutT> {
+  using Base = pcl::Feature<PointInT, PointOutT>;
+
+ public:
+  using PointCloudOut = typename Base::PointCloudOut;
+  using Ptr = pcl::shared_ptr<WavejetEstimation<PointInT, PointOutT>>;
+  using ConstPtr = pcl::shared_ptr<const WavejetEstimation<PointInT, PointOutT>>;
+
+  WavejetEstimation() { this->feature_name_ = "WavejetEstimation"; }
+
+  void setParameters(const WavejetParameters& p) { p.validate(); params_ = p; }
+  const WavejetParameters& getParameters() const { return params_; }
+  /// Wavejet order K (1 to 20, default 4).
+  void setOrder(int k) { auto p = params_; p.order = k; setParameters(p); }
+  /// Order lowering rate beta in [1, 100] (default 1.1).
+  void setBeta(float b) { auto p = params_; p.beta = b; setParameters(p); }
+  /// IRLS passes against noise and outliers (0 to 100, default 0).
+  void setIrlsIterations(int n) { auto p = params_; p.irls_iterations = n; setParameters(p); }
+  /// Plane correction: refit while the tilt exceeds `angle_degrees`, at most `max_refits`.
+  void setPlaneCorrection(int max_refits, float angle_degrees) {
+    auto p = params_; p.max_refits = max_refits; p.refit_angle = angle_degrees; setParameters(p);
+  }
+  /// Normals face this point (metres), PCL's convention; default the origin.
+  void setViewPoint(float x, float y, float z) { auto p = params_; p.viewpoint = {x, y, z}; setParameters(p); }
+  /// Optional first parameterization normals, one per input point (NaN entries: PCA).
+  void setInitialNormals(std::shared_ptr<const Normals> n) { initial_normals_ = std::move(n); }
+  /// Optional orientation hints, one per input point: the output normal takes their side.
+  void setOrientationHints(std::shared_ptr<const Normals> n) { orientation_ = std::move(n); }
+  /// Keep the complex coefficients of every point (off by default: memory).
+  void setKeepCoefficients(bool keep) { keep_coefficients_ = keep; }
+  /// Coefficients of the last compute(), one per index, when setKeepCoefficients(true).
+  const std::vector<WavejetCoefficients>& getCoefficients() const { return coefficients_; }
+  /// Counts of the last compute() (fitted, order lowered, too few neighbours, ...).
+  const WavejetReport& getReport() const { return report_; }
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+
+ protected:
+  bool initCompute() override;
+  void computeFeature(PointCloudOut& output) override;
+
+ private:
+  WavejetParameters params_;
+  std::shared_ptr<const Normals> initial_normals_, orientation_;
+  bool keep_coefficients_ = false;
+  std::vector<WavejetCoefficients> coefficients_;
+  WavejetReport report_;
+  ProgressCallback progress_;
+};
+
+/// Writes one result into a PointWavejet (all NaN, order -1, when invalid).
+void toPoint(const WavejetResult& r, PointWavejet& out);
+
+}  // namespace paps
+
+#ifdef PAPS_NO_PRECOMPILE
+#include <paps/features/impl/wavejet_estimation.hpp>
+#endif

@@ -1,0 +1,397 @@
+#include <paps/features/wavejet.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/QR>
+
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+
+namespace paps {
+
+void WavejetParameters::validate() const {
+  requireInRange("order", order, 1, 20);
+  if (!std::isfinite(beta)) throw InvalidParameter("beta", detail::toString(beta), "a value in [1, 100]");
+  requireInRange("beta", beta, 1.f, 100.f);
+  requireInRange("irls_iterations", irls_iterations, 0, 100);
+  requireInRange("max_refits", max_refits, 0, 50);
+  if (!std::isfinite(refit_angle)) throw InvalidParameter("refit_angle", detail::toString(refit_angle), "a value in [0, 90]");
+  requireInRange("refit_angle", refit_angle, 0.f, 90.f);
+  if (!isFinite(viewpoint)) throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
+}
+
+std::complex<float> WavejetCoefficients::at(int k, int n) const {
+  if (k < 0 || k > order || std::abs(n) > k || ((k - n) & 1)) return {0.f, 0.f};
+  const std::complex<float> c = phi[wavejetIndex(k, std::abs(n))];
+  return n >= 0 ? c : std::conj(c);
+}
+
+std::complex<float> WavejetCoefficients::integralInvariant(int n, float s) const {
+  std::complex<double> a(0, 0);
+  const int first = std::max(std::abs(n), 1);
+  double sk = double(s) * s;  // s^(k+2)
+  for (int k = 0; k < first; ++k) sk *= s;
+  for (int k = first; k <= order; ++k, sk *= s) a += std::complex<double>(at(k, n)) * sk / double(k + 2);
+  return std::complex<float>(a);
+}
+
+struct WavejetWorkspace {
+  std::vector<int> finite;
+  Eigen::MatrixXd a, aw;
+  Eigen::VectorXd b, bw, w, x, residual, c;
+  std::vector<double> abs_residual;
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr;
+  std::vector<Eigen::Vector3d> local;
+  std::vector<std::complex<double>> zpow;
+  std::vector<double> r2pow;
+};
+void WavejetWorkspaceDeleter::operator()(WavejetWorkspace* w) const { delete w; }
+WavejetWorkspacePtr makeWavejetWorkspace() { return WavejetWorkspacePtr(new WavejetWorkspace); }
+
+namespace {
+
+const float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// Full complex coefficient table c[p][q] of the monomials z^p zbar^q (p + q <= K), where
+// c[p][q] = phi_{p+q, p-q}. Used for the products of Corollary 2.
+struct MonomialTable {
+  int order;
+  std::vector<std::complex<double>> c;
+  explicit MonomialTable(int k) : order(k), c(std::size_t(k + 1) * (k + 1), 0.0) {}
+  std::complex<double>& at(int p, int q) { return c[std::size_t(p) * (order + 1) + q]; }
+};
+
+// Builds the design matrix rows (unknowns ordered by k, then n >= 0; n > 0 takes two real
+// unknowns: Re and Im of phi_{k,n}).
+void buildRows(WavejetWorkspace& ws, int order) {
+  const int rows = static_cast<int>(ws.local.size());
+  const int m = wavejetUnknowns(order);
+  ws.a.resize(rows, m);
+  ws.b.resize(rows);
+  ws.zpow.resize(order + 1);
+  ws.r2pow.resize(order / 2 + 1);
+  for (int l = 0; l < rows; ++l) {
+    const Eigen::Vector3d& q = ws.local[l];
+    const std::complex<double> z(q.x(), q.y());
+    const double r2 = q.x() * q.x() + q.y() * q.y();
+    ws.zpow[0] = 1.0;
+    for (int n = 1; n <= order; ++n) ws.zpow[n] = ws.zpow[n - 1] * z;
+    ws.r2pow[0] = 1.0;
+    for (int j = 1; j <= order / 2; ++j) ws.r2pow[j] = ws.r2pow[j - 1] * r2;
+    int col = 0;
+    for (int k = 0; k <= order; ++k)
+      for (int n = k & 1; n <= k; n += 2) {
+        const std::complex<double> c = ws.r2pow[(k - n) / 2] * ws.zpow[n];
+        if (n == 0) {
+          ws.a(l, col++) = c.real();
+        } else {
+          // phi r^k e^{in theta} + conj = 2 Re(phi c) = 2 (Re phi Re c - Im phi Im c)
+          ws.a(l, col++) = 2.0 * c.real();
+          ws.a(l, col++) = -2.0 * c.imag();
+        }
+      }
+    ws.b[l] = q.z();
+  }
+}
+
+// Least squares by Householder QR (columns ordered by increasing order, so the residual of
+// every lower order comes from the same factorisation), optional order selection by
+// generalized cross-validation, optional IRLS. Returns false when the system is rank
+// deficient; `order` may be lowered by the selection.
+bool solve(WavejetWorkspace& ws, int& order, int irls_iterations, bool select_order) {
+  buildRows(ws, order);
+  const int rows = static_cast<int>(ws.a.rows());
+  int m = static_cast<int>(ws.a.cols());
+  ws.qr.compute(ws.a);
+  const auto& qr = ws.qr.matrixQR();
+  double rmax = 0, rmin = INFINITY;
+  for (int i = 0; i < m; ++i) { rmax = std::max(rmax, std::abs(qr(i, i))); rmin = std::min(rmin, std::abs(qr(i, i))); }
+  if (!(rmin > 1e-10 * rmax)) return false;
+  ws.c = ws.b;
+  ws.c.applyOnTheLeft(ws.qr.householderQ().adjoint());
+  if (select_order && order > 2) {
+    // GCV(m) = L RSS_m / (L - m)^2 on the nested models of orders 2..K.
+    double tail = ws.c.tail(rows - m).squaredNorm();
+    double best = INFINITY;
+    int best_order = order;
+    for (int k = order; k >= 2; --k) {
+      const int mk = wavejetUnknowns(k);
+      if (k < order) tail += ws.c.segment(mk, wavejetUnknowns(k + 1) - mk).squaredNorm();
+      const double gcv = tail / ((rows - mk) * double(rows - mk));
+      if (gcv < best * 0.999999) { best = gcv; best_order = k; }
+    }
+    order = best_order;
+    m = wavejetUnknowns(order);
+  }
+  ws.x = qr.topLeftCorner(m, m).triangularView<Eigen::Upper>().solve(ws.c.head(m));
+  if (irls_iterations <= 0) return true;
+  ws.a.conservativeResize(rows, m);
+  ws.w.resize(rows);
+  for (int it = 0; it < irls_iterations; ++it) {
+    ws.residual = ws.b - ws.a * ws.x;
+    ws.abs_residual.resize(rows);
+    for (int l = 0; l < rows; ++l) ws.abs_residual[l] = std::abs(ws.residual[l]);
+    auto mid = ws.abs_residual.begin() + rows / 2;
+    std::nth_element(ws.abs_residual.begin(), mid, ws.abs_residual.end());
+    const double sigma = 1.4826 * *mid;
+    if (!(sigma > 1e-9)) break;  // (nearly) exact fit: nothing to reweight
+    const double c = 4.685 * sigma;
+    int used = 0;
+    for (int l = 0; l < rows; ++l) {
+      const double u = ws.residual[l] / c;
+      ws.w[l] = std::abs(u) < 1 ? (1 - u * u) : 0.0;  // sqrt of the Tukey weight
+      used += ws.w[l] > 0;
+    }
+    if (used < m) break;
+    ws.aw = ws.w.asDiagonal() * ws.a;
+    ws.bw = ws.w.cwiseProduct(ws.b);
+    ws.qr.compute(ws.aw);
+    const auto& r = ws.qr.matrixQR();
+    double lo = INFINITY, hi = 0;
+    for (int i = 0; i < m; ++i) { hi = std::max(hi, std::abs(r(i, i))); lo = std::min(lo, std::abs(r(i, i))); }
+    if (!(lo > 1e-10 * hi)) break;
+    ws.c = ws.bw;
+    ws.c.applyOnTheLeft(ws.qr.householderQ().adjoint());
+    ws.x = r.topLeftCorner(m, m).triangularView<Eigen::Upper>().solve(ws.c.head(m));
+  }
+  return true;
+}
+
+// Complex coefficients phi_{k,n}, n >= 0, from the real solution vector.
+void unpack(const Eigen::VectorXd& x, int order, std::vector<std::complex<double>>& phi) {
+  phi.assign(wavejetStoredCoefficients(order), 0.0);
+  int col = 0;
+  for (int k = 0; k <= order; ++k)
+    for (int n = k & 1; n <= k; n += 2) {
+      if (n == 0) phi[wavejetIndex(k, n)] = {x[col++], 0.0};
+      else { phi[wavejetIndex(k, n)] = {x[col], x[col + 1]}; col += 2; }
+    }
+}
+
+std::complex<double> coef(const std::vector<std::complex<double>>& phi, int k, int n) {
+  const std::complex<double> c = phi[wavejetIndex(k, std::abs(n))];
+  return n >= 0 ? c : std::conj(c);
+}
+
+// Corollary 2: with the plane tilted so that the linear part of the fitted height has
+// gradient g, the tangent-plane coefficients are, to first order in the tilt,
+// phi = Phi - [f (g . grad f)], f the fitted height without its orders 0 and 1 and [.] the
+// coefficients of the product. (Rotating the frame by the small angle gamma maps
+// (x, y, h) to (x, y + gamma h, h - gamma y); solving H(X, Y) to first order gives
+// H = f - gamma f f_y - gamma Y, i.e. g = (0, -gamma); this is eq. 2.15-2.16 written
+// convention-free in the monomials z^p zbar^q.) Orders k >= 3 only change.
+void correctCoefficients(std::vector<std::complex<double>>& phi, int order, double gx, double gy) {
+  if (order < 3) return;
+  MonomialTable f(order), d(order), prod(order);
+  for (int p = 0; p <= order; ++p)
+    for (int q = 0; p + q <= order; ++q)
+      if (p + q >= 2) f.at(p, q) = coef(phi, p + q, p - q);
+  const std::complex<double> gz(gx, gy), gzb(gx, -gy);
+  for (int p = 0; p <= order; ++p)
+    for (int q = 0; p + q <= order; ++q) {
+      const std::complex<double> c = f.at(p, q);
+      if (c == 0.0) continue;
+      if (p > 0) d.at(p - 1, q) += gz * double(p) * c;
+      if (q > 0) d.at(p, q - 1) += gzb * double(q) * c;
+    }
+  for (int p1 = 0; p1 <= order; ++p1)
+    for (int q1 = 0; p1 + q1 <= order; ++q1) {
+      const std::complex<double> c = f.at(p1, q1);
+      if (c == 0.0) continue;
+      for (int p2 = 0; p1 + p2 <= order; ++p2)
+        for (int q2 = 0; p1 + p2 + q1 + q2 <= order; ++q2) prod.at(p1 + p2, q1 + q2) += c * d.at(p2, q2);
+    }
+  for (int k = 3; k <= order; ++k)
+    for (int n = k & 1; n <= k; n += 2) phi[wavejetIndex(k, n)] -= prod.at((k + n) / 2, (k - n) / 2);
+}
+
+Eigen::Vector3d anyTangent(const Eigen::Vector3d& n) {
+  const Eigen::Vector3d a = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  return (a - n * n.dot(a)).normalized();
+}
+
+}  // namespace
+
+WavejetResult fitWavejet(const Positions& points, const int* neighbours, int count,
+                         const Eigen::Vector3f& pf, float radius, const WavejetParameters& params,
+                         WavejetWorkspace& ws, const Eigen::Vector3f& initial_normal,
+                         const Eigen::Vector3f& orientation, WavejetCoefficients* coefficients) {
+  WavejetResult res;
+  if (coefficients) { coefficients->order = -1; coefficients->radius = radius; coefficients->phi.clear(); }
+  if (!isFinite(pf) || !(radius > 0) || !std::isfinite(radius)) return res;
+  ws.finite.clear();
+  for (int j = 0; j < count; ++j)
+    if (isFinite(points[neighbours[j]])) ws.finite.push_back(neighbours[j]);
+  const int l = static_cast<int>(ws.finite.size());
+  int order = params.order;
+  while (order >= 0 && l < params.beta * wavejetUnknowns(order)) --order;
+  if (order < 2) return res;
+
+  const Eigen::Vector3d p = pf.cast<double>();
+  Eigen::Vector3d n;
+  if (isFinite(initial_normal) && initial_normal.norm() > 0) {
+    n = initial_normal.cast<double>().normalized();
+  } else {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (const int j : ws.finite) mean += points[j].cast<double>();
+    mean /= l;
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (const int j : ws.finite) {
+      const Eigen::Vector3d d = points[j].cast<double>() - mean;
+      cov += d * d.transpose();
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    n = eig.eigenvectors().col(0).normalized();
+  }
+  const Eigen::Vector3d toward = isFinite(orientation) ? Eigen::Vector3d(orientation.cast<double>())
+                                                       : Eigen::Vector3d(params.viewpoint.cast<double>() - p);
+  if (n.dot(toward) < 0) n = -n;
+  Eigen::Vector3d t1 = anyTangent(n), t2 = n.cross(t1);
+
+  const double inv_r = 1.0 / radius;
+  const double refit_tan = std::tan(params.refit_angle * M_PI / 180.0);
+  std::vector<std::complex<double>> phi;
+  double gx = 0, gy = 0;
+  for (int refits = 0;; ++refits) {
+    ws.local.resize(l);
+    for (int j = 0; j < l; ++j) {
+      const Eigen::Vector3d d = (points[ws.finite[j]].cast<double>() - p) * inv_r;
+      ws.local[j] = {d.dot(t1), d.dot(t2), d.dot(n)};
+    }
+    ++res.fits;
+    while (!solve(ws, order, params.irls_iterations, params.select_order)) {
+      if (--order < 2) { res = WavejetResult(); return res; }
+    }
+    unpack(ws.x, order, phi);
+    // Linear part 2 Re(phi_11 (x + i y)): gradient (2 Re phi_11, -2 Im phi_11).
+    gx = 2 * phi[wavejetIndex(1, 1)].real();
+    gy = -2 * phi[wavejetIndex(1, 1)].imag();
+    const double tilt_tan = std::hypot(gx, gy);
+    res.converged = tilt_tan <= refit_tan;
+    if (res.converged || refits >= params.max_refits) break;
+    // Corollary 1, then refit: rotate the plane about u (orthogonal to the gradient) into
+    // the tangent plane of the fitted height field.
+    const Eigen::Vector3d n_new = (n - gx * t1 - gy * t2).normalized();
+    const Eigen::Quaterniond rot = Eigen::Quaterniond::FromTwoVectors(n, n_new);
+    n = n_new;
+    t1 = (rot * t1).normalized();
+    t1 = (t1 - n * n.dot(t1)).normalized();
+    t2 = n.cross(t1);
+  }
+
+  // Differential quantities of the fitted height field at the origin (equations 2.9-2.11,
+  // written through the fundamental forms so a residual tilt is accounted for exactly).
+  const std::complex<double> p20 = phi[wavejetIndex(2, 0)], p22 = phi[wavejetIndex(2, 2)];
+  const double fxx = 2 * (p20.real() + 2 * p22.real()) * inv_r;
+  const double fyy = 2 * (p20.real() - 2 * p22.real()) * inv_r;
+  const double fxy = -4 * p22.imag() * inv_r;
+  const double e = 1 + gx * gx, f = gx * gy, g = 1 + gy * gy, w = std::sqrt(1 + gx * gx + gy * gy);
+  const double L = fxx / w, M = fxy / w, N = fyy / w;
+  const double det1 = e * g - f * f;
+  const double gauss = (L * N - M * M) / det1;
+  const double mean = (e * N - 2 * f * M + g * L) / (2 * det1);
+  const double disc = std::sqrt(std::max(0.0, mean * mean - gauss));
+  const double k1 = mean + disc, k2 = mean - disc;
+  // Eigenvector of (II - k1 I): two candidate rows, take the better conditioned.
+  Eigen::Vector2d v1(M - k1 * f, -(L - k1 * e)), v2(N - k1 * g, -(M - k1 * f));
+  Eigen::Vector2d v = v1.squaredNorm() >= v2.squaredNorm() ? v1 : v2;
+  if (v.squaredNorm() < 1e-24) v = Eigen::Vector2d(1, 0);  // umbilic: any direction
+  Eigen::Vector3d dir = v.x() * (t1 + gx * n) + v.y() * (t2 + gy * n);
+
+  // Corollary 1 (final, small residual tilt): the tangent frame. Corollary 2: coefficients.
+  const Eigen::Vector3d n_t = (n - gx * t1 - gy * t2).normalized();
+  const Eigen::Quaterniond rot = Eigen::Quaterniond::FromTwoVectors(n, n_t);
+  Eigen::Vector3d t1_t = rot * t1;
+  t1_t = (t1_t - n_t * n_t.dot(t1_t)).normalized();
+  dir = (dir - n_t * n_t.dot(dir)).normalized();
+  const double cos_tilt = 1.0 / w;
+  correctCoefficients(phi, order, gx, gy);
+  phi[wavejetIndex(1, 1)] = 0.0;
+
+  res.order = order;
+  res.normal = n_t.cast<float>();
+  res.direction1 = dir.cast<float>();
+  res.k1 = static_cast<float>(k1);
+  res.k2 = static_cast<float>(k2);
+  res.mean_curvature = static_cast<float>(mean);
+  res.gaussian_curvature = static_cast<float>(gauss);
+  res.offset = static_cast<float>(phi[0].real() * cos_tilt * radius);
+  WavejetCoefficients local;
+  WavejetCoefficients& c = coefficients ? *coefficients : local;
+  c.order = order;
+  c.radius = radius;
+  c.frame.n = res.normal;
+  c.frame.t1 = t1_t.cast<float>();
+  c.frame.t2 = n_t.cross(t1_t).cast<float>();
+  c.phi.resize(phi.size());
+  for (std::size_t i = 0; i < phi.size(); ++i) c.phi[i] = std::complex<float>(phi[i]);
+  res.a0 = c.integralInvariant(0).real();
+  res.a1 = c.integralInvariant(1);
+  return res;
+}
+
+std::vector<WavejetResult> estimateWavejets(const Positions& points, float radius,
+                                            const WavejetParameters& params, WavejetReport* report,
+                                            std::vector<WavejetCoefficients>* coefficients,
+                                            const Normals* initial_normals, const Normals* orientation,
+                                            const ProgressCallback& progress, int target_neighbours) {
+  params.validate();
+  if (!(radius >= 0) || !std::isfinite(radius))
+    throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
+  requireInRange("target_neighbours", target_neighbours, 3, 100000);
+  if (initial_normals && initial_normals->size() != points.size())
+    throw InvalidParameter("initial_normals", detail::toString(initial_normals->size()), "one per point");
+  if (orientation && orientation->size() != points.size())
+    throw InvalidParameter("orientation", detail::toString(orientation->size()), "one per point");
+  if (countFinite(points) == 0) throw InvalidInput("no finite point");
+  SpatialIndex index(points);
+  if (radius == 0) radius = radiusForMeanNeighbourCount(points, index, target_neighbours);
+  const std::int64_t count = static_cast<std::int64_t>(points.size());
+  std::vector<WavejetResult> out(points.size());
+  std::vector<int> neighbour_count(points.size(), 0);
+  if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
+  ProgressReporter reporter(progress, "wavejets", points.size());
+  const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
+#pragma omp parallel
+  {
+    WavejetWorkspacePtr ws = makeWavejetWorkspace();
+    std::vector<int> idx;
+    std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t i = 0; i < count; ++i) {
+      if (reporter.cancelled()) continue;
+      if (isFinite(points[i])) {
+        const int found = index.radiusSearch(points[i], radius, idx, d2);
+        neighbour_count[i] = found;
+        out[i] = fitWavejet(points, idx.data(), found, points[i], radius, params, *ws,
+                            initial_normals ? (*initial_normals)[i] : nan3,
+                            orientation ? (*orientation)[i] : nan3,
+                            coefficients ? &(*coefficients)[i] : nullptr);
+      }
+      reporter.advance();
+    }
+  }
+  reporter.throwIfCancelled();
+  reporter.finish();
+  if (report) {
+    *report = WavejetReport();
+    report->radius = radius;
+    double sum = 0;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (!isFinite(points[i])) { ++report->non_finite; continue; }
+      if (!out[i].valid()) { ++report->too_few_neighbours; continue; }
+      ++report->fitted;
+      sum += neighbour_count[i];
+      report->lowered += out[i].order < params.order;
+      report->not_converged += !out[i].converged;
+    }
+    report->mean_neighbours = report->fitted ? sum / report->fitted : 0.0;
+  }
+  return out;
+}
+
+}  // namespace paps

@@ -1,0 +1,85 @@
+// Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
+// its input (same number of points, same fields in the same order, only x y z moved).
+//   paps_test_cloud_tool write OUT.pcd COUNT
+//   paps_test_cloud_tool check IN.pcd OUT.pcd
+// Exit 0 when it went well; otherwise one line on stderr and exit 1.
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include <pcl/PCLPointCloud2.h>
+#include <pcl/conversions.h>
+#include <pcl/io/pcd_io.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+namespace {
+
+int fail(const std::string& what) {
+  std::fprintf(stderr, "paps_test_cloud_tool: %s\n", what.c_str());
+  return 1;
+}
+
+// A gently curved, noisy surface with an intensity per point: enough for the denoiser to
+// find neighbours and move points.
+int write(const std::string& path, int count) {
+  pcl::PointCloud<pcl::PointXYZI> cloud;
+  const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(count))));
+  unsigned state = 7u;
+  auto noise = [&state] {
+    state = state * 1664525u + 1013904223u;
+    return (static_cast<float>(state >> 8) / 16777216.f - 0.5f) * 0.004f;
+  };
+  for (int k = 0; k < count; ++k) {
+    pcl::PointXYZI p;
+    p.x = 0.02f * static_cast<float>(k % side);
+    p.y = 0.02f * static_cast<float>(k / side);
+    p.z = 0.1f * std::sin(3.f * p.x) * std::cos(2.f * p.y) + noise();
+    p.intensity = static_cast<float>(k);
+    cloud.push_back(p);
+  }
+  if (pcl::io::savePCDFileBinary(path, cloud) != 0) return fail("cannot write " + path);
+  return 0;
+}
+
+int check(const std::string& in_path, const std::string& out_path) {
+  pcl::PCLPointCloud2 in, out;
+  if (pcl::io::loadPCDFile(in_path, in) != 0) return fail("cannot read " + in_path);
+  if (pcl::io::loadPCDFile(out_path, out) != 0) return fail("cannot read " + out_path);
+  const std::size_t n_in = static_cast<std::size_t>(in.width) * in.height;
+  const std::size_t n_out = static_cast<std::size_t>(out.width) * out.height;
+  if (n_in != n_out) return fail("point count " + std::to_string(n_out) + " != " + std::to_string(n_in));
+  if (in.fields.size() != out.fields.size())
+    return fail("field count " + std::to_string(out.fields.size()) + " != " + std::to_string(in.fields.size()));
+  for (std::size_t f = 0; f < in.fields.size(); ++f)
+    if (in.fields[f].name != out.fields[f].name || in.fields[f].datatype != out.fields[f].datatype ||
+        in.fields[f].count != out.fields[f].count)
+      return fail("field " + std::to_string(f) + " is '" + out.fields[f].name + "', expected '" +
+                  in.fields[f].name + "'");
+  pcl::PointCloud<pcl::PointXYZI> a, b;
+  pcl::fromPCLPointCloud2(in, a);
+  pcl::fromPCLPointCloud2(out, b);
+  std::size_t moved = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    if (a[i].intensity != b[i].intensity) return fail("intensity of point " + std::to_string(i) + " changed");
+    if (!std::isfinite(b[i].x) || !std::isfinite(b[i].y) || !std::isfinite(b[i].z))
+      return fail("point " + std::to_string(i) + " is not finite");
+    if ((a[i].getVector3fMap() - b[i].getVector3fMap()).norm() > 0.05f)
+      return fail("point " + std::to_string(i) + " moved too far");
+    moved += a[i].getVector3fMap() != b[i].getVector3fMap();
+  }
+  if (moved < a.size() / 2) return fail("only " + std::to_string(moved) + " points moved");
+  std::printf("%zu points, %zu fields, %zu moved\n", n_out, out.fields.size(), moved);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  const std::string mode = argc > 1 ? argv[1] : "";
+  if (mode == "write" && argc == 4) return write(argv[2], std::atoi(argv[3]));
+  if (mode == "check" && argc == 4) return check(argv[2], argv[3]);
+  return fail("usage: paps_test_cloud_tool write OUT COUNT | check IN OUT");
+}

@@ -1,0 +1,136 @@
+// Round trips of the self-similarity codec on synthetic surfaces with a known answer, and
+// every kind of bad input.
+#include <cmath>
+
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <pcl/point_types.h>
+
+#include <paps/compression/point_cloud_compression.h>
+#include <paps/compression/self_similarity_codec.h>
+#include <paps/core/metrics.h>
+#include <paps/core/random.h>
+#include <paps/core/synthetic.h>
+
+using namespace paps;
+using namespace paps::compression;
+
+namespace {
+struct Sample {
+  TriangleMesh mesh;
+  Positions points;
+};
+const Sample& engraved() {
+  static const Sample s = [] {
+    Sample r;
+    r.mesh = synthetic::engravedPlane(1.f, 0.25f, 0.02f, 200);
+    r.points = synthetic::sampleMesh(r.mesh, 60000, 11);
+    return r;
+  }();
+  return s;
+}
+const std::vector<std::uint8_t>& engravedStream() {
+  static const std::vector<std::uint8_t> b = compressPositions(engraved().points, CompressionParameters{});
+  return b;
+}
+}  // namespace
+
+TEST(SelfSimilarityCodec, RoundTripOnAnEngravedPlaneIsAccurateAndSmall) {
+  const Sample& s = engraved();
+  EncodeReport er;
+  const auto bytes = compressPositions(s.points, CompressionParameters{}, &er);
+  EXPECT_EQ(bytes, engravedStream());  // deterministic
+  DecodeReport dr;
+  const Positions out = decompressPositions(bytes.data(), bytes.size(), {}, &dr);
+  const double bpp = bytes.size() * 8.0 / s.points.size();
+  const double spacing = er.output_spacing;
+  const PointToMeshDistance truth(s.mesh);
+  const ErrorStats e = pointToMeshError(out, truth);
+  const double d1 = symmetricNearestNeighbourRmse(out, s.points);
+  std::printf("engraved plane: %zu points -> %zu bytes (%.3f bpp), %zu seeds, %zu out, spacing %.4g, "
+              "to surface rmse %.3g, D1 %.3g\n",
+              s.points.size(), bytes.size(), bpp, er.seeds, out.size(), spacing, e.rmse, d1);
+  EXPECT_LT(bpp, 2.0);
+  EXPECT_LT(e.rmse, 0.15 * spacing);
+  EXPECT_LT(d1, 0.8 * spacing);
+  // The decoded density is close to the input's.
+  EXPECT_GT(out.size(), s.points.size() * 7 / 10);
+  EXPECT_LT(out.size(), s.points.size() * 13 / 10);
+}
+
+TEST(SelfSimilarityCodec, NoisyInputIsDenoisedNotAmplified) {
+  const Sample& s = engraved();
+  Positions noisy = s.points;
+  synthetic::addGaussianNoise(noisy, 0.001f, 3);
+  noisy.push_back(Eigen::Vector3f(NAN, 0, 0));
+  EncodeReport er;
+  const auto bytes = compressPositions(noisy, CompressionParameters{}, &er);
+  EXPECT_EQ(er.dropped_non_finite, 1u);
+  const Positions out = decompressPositions(bytes.data(), bytes.size());
+  const PointToMeshDistance truth(s.mesh);
+  const double in_err = pointToMeshError(noisy, truth).rmse, out_err = pointToMeshError(out, truth).rmse;
+  std::printf("noisy: input %.3g, decoded %.3g to the true surface, %.3f bpp\n", in_err, out_err,
+              bytes.size() * 8.0 / noisy.size());
+  EXPECT_LT(out_err, in_err);
+}
+
+TEST(SelfSimilarityCodec, EveryTruncationAndManyBitFlipsAreRejected) {
+  const auto& bytes = engravedStream();
+  for (std::size_t len = 0; len < bytes.size(); len += std::max<std::size_t>(1, bytes.size() / 200))
+    EXPECT_THROW(decompressPositions(bytes.data(), len), CorruptStream) << "length " << len;
+  Random rng(9);
+  for (int t = 0; t < 200; ++t) {
+    auto bad = bytes;
+    bad[rng.below(bad.size())] ^= std::uint8_t(1u << rng.below(8));
+    EXPECT_THROW(decompressPositions(bad.data(), bad.size()), CorruptStream);
+  }
+}
+
+TEST(SelfSimilarityCodec, BadInputGivesClearErrors) {
+  const CompressionParameters p;
+  EXPECT_THROW(compressPositions({}, p), InvalidInput);
+  Positions few(10, Eigen::Vector3f(0, 0, 0));
+  for (int i = 0; i < 10; ++i) few[i].x() = float(i);
+  few[3].y() = 1;
+  EXPECT_THROW(compressPositions(few, p), InvalidInput);
+  EXPECT_THROW(compressPositions(Positions(1000, Eigen::Vector3f(1, 2, 3)), p), InvalidInput);
+  Positions line;
+  for (int i = 0; i < 1000; ++i) line.emplace_back(float(i), 2.f * i, 0.f);
+  EXPECT_THROW(compressPositions(line, p), InvalidInput);
+  Positions nan(1000, Eigen::Vector3f(NAN, NAN, NAN));
+  EXPECT_THROW(compressPositions(nan, p), InvalidInput);
+  auto expectParam = [&](CompressionParameters q, const std::string& name) {
+    try {
+      compressPositions(engraved().points, q);
+      ADD_FAILURE() << name;
+    } catch (const InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), name);
+    }
+  };
+  CompressionParameters q;
+  q.bins = 7;
+  expectParam(q, "bins");
+  q = {}; q.atoms = 0; expectParam(q, "atoms");
+  q = {}; q.sparsity = 40; expectParam(q, "sparsity");
+  q = {}; q.seed_bits = 40; expectParam(q, "seed_bits");
+  q = {}; q.coefficient_bits = 1; expectParam(q, "coefficient_bits");
+  q = {}; q.patch_radius = -1; expectParam(q, "patch_radius");
+  q = {}; q.patch_radius = NAN; expectParam(q, "patch_radius");
+  EXPECT_THROW(compressionPreset("huge"), InvalidParameter);
+}
+
+TEST(PointCloudCompression, StreamsLikeTheOctreeCoder) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  writePositions(engraved().points, *cloud);
+  PointCloudCompression<pcl::PointXYZ> encoder(compressionPreset("compact"));
+  std::stringstream stream;
+  encoder.encodePointCloud(cloud, stream);
+  PointCloudCompression<pcl::PointXYZ> decoder;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr out(new pcl::PointCloud<pcl::PointXYZ>);
+  decoder.decodePointCloud(stream, out);
+  EXPECT_GT(out->size(), cloud->size() / 2);
+  EXPECT_TRUE(out->is_dense);
+  std::stringstream junk("not a compressed cloud at all");
+  EXPECT_THROW(decoder.decodePointCloud(junk, out), CorruptStream);
+}

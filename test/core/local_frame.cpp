@@ -1,0 +1,326 @@
+// Tests of paps/core/local_frame.h on shapes with known normals and principal directions:
+// a unit sphere (normal = radial), a cylinder (t1 around the axis, t2 along it), planes.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+
+#include <paps/core/local_frame.h>
+#include <paps/core/random.h>
+
+namespace {
+
+using paps::LocalFrame;
+using paps::LocalFrames;
+using paps::NeighbourGraph;
+using paps::Normals;
+using paps::Positions;
+using paps::SpatialIndex;
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+constexpr double kDeg = M_PI / 180.0;
+
+double angleDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  const double c = std::clamp<double>(a.normalized().dot(b.normalized()), -1.0, 1.0);
+  return std::acos(c) / kDeg;
+}
+/// Angle between lines (orientation-blind), in degrees.
+double lineAngleDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  const double c = std::min<double>(1.0, std::abs(a.normalized().dot(b.normalized())));
+  return std::acos(c) / kDeg;
+}
+
+/// `count` nearly uniform points on the sphere of `radius` about `centre` (Fibonacci lattice).
+Positions fibonacciSphere(int count, float radius = 1.f,
+                          const Eigen::Vector3f& centre = Eigen::Vector3f::Zero()) {
+  Positions p;
+  const double golden = M_PI * (3.0 - std::sqrt(5.0));
+  for (int i = 0; i < count; ++i) {
+    const double z = 1.0 - (2.0 * i + 1.0) / count;
+    const double r = std::sqrt(1.0 - z * z);
+    const double a = golden * i;
+    p.push_back(centre + radius * Eigen::Vector3f(r * std::cos(a), r * std::sin(a), z));
+  }
+  return p;
+}
+
+/// Cylinder of `radius` around the z axis, z in [-height/2, height/2], a jittered grid
+/// of about `per_unit_area` points per unit area.
+Positions cylinder(float radius, float height, double per_unit_area, std::uint64_t seed) {
+  paps::Random rng(seed);
+  const double step = 1.0 / std::sqrt(per_unit_area);
+  const int nu = static_cast<int>(std::round(2 * M_PI * radius / step));
+  const int nz = static_cast<int>(std::round(height / step));
+  Positions p;
+  for (int j = 0; j < nz; ++j)
+    for (int i = 0; i < nu; ++i) {
+      const double a = 2 * M_PI * (i + 0.3 * rng.uniform(-1, 1)) / nu;
+      const double z = -0.5 * height + height * (j + 0.5 + 0.3 * rng.uniform(-1, 1)) / nz;
+      p.emplace_back(radius * std::cos(a), radius * std::sin(a), z);
+    }
+  return p;
+}
+
+struct Shape {
+  Positions points;
+  std::unique_ptr<SpatialIndex> index;
+  NeighbourGraph graph;
+  Normals normals;
+};
+
+Shape withRadiusGraph(Positions points, float radius) {
+  Shape s;
+  s.points = std::move(points);
+  s.index = std::make_unique<SpatialIndex>(s.points);
+  s.graph = NeighbourGraph::byRadius(s.points, *s.index, radius);
+  s.normals = paps::estimateNormals(s.points, s.graph);
+  return s;
+}
+
+void expectOrthonormalRightHanded(const LocalFrame& f, const char* what, std::size_t i) {
+  EXPECT_NEAR(f.t1.norm(), 1.f, 1e-5f) << what << " " << i;
+  EXPECT_NEAR(f.t2.norm(), 1.f, 1e-5f) << what << " " << i;
+  EXPECT_NEAR(f.n.norm(), 1.f, 1e-5f) << what << " " << i;
+  EXPECT_NEAR(f.t1.dot(f.t2), 0.f, 1e-5f) << what << " " << i;
+  EXPECT_NEAR(f.t1.dot(f.n), 0.f, 1e-5f) << what << " " << i;
+  EXPECT_NEAR(f.t2.dot(f.n), 0.f, 1e-5f) << what << " " << i;
+  EXPECT_LT((f.t1.cross(f.t2) - f.n).norm(), 1e-5f) << what << " " << i;
+}
+
+// ------------------------------------------------------------------------- normals
+
+TEST(EstimateNormals, SphereNormalsAreRadial) {
+  // 20000 points on the unit sphere, about 30 neighbours each (radius 0.077).
+  const Shape s = withRadiusGraph(fibonacciSphere(20000), 0.077f);
+  ASSERT_NEAR(s.graph.meanCount(), 30, 5);
+  double worst = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    ASSERT_TRUE(paps::isFinite(s.normals[i])) << i;
+    EXPECT_NEAR(s.normals[i].norm(), 1.f, 1e-5f);
+    worst = std::max(worst, lineAngleDeg(s.normals[i], s.points[i]));
+  }
+  EXPECT_LT(worst, 1.0) << "largest angle between normal and radius (degrees)";
+}
+
+TEST(EstimateNormals, TiltedPlaneFarFromOriginIsExact) {
+  // A plane through (1000, -2000, 500): centring in double precision keeps PCA exact.
+  const Eigen::Vector3f n = Eigen::Vector3f(1, 2, 3).normalized();
+  const Eigen::Vector3f u = n.unitOrthogonal(), v = n.cross(u);
+  const Eigen::Vector3f o(1000, -2000, 500);
+  paps::Random rng(3);
+  Positions p;
+  for (int i = 0; i < 2000; ++i) p.push_back(o + rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v);
+  const Shape s = withRadiusGraph(p, 0.15f);
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LT(lineAngleDeg(s.normals[i], n), 0.1) << i;
+}
+
+TEST(EstimateNormals, NaNForTooFewOrCollinearNeighbours) {
+  Positions p = {{0, 0, 0}, {0.1f, 0, 0}, {0.2f, 0, 0}, {0.3f, 0, 0},  // a line
+                 {5, 5, 5}, {5.1f, 5, 5},                             // a pair
+                 {kNaN, 0, 0},                                        // NaN
+                 {9, 9, 9}, {9.1f, 9, 9}, {9, 9.1f, 9}};              // a triangle
+  const Shape s = withRadiusGraph(p, 0.5f);
+  for (int i = 0; i < 7; ++i) EXPECT_FALSE(paps::isFinite(s.normals[i])) << i;
+  for (int i = 7; i < 10; ++i) {
+    ASSERT_TRUE(paps::isFinite(s.normals[i])) << i;
+    EXPECT_LT(lineAngleDeg(s.normals[i], Eigen::Vector3f::UnitZ()), 1e-3);
+  }
+}
+
+// --------------------------------------------------------------------- orientation
+
+TEST(OrientNormalsTowards, AllFaceTheViewpoint) {
+  Shape s = withRadiusGraph(fibonacciSphere(3000), 0.15f);
+  s.normals[5] = Eigen::Vector3f::Constant(kNaN);
+  const Eigen::Vector3f view(0.3f, -0.2f, 0.1f);  // inside the sphere
+  std::size_t facing_away = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i)
+    if (paps::isFinite(s.normals[i])) facing_away += s.normals[i].dot(view - s.points[i]) < 0;
+  ASSERT_GT(facing_away, 100u);  // PCA signs are arbitrary: some must flip
+  const Normals before = s.normals;
+  EXPECT_EQ(paps::orientNormalsTowards(s.points, s.normals, view), facing_away);
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    if (i == 5) {
+      EXPECT_FALSE(paps::isFinite(s.normals[i]));
+      continue;
+    }
+    EXPECT_GE(s.normals[i].dot(view - s.points[i]), 0.f) << i;
+    EXPECT_TRUE(s.normals[i] == before[i] || s.normals[i] == -before[i]) << "only flips";
+    EXPECT_LT(s.normals[i].dot(s.points[i]), 0.f) << "inside view: inward normals";
+  }
+  EXPECT_EQ(paps::orientNormalsTowards(s.points, s.normals, view), 0u) << "idempotent";
+}
+
+TEST(OrientNormalsByPropagation, SphereConsistentlyOutward) {
+  Shape s = withRadiusGraph(fibonacciSphere(5000), 0.12f);
+  // Scramble the signs so that the propagation has work to do.
+  paps::Random rng(5);
+  for (auto& n : s.normals)
+    if (rng.uniform() < 0.5) n = -n;
+  const std::size_t flips = paps::orientNormalsByPropagation(s.points, s.normals, s.graph);
+  EXPECT_GT(flips, 1000u);
+  std::size_t outward = 0, inward = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    const float d = s.normals[i].dot(s.points[i]);
+    outward += d > 0;
+    inward += d < 0;
+  }
+  // One sign for all points; seeded at the top with +z, so outward.
+  EXPECT_EQ(outward, s.points.size());
+  EXPECT_EQ(inward, 0u);
+  EXPECT_EQ(paps::orientNormalsByPropagation(s.points, s.normals, s.graph), 0u) << "already consistent";
+}
+
+TEST(OrientNormalsByPropagation, EachComponentSeededUpwards) {
+  // Two separate spheres: each component is oriented on its own, both outward.
+  Positions p = fibonacciSphere(3000, 1.f, Eigen::Vector3f(0, 0, 0));
+  const Positions second = fibonacciSphere(3000, 0.5f, Eigen::Vector3f(5, 0, -3));
+  p.insert(p.end(), second.begin(), second.end());
+  p.emplace_back(kNaN, kNaN, kNaN);
+  Shape s = withRadiusGraph(p, 0.15f);
+  for (std::size_t i = 0; i < s.normals.size(); i += 2) s.normals[i] = -s.normals[i];
+  paps::orientNormalsByPropagation(s.points, s.normals, s.graph);
+  for (std::size_t i = 0; i < 6000; ++i) {
+    const Eigen::Vector3f c = i < 3000 ? Eigen::Vector3f(0, 0, 0) : Eigen::Vector3f(5, 0, -3);
+    EXPECT_GT(s.normals[i].dot(s.points[i] - c), 0.f) << i;
+  }
+  EXPECT_FALSE(paps::isFinite(s.normals.back()));
+}
+
+TEST(OrientNormalsByPropagation, Deterministic) {
+  Shape s = withRadiusGraph(fibonacciSphere(4000), 0.13f);
+  Normals a = s.normals, b = s.normals;
+  for (std::size_t i = 0; i < a.size(); i += 3) { a[i] = -a[i]; b[i] = -b[i]; }
+  paps::orientNormalsByPropagation(s.points, a, s.graph);
+  paps::orientNormalsByPropagation(s.points, b, s.graph);
+  EXPECT_EQ(a, b);
+}
+
+// -------------------------------------------------------------------------- frames
+
+TEST(EstimatePrincipalFrames, CylinderT1AroundAxisT2AlongIt) {
+  // Radius 0.5, height 2: about 30 neighbours at radius 0.1.
+  Shape s = withRadiusGraph(cylinder(0.5f, 2.f, 1000, 7), 0.1f);
+  paps::orientNormalsTowards(s.points, s.normals, Eigen::Vector3f::Zero());
+  const LocalFrames frames = paps::estimatePrincipalFrames(s.normals, s.graph);
+  ASSERT_EQ(frames.size(), s.points.size());
+  double worst_t1 = 0, worst_t2 = 0, worst_n = 0;
+  std::size_t checked = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    const LocalFrame& f = frames[i];
+    ASSERT_TRUE(f.valid()) << i;
+    expectOrthonormalRightHanded(f, "cylinder frame", i);
+    if (std::abs(s.points[i].z()) > 1.f - 0.25f) continue;  // away from the borders
+    const Eigen::Vector3f radial(s.points[i].x(), s.points[i].y(), 0.f);
+    const Eigen::Vector3f around = Eigen::Vector3f::UnitZ().cross(radial).normalized();
+    worst_n = std::max(worst_n, angleDeg(f.n, -radial));
+    worst_t1 = std::max(worst_t1, lineAngleDeg(f.t1, around));
+    worst_t2 = std::max(worst_t2, lineAngleDeg(f.t2, Eigen::Vector3f::UnitZ()));
+    ++checked;
+  }
+  EXPECT_GT(checked, s.points.size() / 2);
+  EXPECT_LT(worst_n, 3.0);  // measured 1.6 (jittered sampling)
+  EXPECT_LT(worst_t1, 5.0) << "t1 must be perpendicular to the axis";
+  EXPECT_LT(worst_t2, 5.0) << "t2 must be along the axis";
+}
+
+TEST(EstimatePrincipalFrames, SphereFramesOrthonormalRightHanded) {
+  Shape s = withRadiusGraph(fibonacciSphere(4000), 0.12f);
+  s.normals[10] = Eigen::Vector3f::Constant(kNaN);
+  const LocalFrames frames = paps::estimatePrincipalFrames(s.normals, s.graph);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    if (i == 10) {
+      EXPECT_FALSE(frames[i].valid());
+      continue;
+    }
+    ASSERT_TRUE(frames[i].valid());
+    EXPECT_EQ(frames[i].n, s.normals[i]) << "the frame normal is the given normal";
+    expectOrthonormalRightHanded(frames[i], "sphere frame", i);
+  }
+}
+
+TEST(EstimatePrincipalFrames, PlaneGetsADeterministicTangentFrame) {
+  paps::Random rng(9);
+  Positions p;
+  for (int i = 0; i < 2000; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.f);
+  Shape s = withRadiusGraph(p, 0.05f);
+  for (auto& n : s.normals) n = Eigen::Vector3f::UnitZ();  // exactly equal normals
+  const LocalFrames frames = paps::estimatePrincipalFrames(s.normals, s.graph);
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    expectOrthonormalRightHanded(frames[i], "plane frame", i);
+    EXPECT_EQ(frames[i].t1, frames[0].t1) << "flat regions: one reproducible tangent";
+  }
+}
+
+TEST(EstimatePrincipalFrames, SameWithOneOrTwoThreads) {
+  Shape s = withRadiusGraph(cylinder(0.5f, 2.f, 1000, 8), 0.1f);
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const Normals n1 = paps::estimateNormals(s.points, s.graph);
+  const LocalFrames f1 = paps::estimatePrincipalFrames(n1, s.graph);
+  omp_set_num_threads(2);
+  const Normals n2 = paps::estimateNormals(s.points, s.graph);
+  const LocalFrames f2 = paps::estimatePrincipalFrames(n2, s.graph);
+  omp_set_num_threads(saved);
+  ASSERT_EQ(n1, n2);
+  for (std::size_t i = 0; i < f1.size(); ++i) {
+    ASSERT_EQ(f1[i].t1, f2[i].t1) << i;
+    ASSERT_EQ(f1[i].t2, f2[i].t2) << i;
+  }
+}
+
+// ---------------------------------------------------------------------- LocalFrame
+
+TEST(LocalFrame, DefaultIsTheWorldFrame) {
+  const LocalFrame f;
+  EXPECT_TRUE(f.valid());
+  expectOrthonormalRightHanded(f, "default", 0);
+  const Eigen::Vector3f d(0.1f, -2.f, 3.f);
+  EXPECT_EQ(f.toLocal(d), d);
+}
+
+TEST(LocalFrame, ToLocalToWorldRoundTrip) {
+  LocalFrame f;
+  f.n = Eigen::Vector3f(1, -2, 2).normalized();
+  f.t1 = f.n.unitOrthogonal();
+  f.t2 = f.n.cross(f.t1);
+  expectOrthonormalRightHanded(f, "built", 0);
+  const Eigen::Vector3f d(0.3f, 0.7f, -1.1f);
+  const Eigen::Vector3f l = f.toLocal(d);
+  EXPECT_LT((f.toWorld(l) - d).norm(), 1e-6f);
+  EXPECT_NEAR(l.z(), f.n.dot(d), 1e-6f);
+  EXPECT_NEAR(l.norm(), d.norm(), 1e-6f);
+}
+
+TEST(LocalFrame, RotatedHalfTurn) {
+  LocalFrame f;
+  f.n = Eigen::Vector3f(0.2f, 0.5f, -1.f).normalized();
+  f.t1 = f.n.unitOrthogonal();
+  f.t2 = f.n.cross(f.t1);
+  const LocalFrame g = f.rotatedHalfTurn();
+  EXPECT_EQ(g.n, f.n);
+  EXPECT_EQ(g.t1, -f.t1);
+  EXPECT_EQ(g.t2, -f.t2);
+  expectOrthonormalRightHanded(g, "half turn", 0);
+  const LocalFrame back = g.rotatedHalfTurn();
+  EXPECT_EQ(back.t1, f.t1);
+  EXPECT_EQ(back.t2, f.t2);
+  // (u, v, h) -> (-u, -v, h): the same offset seen from the turned frame.
+  const Eigen::Vector3f d(0.4f, -0.1f, 0.9f);
+  const Eigen::Vector3f a = f.toLocal(d), b = g.toLocal(d);
+  EXPECT_FLOAT_EQ(b.x(), -a.x());
+  EXPECT_FLOAT_EQ(b.y(), -a.y());
+  EXPECT_FLOAT_EQ(b.z(), a.z());
+}
+
+TEST(LocalFrame, NaNNormalIsInvalid) {
+  LocalFrame f;
+  f.n = Eigen::Vector3f(kNaN, 0, 1);
+  EXPECT_FALSE(f.valid());
+}
+
+}  // namespace

@@ -1,0 +1,456 @@
+// Tests of paps/core/neighbourhood.h: the spatial index against brute force, the neighbour
+// graphs, the automatic radius, errors and determinism across thread counts.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <vector>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/random.h>
+
+namespace {
+
+using paps::NeighbourGraph;
+using paps::Positions;
+using paps::SpatialIndex;
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+/// `count` points uniform in the unit cube; every `nan_every`-th one (0: none) is NaN in
+/// one coordinate (the coordinate cycles), so the index must skip them.
+Positions randomPoints(int count, std::uint64_t seed, int nan_every) {
+  paps::Random rng(seed);
+  Positions p;
+  for (int i = 0; i < count; ++i) {
+    Eigen::Vector3f x(rng.uniform(), rng.uniform(), rng.uniform());
+    if (nan_every > 0 && i % nan_every == nan_every - 1) x[(i / nan_every) % 3] = kNaN;
+    p.push_back(x);
+  }
+  return p;
+}
+
+/// `count` points uniform on the square [0, 1]^2 at z = 0.
+Positions randomPlane(int count, std::uint64_t seed) {
+  paps::Random rng(seed);
+  Positions p;
+  for (int i = 0; i < count; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.f);
+  return p;
+}
+
+float squaredDistance(const Eigen::Vector3f& a, const Eigen::Vector3f& b) { return (a - b).squaredNorm(); }
+
+/// Brute force: (squared distance, index) of every finite point, sorted.
+std::vector<std::pair<float, int>> bruteForce(const Positions& p, const Eigen::Vector3f& q) {
+  std::vector<std::pair<float, int>> all;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (paps::isFinite(p[i])) all.emplace_back(squaredDistance(p[i], q), static_cast<int>(i));
+  std::sort(all.begin(), all.end());
+  return all;
+}
+
+std::vector<int> listOf(const NeighbourGraph& g, std::size_t i) { return {g.begin(i), g.end(i)}; }
+
+// ----------------------------------------------------------------------- SpatialIndex
+
+TEST(SpatialIndex, SizeCountsFinitePointsOnly) {
+  const Positions p = randomPoints(1000, 1, 7);
+  const SpatialIndex index(p);
+  EXPECT_EQ(index.size(), paps::countFinite(p));
+  EXPECT_EQ(index.size(), 1000u - 1000u / 7u);
+}
+
+TEST(SpatialIndex, RadiusSearchMatchesBruteForce) {
+  const Positions p = randomPoints(3000, 2, 5);
+  const SpatialIndex index(p);
+  paps::Random rng(20);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  for (int t = 0; t < 200; ++t) {
+    const Eigen::Vector3f q(rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1));
+    const float r = static_cast<float>(rng.uniform(0.02, 0.2));
+    const float r2 = r * r;
+    const int n = index.radiusSearch(q, r, idx, d2);
+    ASSERT_EQ(n, static_cast<int>(idx.size()));
+    ASSERT_EQ(idx.size(), d2.size());
+    // Every returned point is finite, within the radius, its distance is right, sorted.
+    std::set<int> got;
+    for (int k = 0; k < n; ++k) {
+      ASSERT_GE(idx[k], 0);
+      ASSERT_LT(idx[k], static_cast<int>(p.size()));
+      ASSERT_TRUE(paps::isFinite(p[idx[k]])) << "NaN point " << idx[k] << " returned";
+      EXPECT_NEAR(d2[k], squaredDistance(p[idx[k]], q), 1e-6f);
+      EXPECT_LE(d2[k], r2 * (1 + 1e-5f));
+      if (k > 0) EXPECT_LE(d2[k - 1], d2[k]);
+      got.insert(idx[k]);
+    }
+    EXPECT_EQ(got.size(), idx.size()) << "duplicate indices";
+    // Every point clearly inside is returned; nothing clearly outside is.
+    std::size_t inside = 0;
+    for (const auto& [dist2, i] : bruteForce(p, q)) {
+      if (dist2 < r2 * (1 - 1e-5f)) {
+        ++inside;
+        EXPECT_TRUE(got.count(i)) << "point " << i << " at distance " << std::sqrt(dist2)
+                                  << " missing for radius " << r;
+      }
+    }
+    EXPECT_GE(got.size(), inside);
+    EXPECT_LE(got.size(), inside + 1);  // at most a point exactly on the sphere
+  }
+}
+
+TEST(SpatialIndex, RadiusSearchMaxCountKeepsTheNearest) {
+  const Positions p = randomPoints(2000, 3, 4);
+  const SpatialIndex index(p);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  for (int t = 0; t < 50; ++t) {
+    const Eigen::Vector3f q = p[t * 13 % 1500].allFinite() ? p[t * 13 % 1500] : Eigen::Vector3f(0.5f, 0.5f, 0.5f);
+    const int all = index.radiusSearch(q, 0.3f, idx, d2);
+    ASSERT_GT(all, 10);
+    const int n = index.radiusSearch(q, 0.3f, idx, d2, 10);
+    ASSERT_EQ(n, 10);
+    const auto brute = bruteForce(p, q);
+    for (int k = 0; k < n; ++k) EXPECT_NEAR(d2[k], brute[k].first, 1e-6f) << "rank " << k;
+  }
+}
+
+TEST(SpatialIndex, NearestKMatchesBruteForce) {
+  const Positions p = randomPoints(3000, 4, 6);
+  const SpatialIndex index(p);
+  paps::Random rng(40);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  for (int t = 0; t < 200; ++t) {
+    const Eigen::Vector3f q(rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1));
+    const int k = 1 + static_cast<int>(rng.below(40));
+    const int n = index.nearestK(q, k, idx, d2);
+    ASSERT_EQ(n, k);
+    ASSERT_EQ(idx.size(), static_cast<std::size_t>(k));
+    const auto brute = bruteForce(p, q);
+    std::set<int> expected, got(idx.begin(), idx.end());
+    for (int j = 0; j < k; ++j) expected.insert(brute[j].second);
+    for (int j = 0; j < k; ++j) {
+      ASSERT_TRUE(paps::isFinite(p[idx[j]]));
+      EXPECT_NEAR(d2[j], squaredDistance(p[idx[j]], q), 1e-6f);
+      EXPECT_NEAR(d2[j], brute[j].first, 1e-6f) << "rank " << j;
+    }
+    // Random data: ties at the k-th distance have probability zero.
+    EXPECT_EQ(got, expected);
+  }
+}
+
+TEST(SpatialIndex, NearestKReturnsAtMostTheFinitePoints) {
+  Positions p = {{0, 0, 0}, {kNaN, 0, 0}, {1, 0, 0}, {0, kNaN, kNaN}, {0, 2, 0}};
+  const SpatialIndex index(p);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  EXPECT_EQ(index.nearestK(Eigen::Vector3f(0.1f, 0, 0), 10, idx, d2), 3);
+  EXPECT_EQ(idx, (std::vector<int>{0, 2, 4}));
+  EXPECT_NEAR(d2[2], 0.01f + 4.f, 1e-6f);
+  EXPECT_EQ(index.nearestK(Eigen::Vector3f(0.1f, 0, 0), 0, idx, d2), 0);
+  EXPECT_TRUE(idx.empty());
+  // A non-finite query finds nothing.
+  EXPECT_EQ(index.nearestK(Eigen::Vector3f(kNaN, 0, 0), 2, idx, d2), 0);
+  EXPECT_EQ(index.radiusSearch(Eigen::Vector3f(kNaN, 0, 0), 5.f, idx, d2), 0);
+}
+
+TEST(SpatialIndex, EmptyAndAllNaNIndexFindNothing) {
+  std::vector<int> idx{7};
+  std::vector<float> d2{1.f};
+  const SpatialIndex empty(Positions{});
+  EXPECT_EQ(empty.size(), 0u);
+  EXPECT_EQ(empty.radiusSearch(Eigen::Vector3f::Zero(), 1.f, idx, d2), 0);
+  EXPECT_TRUE(idx.empty());
+  const SpatialIndex nan(Positions(5, Eigen::Vector3f::Constant(kNaN)));
+  EXPECT_EQ(nan.size(), 0u);
+  EXPECT_EQ(nan.nearestK(Eigen::Vector3f::Zero(), 3, idx, d2), 0);
+}
+
+// --------------------------------------------------------------------- NeighbourGraph
+
+TEST(NeighbourGraph, ByRadiusSelfFirstSymmetricAndNaNEmpty) {
+  const Positions p = randomPoints(3000, 5, 9);
+  const SpatialIndex index(p);
+  const float r = 0.08f;
+  const NeighbourGraph g = NeighbourGraph::byRadius(p, index, r);
+  ASSERT_EQ(g.size(), p.size());
+  std::vector<std::set<int>> sets(p.size());
+  std::vector<int> idx;
+  std::vector<float> d2;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) {
+      EXPECT_EQ(g.count(i), 0) << "NaN point " << i;
+      continue;
+    }
+    ASSERT_GE(g.count(i), 1);
+    EXPECT_EQ(*g.begin(i), static_cast<int>(i)) << "self must come first";
+    sets[i] = std::set<int>(g.begin(i), g.end(i));
+    EXPECT_EQ(sets[i].size(), static_cast<std::size_t>(g.count(i)));
+    // The same set as a direct search.
+    index.radiusSearch(p[i], r, idx, d2);
+    EXPECT_EQ(sets[i], std::set<int>(idx.begin(), idx.end()));
+    for (int j : sets[i]) EXPECT_TRUE(paps::isFinite(p[j]));
+  }
+  std::size_t pairs = 0;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    for (int j : sets[i]) {
+      EXPECT_TRUE(sets[j].count(static_cast<int>(i))) << i << " -> " << j << " but not back";
+      ++pairs;
+    }
+  EXPECT_GT(pairs, 3 * p.size());  // the test is not vacuous: points have neighbours
+}
+
+TEST(NeighbourGraph, ByRadiusMaxCount) {
+  const Positions p = randomPoints(2000, 6, 0);
+  const SpatialIndex index(p);
+  const NeighbourGraph all = NeighbourGraph::byRadius(p, index, 0.15f);
+  const NeighbourGraph capped = NeighbourGraph::byRadius(p, index, 0.15f, 8);
+  std::size_t capped_points = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    EXPECT_EQ(capped.count(i), std::min(all.count(i), 8));
+    EXPECT_EQ(*capped.begin(i), static_cast<int>(i));
+    capped_points += all.count(i) > 8;
+  }
+  EXPECT_GT(capped_points, p.size() / 2);
+}
+
+TEST(NeighbourGraph, ByCountSelfFirstAndExactCount) {
+  const Positions p = randomPoints(2000, 7, 11);
+  const SpatialIndex index(p);
+  const NeighbourGraph g = NeighbourGraph::byCount(p, index, 12);
+  ASSERT_EQ(g.size(), p.size());
+  std::vector<int> idx;
+  std::vector<float> d2;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) {
+      EXPECT_EQ(g.count(i), 0);
+      continue;
+    }
+    ASSERT_EQ(g.count(i), 12);
+    EXPECT_EQ(*g.begin(i), static_cast<int>(i));
+    const auto brute = bruteForce(p, p[i]);
+    std::set<int> expected;
+    for (int k = 0; k < 12; ++k) expected.insert(brute[k].second);
+    EXPECT_EQ(std::set<int>(g.begin(i), g.end(i)), expected);
+  }
+  EXPECT_DOUBLE_EQ(g.meanCount(), 12.0);
+}
+
+TEST(NeighbourGraph, ByCountWithFewerPointsThanK) {
+  const Positions p = {{0, 0, 0}, {1, 0, 0}, {kNaN, kNaN, kNaN}, {0, 1, 0}};
+  const SpatialIndex index(p);
+  const NeighbourGraph g = NeighbourGraph::byCount(p, index, 10);
+  EXPECT_EQ(g.count(0), 3);
+  EXPECT_EQ(g.count(2), 0);
+  EXPECT_EQ(listOf(g, 3).front(), 3);
+  EXPECT_DOUBLE_EQ(g.meanCount(), 3.0);
+}
+
+TEST(NeighbourGraph, SelfFirstAmongExactDuplicates) {
+  // Five copies of the same point and one apart: each copy must list itself first.
+  Positions p(5, Eigen::Vector3f(0.25f, 0.5f, 0.75f));
+  p.emplace_back(0.3f, 0.5f, 0.75f);
+  const SpatialIndex index(p);
+  for (const NeighbourGraph& g :
+       {NeighbourGraph::byRadius(p, index, 0.01f), NeighbourGraph::byCount(p, index, 6)}) {
+    for (std::size_t i = 0; i < 5; ++i) {
+      EXPECT_EQ(*g.begin(i), static_cast<int>(i));
+      EXPECT_EQ(std::set<int>(g.begin(i), g.end(i)).size(), static_cast<std::size_t>(g.count(i)));
+    }
+  }
+  EXPECT_EQ(NeighbourGraph::byRadius(p, index, 0.01f).count(5), 1);
+}
+
+TEST(NeighbourGraph, SelfFirstAmongDuplicatesBeyondTheCap) {
+  // BUG (modules/core/src/neighbourhood.cpp:77-79, NeighbourGraphBuilder::build): self is
+  // moved to the front only when the capped query returned it; with more exact duplicates
+  // than max_count (byRadius) or k (byCount) the query may return other copies only, so the
+  // list does not start with the point (8 of 12 points here). Fix: when self is missing,
+  // put it first and drop the last entry. Remove this skip once fixed.
+  // More exact copies than the list may hold: the list must still start with the point
+  // itself (the header promises self first; the denoiser drops element 0 as "self").
+  const Positions p(12, Eigen::Vector3f(0.25f, 0.5f, 0.75f));
+  const SpatialIndex index(p);
+  const NeighbourGraph by_radius = NeighbourGraph::byRadius(p, index, 0.01f, 4);
+  const NeighbourGraph by_count = NeighbourGraph::byCount(p, index, 4);
+  std::size_t radius_bad = 0, count_bad = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    ASSERT_EQ(by_radius.count(i), 4);
+    ASSERT_EQ(by_count.count(i), 4);
+    radius_bad += *by_radius.begin(i) != static_cast<int>(i);
+    count_bad += *by_count.begin(i) != static_cast<int>(i);
+  }
+  EXPECT_EQ(radius_bad, 0u) << "points whose capped radius list does not start with themselves";
+  EXPECT_EQ(count_bad, 0u) << "points whose k-nearest list does not start with themselves";
+}
+
+TEST(NeighbourGraph, MeanCountIgnoresEmptyLists) {
+  const Positions p = {{0, 0, 0}, {0.1f, 0, 0}, {kNaN, 0, 0}, {5, 5, 5}};
+  const SpatialIndex index(p);
+  const NeighbourGraph g = NeighbourGraph::byRadius(p, index, 0.5f);
+  EXPECT_EQ(g.count(0), 2);
+  EXPECT_EQ(g.count(1), 2);
+  EXPECT_EQ(g.count(2), 0);
+  EXPECT_EQ(g.count(3), 1);
+  EXPECT_DOUBLE_EQ(g.meanCount(), 5.0 / 3.0);
+  EXPECT_DOUBLE_EQ(NeighbourGraph().meanCount(), 0.0);
+  EXPECT_EQ(NeighbourGraph().size(), 0u);
+}
+
+TEST(NeighbourGraph, InvalidRadiusAndCount) {
+  const Positions p = randomPoints(50, 8, 0);
+  const SpatialIndex index(p);
+  for (float r : {0.f, -1.f, kNaN, std::numeric_limits<float>::infinity()}) {
+    try {
+      NeighbourGraph::byRadius(p, index, r);
+      ADD_FAILURE() << "radius " << r << " accepted";
+    } catch (const paps::InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "radius");
+    }
+  }
+  for (int k : {0, -3}) {
+    try {
+      NeighbourGraph::byCount(p, index, k);
+      ADD_FAILURE() << "k " << k << " accepted";
+    } catch (const paps::InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "k");
+    }
+  }
+}
+
+TEST(NeighbourGraph, ProgressCallbackCancels) {
+  const Positions p = randomPoints(5000, 9, 0);
+  const SpatialIndex index(p);
+  int calls = 0;
+  auto stop = [&](const std::string&, float) { return ++calls < 2; };
+  EXPECT_THROW(NeighbourGraph::byRadius(p, index, 0.05f, 0, stop), paps::Cancelled);
+  EXPECT_GE(calls, 2);
+  float last = -1.f;
+  bool monotone = true;
+  auto watch = [&](const std::string&, float f) {
+    monotone = monotone && f >= last;
+    last = f;
+    return true;
+  };
+  NeighbourGraph::byCount(p, index, 5, watch);
+  EXPECT_TRUE(monotone);
+  EXPECT_FLOAT_EQ(last, 1.f);
+}
+
+TEST(NeighbourGraph, SameResultWithOneOrTwoThreads) {
+  const Positions p = randomPoints(20000, 10, 13);
+  const SpatialIndex index(p);
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const NeighbourGraph r1 = NeighbourGraph::byRadius(p, index, 0.04f, 40);
+  const NeighbourGraph k1 = NeighbourGraph::byCount(p, index, 9);
+  omp_set_num_threads(2);
+  const NeighbourGraph r2 = NeighbourGraph::byRadius(p, index, 0.04f, 40);
+  const NeighbourGraph k2 = NeighbourGraph::byCount(p, index, 9);
+  omp_set_num_threads(saved);
+  ASSERT_EQ(r1.size(), r2.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    ASSERT_EQ(listOf(r1, i), listOf(r2, i)) << "radius graph differs at point " << i;
+    ASSERT_EQ(listOf(k1, i), listOf(k2, i)) << "k graph differs at point " << i;
+  }
+}
+
+// --------------------------------------------------------------- automatic radius
+
+TEST(RadiusForMeanNeighbourCount, UniformPlaneHitsTheTarget) {
+  const Positions p = randomPlane(20000, 11);
+  const SpatialIndex index(p);
+  for (int target : {10, 30, 80}) {
+    const float r = paps::radiusForMeanNeighbourCount(p, index, target);
+    // Density 20000 per unit area: count ~ 20000 pi r^2 away from the border.
+    const double expected_r = std::sqrt(target / (20000 * M_PI));
+    EXPECT_NEAR(r, expected_r, 0.15 * expected_r) << "target " << target;
+    const NeighbourGraph g = NeighbourGraph::byRadius(p, index, r);
+    EXPECT_NEAR(g.meanCount(), target, 0.15 * target) << "target " << target << ", radius " << r;
+  }
+}
+
+TEST(RadiusForMeanNeighbourCount, ScalesWithTheData) {
+  Positions p = randomPlane(5000, 12);
+  const float r1 = paps::radiusForMeanNeighbourCount(p, SpatialIndex(p), 20);
+  for (auto& x : p) x = 1000.f * x + Eigen::Vector3f(5e3f, -2e3f, 7.f);
+  const float r2 = paps::radiusForMeanNeighbourCount(p, SpatialIndex(p), 20);
+  EXPECT_NEAR(r2 / r1, 1000.f, 10.f);
+}
+
+TEST(RadiusForMeanNeighbourCount, IgnoresNaNAndIsDeterministic) {
+  Positions p = randomPlane(10000, 13);
+  const float clean = paps::radiusForMeanNeighbourCount(p, SpatialIndex(p), 30);
+  Positions with_nan = p;
+  for (std::size_t i = 0; i < with_nan.size(); i += 3) with_nan.insert(with_nan.begin() + i, Eigen::Vector3f(kNaN, kNaN, kNaN));
+  const SpatialIndex index(with_nan);
+  const float r = paps::radiusForMeanNeighbourCount(with_nan, index, 30);
+  EXPECT_NEAR(r, clean, 0.1f * clean);
+  EXPECT_EQ(r, paps::radiusForMeanNeighbourCount(with_nan, index, 30));
+  EXPECT_NEAR(paps::NeighbourGraph::byRadius(with_nan, index, r).meanCount(), 30, 4.5);
+}
+
+TEST(RadiusForMeanNeighbourCount, Errors) {
+  const Positions none;
+  EXPECT_THROW(paps::radiusForMeanNeighbourCount(none, SpatialIndex(none), 10), paps::InvalidInput);
+  const Positions one = {{1, 2, 3}, {kNaN, 0, 0}};
+  EXPECT_THROW(paps::radiusForMeanNeighbourCount(one, SpatialIndex(one), 10), paps::InvalidInput);
+  const Positions nan(4, Eigen::Vector3f::Constant(kNaN));
+  EXPECT_THROW(paps::radiusForMeanNeighbourCount(nan, SpatialIndex(nan), 10), paps::InvalidInput);
+  const Positions same(10, Eigen::Vector3f(1, 1, 1));
+  EXPECT_THROW(paps::radiusForMeanNeighbourCount(same, SpatialIndex(same), 3), paps::InvalidInput);
+  const Positions two = {{0, 0, 0}, {1, 0, 0}};
+  EXPECT_GT(paps::radiusForMeanNeighbourCount(two, SpatialIndex(two), 2), 0.f);
+  try {
+    paps::radiusForMeanNeighbourCount(two, SpatialIndex(two), 1);
+    ADD_FAILURE() << "target_count 1 accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "target_count");
+  }
+  try {
+    paps::radiusForMeanNeighbourCount(two, SpatialIndex(two), 5, 0);
+    ADD_FAILURE() << "samples 0 accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "samples");
+  }
+}
+
+// ------------------------------------------------------------ buildRadiusNeighbourhood
+
+TEST(BuildRadiusNeighbourhood, GivenOrAutomaticRadius) {
+  const Positions p = randomPlane(5000, 14);
+  const paps::RadiusNeighbourhood fixed = paps::buildRadiusNeighbourhood(p, 0.03f, 30);
+  EXPECT_EQ(fixed.radius, 0.03f);
+  ASSERT_TRUE(fixed.index);
+  EXPECT_EQ(fixed.index->size(), p.size());
+  EXPECT_EQ(fixed.graph.size(), p.size());
+  const paps::RadiusNeighbourhood automatic = paps::buildRadiusNeighbourhood(p, 0.f, 25);
+  EXPECT_NEAR(automatic.graph.meanCount(), 25, 0.15 * 25);
+  const paps::RadiusNeighbourhood capped = paps::buildRadiusNeighbourhood(p, 0.1f, 25, 7);
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LE(capped.graph.count(i), 7);
+}
+
+TEST(BuildRadiusNeighbourhood, Errors) {
+  const Positions p = randomPlane(100, 15);
+  for (float r : {-1.f, kNaN}) {
+    try {
+      paps::buildRadiusNeighbourhood(p, r, 10);
+      ADD_FAILURE() << "radius " << r << " accepted";
+    } catch (const paps::InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "radius");
+    }
+  }
+  EXPECT_THROW(paps::buildRadiusNeighbourhood(Positions{}, 0.1f, 10), paps::InvalidInput);
+  EXPECT_THROW(paps::buildRadiusNeighbourhood(Positions(3, Eigen::Vector3f::Constant(kNaN)), 0.f, 10),
+               paps::InvalidInput);
+  EXPECT_THROW(paps::buildRadiusNeighbourhood(Positions{{0, 0, 0}, {kNaN, 0, 0}}, 0.1f, 10),
+               paps::InvalidInput);
+}
+
+}  // namespace

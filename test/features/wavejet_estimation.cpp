@@ -1,0 +1,330 @@
+// Wavejets on analytic surfaces with known answers (manuscript 2.4).
+#include <cmath>
+#include <functional>
+
+#include <gtest/gtest.h>
+#include <omp.h>
+#include <pcl/common/io.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+#include <paps/core/random.h>
+#include <paps/features/wavejet_estimation.h>
+
+namespace {
+
+using paps::Positions;
+using HeightFn = std::function<double(double, double)>;
+constexpr double kPi = 3.14159265358979323846;
+
+// Irregular samples of z = f(x, y) over the disk of radius `extent`; point 0 is the apex.
+Positions heightFieldSamples(const HeightFn& f, int count, double extent, std::uint64_t seed) {
+  paps::Random rng(seed);
+  Positions p;
+  p.emplace_back(0.f, 0.f, static_cast<float>(f(0, 0)));
+  while (static_cast<int>(p.size()) < count) {
+    const double x = rng.uniform(-extent, extent), y = rng.uniform(-extent, extent);
+    if (x * x + y * y > extent * extent) continue;
+    p.emplace_back(static_cast<float>(x), static_cast<float>(y), static_cast<float>(f(x, y)));
+  }
+  return p;
+}
+
+std::vector<int> iota(std::size_t n) {
+  std::vector<int> v(n);
+  for (std::size_t i = 0; i < n; ++i) v[i] = static_cast<int>(i);
+  return v;
+}
+
+paps::WavejetResult fitAtApex(const Positions& p, const paps::WavejetParameters& params, float radius,
+                              const Eigen::Vector3f& initial = Eigen::Vector3f::Constant(NAN),
+                              paps::WavejetCoefficients* c = nullptr) {
+  std::vector<int> nb;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if ((p[i] - p[0]).head<2>().norm() <= radius) nb.push_back(static_cast<int>(i));
+  auto ws = paps::makeWavejetWorkspace();
+  return paps::fitWavejet(p, nb.data(), static_cast<int>(nb.size()), p[0], radius, params, *ws, initial,
+                          Eigen::Vector3f::UnitZ(), c);
+}
+
+Eigen::Vector3f tilted(double degrees, double azimuth) {
+  const double g = degrees * kPi / 180;
+  return Eigen::Vector3f(static_cast<float>(std::sin(g) * std::cos(azimuth)),
+                         static_cast<float>(std::sin(g) * std::sin(azimuth)), static_cast<float>(std::cos(g)));
+}
+
+double angleDeg(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return std::acos(std::min(1.0, std::abs(static_cast<double>(a.normalized().dot(b.normalized()))))) * 180 / kPi;
+}
+
+TEST(Wavejet, ParaboloidAndSaddlePrincipalCurvaturesAtApex) {
+  struct Case { double a, b; };
+  for (const Case c : {Case{0.5, 0.2}, Case{0.8, -0.3}, Case{-0.4, -0.1}}) {
+    const Positions p = heightFieldSamples([&](double x, double y) { return c.a * x * x + c.b * y * y; }, 400, 0.5, 7);
+    paps::WavejetParameters params;
+    const auto r = fitAtApex(p, params, 0.5f);
+    ASSERT_TRUE(r.valid());
+    EXPECT_EQ(r.order, 4);
+    EXPECT_NEAR(r.k1, 2 * std::max(c.a, c.b), 1e-3);
+    EXPECT_NEAR(r.k2, 2 * std::min(c.a, c.b), 1e-3);
+    EXPECT_NEAR(r.mean_curvature, c.a + c.b, 1e-3);
+    EXPECT_NEAR(r.gaussian_curvature, 4 * c.a * c.b, 1e-3);
+    EXPECT_LT(angleDeg(r.normal, Eigen::Vector3f::UnitZ()), 0.01);
+    // k1 direction: x when a > b, else y.
+    const Eigen::Vector3f d1 = c.a > c.b ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY();
+    EXPECT_GT(std::abs(r.direction1.dot(d1)), 0.999f);
+    EXPECT_NEAR(r.offset, 0.f, 1e-5);
+  }
+}
+
+TEST(Wavejet, SphereCurvatureIsOneOverRadius) {
+  // 4000 points on a sphere of radius 2, outward orientation hints: k1 = k2 = -1/2.
+  paps::Random rng(3);
+  Positions p;
+  paps::Normals out;
+  while (p.size() < 4000) {
+    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    v.normalize();
+    p.push_back((2.0 * v).cast<float>());
+    out.push_back(v.cast<float>());
+  }
+  paps::WavejetParameters params;
+  paps::WavejetReport report;
+  const auto res = paps::estimateWavejets(p, 0.45f, params, &report, nullptr, nullptr, &out);
+  EXPECT_EQ(report.fitted, p.size());
+  double worst = 0, worst_normal = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    worst = std::max({worst, std::abs(res[i].k1 + 0.5), std::abs(res[i].k2 + 0.5)});
+    worst_normal = std::max(worst_normal, angleDeg(res[i].normal, out[i]));
+    EXPECT_GT(res[i].normal.dot(out[i]), 0.f);
+  }
+  EXPECT_LT(worst, 0.005);  // 1% of 1/r
+  EXPECT_LT(worst_normal, 0.05);
+}
+
+// The surfaces of the bench, each with its exact normal at the apex (all +z).
+std::vector<std::pair<const char*, HeightFn>> analyticSurfaces() {
+  return {{"paraboloid", [](double x, double y) { return 0.5 * x * x + 0.3 * y * y; }},
+          {"saddle", [](double x, double y) { return 0.5 * x * x - 0.4 * y * y; }},
+          {"monkey saddle", [](double x, double y) { return x * x * x - 3 * x * y * y; }},
+          {"x4+y4", [](double x, double y) { return x * x * x * x + y * y * y * y; }},
+          {"sphere cap", [](double x, double y) { return 1.0 - std::sqrt(1.0 - x * x - y * y); }},
+          {"cylinder", [](double x, double) { return 1.0 - std::sqrt(1.0 - x * x); }}};
+}
+
+TEST(Wavejet, TiltedPlaneCorrectedWithinHalfDegree) {
+  for (const auto& s : analyticSurfaces()) {
+    const Positions p = heightFieldSamples(s.second, 300, 0.4, 11);
+    paps::WavejetParameters params;
+    for (double tilt : {5.0, 10.0, 20.0})
+      for (double az : {0.0, 1.0, 2.5}) {
+        const auto r = fitAtApex(p, params, 0.4f, tilted(tilt, az));
+        ASSERT_TRUE(r.valid()) << s.first;
+        EXPECT_LT(angleDeg(r.normal, Eigen::Vector3f::UnitZ()), 0.5) << s.first << " tilt " << tilt;
+      }
+  }
+}
+
+TEST(Wavejet, Corollary2CorrectionIsSecondOrder) {
+  // Third-order content; fit from a plane tilted by gamma without refitting. The corrected
+  // |phi_3,n| must differ from the tangent-plane ones by O(gamma^2), not O(gamma).
+  const HeightFn f = [](double x, double y) { return 0.5 * x * x + 0.2 * y * y + 0.3 * x * x * x + 0.4 * x * y * y; };
+  const Positions p = heightFieldSamples(f, 500, 0.5, 5);
+  paps::WavejetParameters params;
+  params.order = 5;
+  paps::WavejetCoefficients ref, c1, c2;
+  ASSERT_TRUE(fitAtApex(p, params, 0.5f, Eigen::Vector3f::UnitZ(), &ref).valid());
+  params.max_refits = 0;
+  params.refit_angle = 90;
+  ASSERT_TRUE(fitAtApex(p, params, 0.5f, tilted(2, 0.7), &c1).valid());
+  ASSERT_TRUE(fitAtApex(p, params, 0.5f, tilted(4, 0.7), &c2).valid());
+  double e1 = 0, e2 = 0, mag = 0;
+  for (int n : {1, 3}) {
+    e1 += std::abs(std::abs(c1.at(3, n)) - std::abs(ref.at(3, n)));
+    e2 += std::abs(std::abs(c2.at(3, n)) - std::abs(ref.at(3, n)));
+    mag += std::abs(ref.at(3, n));
+  }
+  // Measured: 1.7e-5, 6.6e-5, 2.6e-4, 1.0e-3 at 1, 2, 4, 8 degrees (|phi_3| sum 0.044):
+  // quadratic in gamma, while the uncorrected first-order change is ~ gamma |phi_2| ~ 2e-3.
+  EXPECT_LT(e2, 0.01 * mag);
+  EXPECT_GT(e2, 2.5 * e1);  // error grows like gamma^2
+}
+
+TEST(Wavejet, OrderLoweredWhenFewNeighbours) {
+  const Positions p = heightFieldSamples([](double x, double y) { return 0.3 * x * x + 0.1 * y * y; }, 12, 0.5, 9);
+  paps::WavejetParameters params;  // K = 4 needs 1.1 * 15 = 16.5; K = 3 needs 11
+  const auto idx = iota(p.size());
+  auto ws = paps::makeWavejetWorkspace();
+  const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(NAN), up = Eigen::Vector3f::UnitZ();
+  auto r = paps::fitWavejet(p, idx.data(), 12, p[0], 0.5f, params, *ws, nan3, up);
+  ASSERT_TRUE(r.valid());
+  EXPECT_EQ(r.order, 3);
+  r = paps::fitWavejet(p, idx.data(), 7, p[0], 0.5f, params, *ws, nan3, up);  // K = 2 needs 6.6
+  ASSERT_TRUE(r.valid());
+  EXPECT_EQ(r.order, 2);
+  // 7 points: the PCA plane is a few degrees off, below the refit angle; an order-2 fit
+  // over a tilted plane is then only o(gamma)-exact.
+  EXPECT_NEAR(r.k1, 0.6, 1e-2);
+  params.beta = 2;  // K = 3 needs 20, K = 2 needs 12
+  r = paps::fitWavejet(p, idx.data(), 12, p[0], 0.5f, params, *ws, nan3, up);
+  EXPECT_EQ(r.order, 2);
+}
+
+TEST(Wavejet, TooFewNeighboursGiveNaN) {
+  const Positions p = heightFieldSamples([](double x, double y) { return x * y; }, 6, 0.5, 1);
+  const auto idx = iota(p.size());
+  auto ws = paps::makeWavejetWorkspace();
+  const auto r = paps::fitWavejet(p, idx.data(), 6, p[0], 0.5f, paps::WavejetParameters(), *ws);
+  EXPECT_FALSE(r.valid());
+  EXPECT_TRUE(std::isnan(r.k1) && std::isnan(r.normal.x()) && std::isnan(r.mean_curvature));
+}
+
+pcl::PointCloud<pcl::PointXYZ>::Ptr toCloud(const Positions& p) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr c(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const auto& x : p) c->push_back(pcl::PointXYZ(x.x(), x.y(), x.z()));
+  return c;
+}
+
+TEST(WavejetEstimation, FeatureOnHeightFieldWithIsolatedAndNaNPoints) {
+  Positions p = heightFieldSamples([](double x, double y) { return 0.25 * (x * x + y * y); }, 3000, 1.0, 2);
+  p.emplace_back(50.f, 50.f, 50.f);  // isolated: too few neighbours
+  p.emplace_back(NAN, 0.f, 0.f);     // NaN input
+  auto cloud = toCloud(p);
+  cloud->is_dense = false;
+  paps::WavejetEstimation<pcl::PointXYZ> wj;
+  wj.setInputCloud(cloud);
+  wj.setRadiusSearch(0.15);
+  wj.setViewPoint(0, 0, 10);
+  wj.setKeepCoefficients(true);
+  pcl::PointCloud<paps::PointWavejet> out;
+  wj.compute(out);
+  ASSERT_EQ(out.size(), p.size());
+  EXPECT_FALSE(out.is_dense);
+  EXPECT_EQ(wj.getReport().too_few_neighbours, 1u);
+  EXPECT_EQ(wj.getReport().non_finite, 1u);
+  EXPECT_TRUE(std::isnan(out[p.size() - 2].k1));
+  EXPECT_EQ(out[p.size() - 2].order, -1);
+  EXPECT_TRUE(std::isnan(out[p.size() - 1].normal_x));
+  // Apex: k1 = k2 = 0.5, normal +z (towards the viewpoint).
+  EXPECT_NEAR(out[0].k1, 0.5, 2e-3);
+  EXPECT_NEAR(out[0].k2, 0.5, 2e-3);
+  EXPECT_GT(out[0].normal_z, 0.9999f);
+  ASSERT_EQ(wj.getCoefficients().size(), p.size());
+  EXPECT_NEAR(wj.getCoefficients()[0].at(2, 0).real(), 0.25 * 0.15, 1e-4);  // unit-disk units
+  // The point type is registered: its normal copies into pcl::Normal.
+  pcl::PointCloud<pcl::Normal> normals;
+  pcl::copyPointCloud(out, normals);
+  EXPECT_EQ(normals[0].normal_z, out[0].normal_z);
+}
+
+TEST(WavejetEstimation, KSearchAndOtherPointTypes) {
+  const Positions p = heightFieldSamples([](double x, double y) { return 0.5 * x * x - 0.5 * y * y; }, 2000, 1.0, 4);
+  pcl::PointCloud<pcl::PointNormal>::Ptr cloud(new pcl::PointCloud<pcl::PointNormal>);
+  for (const auto& x : p) { pcl::PointNormal q; q.getVector3fMap() = x; cloud->push_back(q); }
+  paps::WavejetEstimation<pcl::PointNormal> wj;
+  wj.setInputCloud(cloud);
+  wj.setKSearch(40);
+  pcl::PointCloud<paps::PointWavejet> out;
+  wj.compute(out);
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_NEAR(out[0].k1, 1.0, 0.01);
+  EXPECT_NEAR(out[0].k2, -1.0, 0.01);
+}
+
+TEST(WavejetEstimation, BadParametersThrow) {
+  paps::WavejetEstimation<pcl::PointXYZ> wj;
+  EXPECT_THROW(wj.setOrder(0), paps::InvalidParameter);
+  EXPECT_THROW(wj.setOrder(50), paps::InvalidParameter);
+  EXPECT_THROW(wj.setBeta(0.5f), paps::InvalidParameter);
+  EXPECT_THROW(wj.setBeta(NAN), paps::InvalidParameter);
+  EXPECT_THROW(wj.setIrlsIterations(-1), paps::InvalidParameter);
+  EXPECT_THROW(wj.setPlaneCorrection(-1, 1.f), paps::InvalidParameter);
+  pcl::PointCloud<paps::PointWavejet> out;
+  auto empty = pcl::PointCloud<pcl::PointXYZ>::Ptr(new pcl::PointCloud<pcl::PointXYZ>);
+  wj.setInputCloud(empty);
+  wj.setRadiusSearch(0.1);
+  EXPECT_THROW(wj.compute(out), paps::InvalidInput);
+  wj.setInputCloud(toCloud(heightFieldSamples([](double, double) { return 0.0; }, 100, 1.0, 1)));
+  wj.setRadiusSearch(0);
+  EXPECT_THROW(wj.compute(out), paps::InvalidParameter);  // neither radius nor k
+  wj.setRadiusSearch(-1);
+  EXPECT_THROW(wj.compute(out), paps::InvalidParameter);
+  wj.setRadiusSearch(0.3);
+  wj.setKSearch(10);
+  EXPECT_THROW(wj.compute(out), paps::InvalidParameter);  // both
+  Positions p(10, Eigen::Vector3f::Zero());
+  EXPECT_THROW(paps::estimateWavejets(p, NAN, paps::WavejetParameters()), paps::InvalidParameter);
+  EXPECT_THROW(paps::estimateWavejets(Positions(3, Eigen::Vector3f::Constant(NAN)), 0.1f, paps::WavejetParameters()),
+               paps::InvalidInput);
+}
+
+TEST(WavejetEstimation, DeterministicAcrossThreadCounts) {
+  Positions p = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; }, 4000, 1.0, 8);
+  paps::Random rng(2);
+  for (auto& x : p) x.z() += static_cast<float>(0.002 * rng.gaussian());
+  paps::WavejetParameters params;
+  params.irls_iterations = 3;
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto a = paps::estimateWavejets(p, 0.12f, params);
+  omp_set_num_threads(std::max(2, threads));
+  const auto b = paps::estimateWavejets(p, 0.12f, params);
+  omp_set_num_threads(threads);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    ASSERT_EQ(a[i].k1, b[i].k1);
+    ASSERT_EQ(a[i].normal, b[i].normal);
+    ASSERT_EQ(a[i].a0, b[i].a0);
+  }
+}
+
+TEST(Wavejet, IrlsResistsOutliers) {
+  Positions p = heightFieldSamples([](double x, double y) { return 0.5 * x * x + 0.1 * y * y; }, 400, 0.5, 6);
+  paps::Random rng(4);
+  for (std::size_t i = 1; i < p.size(); i += 10) p[i].z() += static_cast<float>(rng.uniform(0.05, 0.2));
+  paps::WavejetParameters params;
+  const auto plain = fitAtApex(p, params, 0.5f);
+  params.irls_iterations = 10;
+  const auto robust = fitAtApex(p, params, 0.5f);
+  EXPECT_LT(std::abs(robust.k1 - 1.0), 0.02);
+  EXPECT_LT(std::abs(robust.k1 - 1.0), 0.5 * std::abs(plain.k1 - 1.0));
+}
+
+TEST(Wavejet, IntegralInvariantOfParaboloid) {
+  // z = c r^2 (unit disk): phi_20 = c, a_0(1) = c / 4, a_1 = 0.
+  const Positions p = heightFieldSamples([](double x, double y) { return 0.2 * (x * x + y * y); }, 300, 1.0, 3);
+  paps::WavejetCoefficients c;
+  const auto r = fitAtApex(p, paps::WavejetParameters(), 1.f, Eigen::Vector3f::Constant(NAN), &c);
+  EXPECT_NEAR(r.a0, 0.05, 1e-4);
+  EXPECT_NEAR(std::abs(r.a1), 0.0, 1e-4);
+  EXPECT_NEAR(c.integralInvariant(0, 0.5f).real(), 0.2 * std::pow(0.5, 4) / 4, 1e-5);
+}
+
+}  // namespace
+
+namespace {
+TEST(Wavejet, OrderSelectionUnderNoise) {
+  // Noisy paraboloid: GCV picks order 2 and the curvature error drops; on clean data with
+  // quartic content the full order stays.
+  const HeightFn f = [](double x, double y) { return 0.5 * x * x + 0.25 * y * y; };
+  double err_fixed = 0, err_sel = 0;
+  int order2 = 0;
+  for (std::uint64_t seed = 1; seed <= 20; ++seed) {
+    Positions p = heightFieldSamples(f, 60, 0.12, seed);
+    paps::Random rng(seed + 100);
+    for (auto& x : p) x.z() += static_cast<float>(0.0012 * rng.gaussian());  // 1% of R
+    paps::WavejetParameters params;
+    const auto a = fitAtApex(p, params, 0.12f);
+    params.select_order = true;
+    const auto b = fitAtApex(p, params, 0.12f);
+    err_fixed += std::pow(a.k1 - 1.0, 2) + std::pow(a.k2 - 0.5, 2);
+    err_sel += std::pow(b.k1 - 1.0, 2) + std::pow(b.k2 - 0.5, 2);
+    order2 += b.order == 2;
+  }
+  EXPECT_GE(order2, 15);
+  EXPECT_LT(err_sel, 0.25 * err_fixed);
+  const Positions clean = heightFieldSamples([](double x, double y) { return x * x * x * x + 2 * y * y * y * y + 0.3 * x * y; }, 200, 0.5, 3);
+  paps::WavejetParameters params;
+  params.select_order = true;
+  EXPECT_EQ(fitAtApex(clean, params, 0.5f).order, 4);
+}
+}  // namespace

@@ -1,0 +1,406 @@
+// Tests of paps/filters/point_bilateral_filter.h: error to the true surface goes down on a
+// noisy sphere and an engraved plane, the pcl::Filter contract (NaN pass-through, fields
+// kept, indices, is_dense), edge cases, named parameter errors and determinism.
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+#include <paps/core/metrics.h>
+#include <paps/core/random.h>
+#include <paps/core/synthetic.h>
+#include <paps/filters/point_bilateral_filter.h>
+
+namespace {
+
+using paps::PointBilateralFilter;
+using paps::PointBilateralParameters;
+using paps::PointBilateralReport;
+using paps::Positions;
+
+/// A NaN with a payload, so that "passed through untouched" is checked bit for bit.
+float payloadNaN() {
+  const std::uint32_t bits = 0x7fc0beefu;
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+}
+std::uint32_t bitsOf(float f) {
+  std::uint32_t b;
+  std::memcpy(&b, &f, sizeof b);
+  return b;
+}
+bool sameBits(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return bitsOf(a.x()) == bitsOf(b.x()) && bitsOf(a.y()) == bitsOf(b.y()) && bitsOf(a.z()) == bitsOf(b.z());
+}
+
+/// `count` points uniform on the unit sphere, with Gaussian noise of `noise` x the
+/// bounding-box diagonal (2 sqrt 3).
+Positions noisySphere(std::size_t count, float noise, std::uint64_t seed) {
+  paps::Random rng(seed);
+  Positions p;
+  for (std::size_t i = 0; i < count; ++i) {
+    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    p.push_back(d.normalized());
+  }
+  paps::synthetic::addGaussianNoise(p, noise, seed + 1);
+  return p;
+}
+
+/// RMS of | |p| - 1 | over the finite points: the exact distance to the unit sphere.
+double sphereRmse(const Positions& p) {
+  double s = 0;
+  std::size_t n = 0;
+  for (const auto& x : p)
+    if (paps::isFinite(x)) {
+      s += std::pow(x.cast<double>().norm() - 1.0, 2);
+      ++n;
+    }
+  return std::sqrt(s / n);
+}
+
+template <typename PointT>
+typename pcl::PointCloud<PointT>::Ptr toCloud(const Positions& p) {
+  auto c = pcl::make_shared<pcl::PointCloud<PointT>>();
+  c->resize(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) (*c)[i].getVector3fMap() = p[i];
+  c->width = static_cast<std::uint32_t>(p.size());
+  c->height = 1;
+  c->is_dense = paps::countFinite(p) == p.size();
+  return c;
+}
+
+template <typename PointT>
+pcl::PointCloud<PointT> runFilter(PointBilateralFilter<PointT>& f,
+                                  const typename pcl::PointCloud<PointT>::Ptr& in) {
+  pcl::PointCloud<PointT> out;
+  f.setInputCloud(in);
+  f.filter(out);
+  return out;
+}
+
+Positions smallSphere(std::size_t count = 3000) { return noisySphere(count, 0.0025f, 5); }
+
+// ---------------------------------------------------------------------------- quality
+
+TEST(PointBilateralFilter, ReducesErrorOnNoisySphere) {
+  const Positions noisy = noisySphere(20000, 0.0025f, 1);
+  const double before = sphereRmse(noisy);
+  for (int iterations : {1, 3}) {
+    PointBilateralFilter<pcl::PointXYZ> f;
+    f.setIterations(iterations);
+    const auto out = runFilter(f, toCloud<pcl::PointXYZ>(noisy));
+    ASSERT_EQ(out.size(), noisy.size());
+    const Positions q = paps::positionsOf(out);
+    ASSERT_EQ(paps::countFinite(q), q.size());
+    const double after = sphereRmse(q);
+    std::printf("bilateral, sphere 20K, noise 0.25%%, %d pass(es): RMSE %.3g -> %.3g (factor %.2f), radius %.4g\n",
+                iterations, before, after, before / after, f.getReport().radius);
+    // Measured factors 2.40 (1 pass) and 3.21 (3 passes).
+    EXPECT_GT(before / after, iterations == 1 ? 2.0 : 2.7) << iterations << " passes";
+    EXPECT_EQ(f.getReport().moved + f.getReport().isolated, noisy.size());
+  }
+}
+
+TEST(PointBilateralFilter, ReducesErrorOnEngravedPlane) {
+  const paps::TriangleMesh mesh = paps::synthetic::engravedPlane(1.f, 0.1f, 0.01f, 400);
+  Positions noisy = paps::synthetic::sampleMesh(mesh, 40000, 17);
+  paps::synthetic::addGaussianNoise(noisy, 0.0025f, 18);
+  const paps::PointToMeshDistance truth(mesh);
+  const double before = paps::pointToMeshError(noisy, truth).rmse;
+  PointBilateralReport report;
+  const Positions out = paps::bilateralFilterPositions(noisy, {}, &report);
+  const paps::ErrorStats after = paps::pointToMeshError(out, truth);
+  ASSERT_EQ(after.count, noisy.size());
+  std::printf("bilateral, engraved plane 40K, noise 0.25%%: RMSE %.3g -> %.3g (factor %.2f)\n", before,
+              after.rmse, before / after.rmse);
+  EXPECT_GT(before / after.rmse, 1.55);  // measured 1.85
+}
+
+// ------------------------------------------------------------------ filter contract
+
+TEST(PointBilateralFilter, NaNPassThroughAndOtherFieldsKept) {
+  Positions p = smallSphere();
+  const float nan = payloadNaN();
+  const std::vector<std::size_t> holes = {0, 7, 500, 1234, 2999};
+  for (std::size_t i : holes) p[i] = Eigen::Vector3f(nan, i == 7 ? 0.5f : nan, nan);
+  p[42].x() = std::numeric_limits<float>::infinity();
+
+  auto in = toCloud<pcl::PointXYZI>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) (*in)[i].intensity = 0.25f * static_cast<float>(i);
+  PointBilateralFilter<pcl::PointXYZI> f;
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), in->size());
+  EXPECT_FALSE(out.is_dense);
+  std::size_t moved = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(bitsOf(out[i].intensity), bitsOf((*in)[i].intensity)) << i;
+    if (!paps::isFinite(p[i])) {
+      EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << "non-finite point " << i << " changed";
+    } else {
+      EXPECT_TRUE(paps::isFinite(out[i].getVector3fMap())) << i;
+      moved += out[i].getVector3fMap() != p[i];
+    }
+  }
+  EXPECT_GT(moved, 0.9 * (p.size() - holes.size() - 1));
+  EXPECT_EQ(f.getReport().non_finite, holes.size() + 1);
+}
+
+TEST(PointBilateralFilter, DenseStaysDenseAndColoursKept) {
+  const Positions p = smallSphere();
+  auto in = toCloud<pcl::PointXYZRGB>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) {
+    (*in)[i].r = static_cast<std::uint8_t>(i);
+    (*in)[i].g = static_cast<std::uint8_t>(i / 7);
+    (*in)[i].b = static_cast<std::uint8_t>(255 - i % 256);
+  }
+  PointBilateralFilter<pcl::PointXYZRGB> f;
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), in->size());
+  EXPECT_TRUE(out.is_dense);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].rgba, (*in)[i].rgba) << i;
+    EXPECT_TRUE(paps::isFinite(out[i].getVector3fMap()));
+  }
+}
+
+TEST(PointBilateralFilter, NormalFieldsOfPointNormalKept) {
+  Positions p = smallSphere(1000);
+  auto in = toCloud<pcl::PointNormal>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) {
+    (*in)[i].getNormalVector3fMap() = Eigen::Vector3f(0.f, 0.f, static_cast<float>(i));
+    (*in)[i].curvature = 0.5f;
+  }
+  PointBilateralFilter<pcl::PointNormal> f;
+  const auto out = runFilter(f, in);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].normal_z, static_cast<float>(i));
+    EXPECT_EQ(out[i].curvature, 0.5f);
+  }
+}
+
+TEST(PointBilateralFilter, OnlyIndexedPointsMove) {
+  const Positions p = smallSphere();
+  auto indices = pcl::make_shared<pcl::Indices>();
+  std::vector<bool> listed(p.size(), false);
+  for (std::size_t i = 1; i < p.size(); i += 3) {
+    indices->push_back(static_cast<int>(i));
+    listed[i] = true;
+  }
+  PointBilateralFilter<pcl::PointXYZ> f;
+  f.setIndices(indices);
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  ASSERT_EQ(out.size(), p.size());
+  std::size_t moved_listed = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (listed[i]) moved_listed += out[i].getVector3fMap() != p[i];
+    else EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << "unlisted point " << i << " moved";
+  }
+  EXPECT_GT(moved_listed, 0.9 * indices->size());
+  EXPECT_EQ(f.getReport().moved, indices->size());
+}
+
+TEST(PointBilateralFilter, IndexOutOfRangeIsRejected) {
+  // BUG (modules/core/include/paps/core/positions.h:66, applyPositionFilter): indices are
+  // used unchecked, `movable[i] = 1` writes outside the vector for i < 0 or i >= size
+  // (heap corruption, abort). Expected: a paps::Error naming the bad index. Remove this
+  // skip once fixed.
+  const Positions p = smallSphere(500);
+  for (int bad : {-1, 500, 100000}) {
+    PointBilateralFilter<pcl::PointXYZ> f;
+    f.setIndices(pcl::make_shared<pcl::Indices>(pcl::Indices{0, 1, bad}));
+    f.setInputCloud(toCloud<pcl::PointXYZ>(p));
+    pcl::PointCloud<pcl::PointXYZ> out;
+    EXPECT_THROW(f.filter(out), paps::Error) << "index " << bad;
+  }
+}
+
+TEST(PointBilateralFilter, ClassMatchesFunctionAndInPlace) {
+  const Positions p = smallSphere(2000);
+  PointBilateralParameters params;
+  params.iterations = 2;
+  const Positions expected = paps::bilateralFilterPositions(p, params);
+  PointBilateralFilter<pcl::PointXYZ> f;
+  f.setParameters(params);
+  auto cloud = toCloud<pcl::PointXYZ>(p);
+  const auto out = runFilter(f, cloud);
+  f.filter(*cloud);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    EXPECT_TRUE(sameBits(out[i].getVector3fMap(), expected[i])) << i;
+    EXPECT_TRUE(sameBits((*cloud)[i].getVector3fMap(), expected[i])) << i;
+  }
+}
+
+TEST(PointBilateralFilter, MovesAlongTheNormalOnly) {
+  // On a noisy plane z ~ 0 a point moves along its (near vertical) normal: x and y change
+  // far less than z.
+  paps::Random rng(4);
+  Positions p;
+  for (int i = 0; i < 4000; ++i)
+    p.emplace_back(rng.uniform(), rng.uniform(), 0.002 * rng.gaussian());
+  const Positions q = paps::bilateralFilterPositions(p, {});
+  double dxy = 0, dz = 0, z_before = 0, z_after = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    dxy += (q[i] - p[i]).head<2>().norm();
+    dz += std::abs(q[i].z() - p[i].z());
+    z_before += p[i].z() * p[i].z();
+    z_after += q[i].z() * q[i].z();
+  }
+  EXPECT_LT(dxy, 0.1 * dz);
+  EXPECT_LT(z_after, 0.5 * z_before);
+}
+
+// ------------------------------------------------------------------------ edge cases
+
+TEST(PointBilateralFilter, EmptyAndAllNaNAreInvalidInput) {
+  PointBilateralFilter<pcl::PointXYZ> f;
+  pcl::PointCloud<pcl::PointXYZ> out;
+  f.setInputCloud(pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>());
+  EXPECT_THROW(f.filter(out), paps::InvalidInput);
+  f.setInputCloud(toCloud<pcl::PointXYZ>(Positions(10, Eigen::Vector3f::Constant(payloadNaN()))));
+  EXPECT_THROW(f.filter(out), paps::InvalidInput);
+  EXPECT_THROW(paps::bilateralFilterPositions(Positions{}, {}), paps::InvalidInput);
+}
+
+TEST(PointBilateralFilter, SinglePointUnchanged) {
+  PointBilateralFilter<pcl::PointXYZ> f;
+  const Positions one = {{0.3f, -0.2f, 1.5f}};
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(one));
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_TRUE(sameBits(out[0].getVector3fMap(), one[0]));
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_EQ(f.getReport().isolated, 1u);
+  const Positions mixed = {{payloadNaN(), 0, 0}, {1, 2, 3}, {0, payloadNaN(), 0}};
+  const auto out2 = runFilter(f, toCloud<pcl::PointXYZ>(mixed));
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_TRUE(sameBits(out2[i].getVector3fMap(), mixed[i]));
+  EXPECT_FALSE(out2.is_dense);
+}
+
+TEST(PointBilateralFilter, DuplicatePointsGiveFiniteOutput) {
+  const Positions base = smallSphere(1500);
+  Positions p;
+  for (const auto& x : base)
+    for (int k = 0; k < 3; ++k) p.push_back(x);
+  PointBilateralFilter<pcl::PointXYZ> f;
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  ASSERT_EQ(out.size(), p.size());
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(paps::isFinite(out[i].getVector3fMap())) << i;
+  for (std::size_t i = 0; i < out.size(); i += 3)
+    EXPECT_LT((out[i].getVector3fMap() - out[i + 1].getVector3fMap()).norm(), 1e-3f) << i;
+}
+
+TEST(PointBilateralFilter, AllIdenticalPointsDoNotCrash) {
+  const Positions same(200, Eigen::Vector3f(1.f, 2.f, 3.f));
+  PointBilateralParameters params;
+  params.radius = 0.1f;
+  PointBilateralReport report;
+  const Positions out = paps::bilateralFilterPositions(same, params, &report);
+  for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(sameBits(out[i], same[i])) << i;
+  EXPECT_EQ(report.isolated, same.size());
+  params.radius = 0.f;
+  EXPECT_THROW(paps::bilateralFilterPositions(same, params), paps::InvalidInput);
+}
+
+TEST(PointBilateralFilter, TinyCloudsGiveFiniteOutput) {
+  // Fewer points than the target neighbour count and than the similar patches asked for.
+  paps::Random rng(77);
+  for (int n : {2, 3, 4, 5, 8, 20, 60}) {
+    Positions p;
+    for (int i = 0; i < n; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.01 * rng.gaussian());
+    const Positions out = paps::bilateralFilterPositions(p, {});
+    ASSERT_EQ(out.size(), p.size());
+    for (int i = 0; i < n; ++i) {
+      EXPECT_TRUE(paps::isFinite(out[i])) << n << " points, point " << i;
+      EXPECT_LT((out[i] - p[i]).norm(), 0.5f) << n << " points, point " << i;
+    }
+  }
+}
+
+TEST(PointBilateralFilter, TinyRadiusLeavesPointsIsolated) {
+  Positions p = smallSphere(2000);
+  p[3] = Eigen::Vector3f::Constant(payloadNaN());
+  PointBilateralFilter<pcl::PointXYZ> f;
+  f.setRadius(1e-7f);
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << i;
+  EXPECT_EQ(f.getReport().isolated, p.size() - 1);
+  EXPECT_EQ(f.getReport().moved, 0u);
+  EXPECT_EQ(f.getReport().radius, 1e-7f);
+}
+
+// ------------------------------------------------------------------------ parameters
+
+template <typename Fn>
+void expectInvalidParameter(Fn fn, const std::string& name) {
+  try {
+    fn();
+    ADD_FAILURE() << "bad " << name << " accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), name) << e.what();
+    EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+  }
+}
+
+TEST(PointBilateralFilter, BadParametersAreNamed) {
+  PointBilateralFilter<pcl::PointXYZ> f;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  expectInvalidParameter([&] { f.setRadius(-1.f); }, "radius");
+  expectInvalidParameter([&] { f.setRadius(nan); }, "radius");
+  expectInvalidParameter([&] { f.setIterations(0); }, "iterations");
+  expectInvalidParameter([&] { f.setIterations(-2); }, "iterations");
+  auto with = [&](auto change) {
+    PointBilateralParameters p;
+    change(p);
+    f.setParameters(p);
+  };
+  expectInvalidParameter([&] { with([](auto& p) { p.target_neighbours = 0; }); }, "target_neighbours");
+  expectInvalidParameter([&] { with([](auto& p) { p.sigma_c_fraction = 0.f; }); }, "sigma_c_fraction");
+  expectInvalidParameter([&] { with([](auto& p) { p.sigma_c_fraction = -0.5f; }); }, "sigma_c_fraction");
+  expectInvalidParameter([&] { with([](auto& p) { p.sigma_s = -1.f; }); }, "sigma_s");
+  expectInvalidParameter([&] { with([nan](auto& p) { p.sigma_s = nan; }); }, "sigma_s");
+  EXPECT_EQ(f.getParameters().iterations, 1) << "a rejected value leaves the filter as it was";
+  EXPECT_EQ(f.getParameters().radius, 0.f);
+  PointBilateralParameters bad;
+  bad.iterations = 0;
+  expectInvalidParameter([&] { paps::bilateralFilterPositions(smallSphere(100), bad); }, "iterations");
+  expectInvalidParameter([&] {
+    paps::bilateralFilterPositions(smallSphere(100), {}, nullptr, std::vector<std::uint8_t>(5, 1));
+  }, "movable");
+}
+
+// ----------------------------------------------------------------- threads, progress
+
+TEST(PointBilateralFilter, SameOutputWithOneOrTwoThreads) {
+  Positions p = smallSphere(8000);
+  p[10] = Eigen::Vector3f::Constant(payloadNaN());
+  PointBilateralParameters params;
+  params.iterations = 2;
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const Positions a = paps::bilateralFilterPositions(p, params);
+  omp_set_num_threads(2);
+  const Positions b = paps::bilateralFilterPositions(p, params);
+  omp_set_num_threads(saved);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) differ += !sameBits(a[i], b[i]);
+  EXPECT_EQ(differ, 0u);
+}
+
+TEST(PointBilateralFilter, ProgressCancels) {
+  const Positions p = smallSphere(2000);
+  int calls = 0;
+  EXPECT_THROW(paps::bilateralFilterPositions(p, {}, nullptr, {}, [&](const std::string&, float) { return ++calls < 3; }),
+               paps::Cancelled);
+}
+
+}  // namespace

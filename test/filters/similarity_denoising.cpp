@@ -1,0 +1,496 @@
+// Tests of paps/filters/similarity_denoising.h: error to the true surface goes down on an
+// engraved plane, the pcl::Filter contract (NaN pass-through, fields kept, indices, is_dense),
+// edge cases, named parameter errors and determinism across thread counts.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+#include <pcl/point_cloud.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+#include <paps/core/metrics.h>
+#include <paps/core/random.h>
+#include <paps/core/synthetic.h>
+#include <paps/filters/point_bilateral_filter.h>
+#include <paps/filters/similarity_denoising.h>
+
+namespace {
+
+using paps::Positions;
+using paps::SimilarityDenoising;
+using paps::SimilarityDenoisingParameters;
+using paps::SimilarityDenoisingReport;
+
+/// A NaN with a payload, so that "passed through untouched" is checked bit for bit.
+float payloadNaN() {
+  const std::uint32_t bits = 0x7fc0beefu;
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return f;
+}
+std::uint32_t bitsOf(float f) {
+  std::uint32_t b;
+  std::memcpy(&b, &f, sizeof b);
+  return b;
+}
+bool sameBits(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  return bitsOf(a.x()) == bitsOf(b.x()) && bitsOf(a.y()) == bitsOf(b.y()) && bitsOf(a.z()) == bitsOf(b.z());
+}
+
+/// Engraved plane of side 1 (wavelength 0.1, amplitude 0.01) sampled with `count` points
+/// and Gaussian noise of `noise` x the bounding-box diagonal.
+struct NoisyShape {
+  paps::TriangleMesh mesh;
+  Positions clean, noisy;
+};
+NoisyShape engravedPlane(std::size_t count, float noise, int resolution = 400) {
+  NoisyShape s;
+  s.mesh = paps::synthetic::engravedPlane(1.f, 0.1f, 0.01f, resolution);
+  s.clean = paps::synthetic::sampleMesh(s.mesh, count, 17);
+  s.noisy = s.clean;
+  paps::synthetic::addGaussianNoise(s.noisy, noise, 18);
+  return s;
+}
+
+template <typename PointT>
+typename pcl::PointCloud<PointT>::Ptr toCloud(const Positions& p) {
+  auto c = pcl::make_shared<pcl::PointCloud<PointT>>();
+  c->resize(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) (*c)[i].getVector3fMap() = p[i];
+  c->width = static_cast<std::uint32_t>(p.size());
+  c->height = 1;
+  c->is_dense = paps::countFinite(p) == p.size();
+  return c;
+}
+
+template <typename PointT>
+Positions positions(const pcl::PointCloud<PointT>& c) {
+  return paps::positionsOf(c);
+}
+
+/// Runs the filter stage on a cloud and returns the output.
+template <typename PointT>
+pcl::PointCloud<PointT> runFilter(SimilarityDenoising<PointT>& f,
+                                  const typename pcl::PointCloud<PointT>::Ptr& in) {
+  pcl::PointCloud<PointT> out;
+  f.setInputCloud(in);
+  f.filter(out);
+  return out;
+}
+
+/// A small noisy engraved plane (fast).
+Positions smallNoisyPlane(std::size_t count = 3000) { return engravedPlane(count, 0.0025f, 100).noisy; }
+
+// ---------------------------------------------------------------------------- quality
+
+TEST(SimilarityDenoising, ReducesErrorOnEngravedPlane) {
+  const NoisyShape s = engravedPlane(40000, 0.0025f);
+  const paps::PointToMeshDistance truth(s.mesh);
+  const double before = paps::pointToMeshError(s.noisy, truth).rmse;
+
+  SimilarityDenoising<pcl::PointXYZ> f;
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(s.noisy));
+  ASSERT_EQ(out.size(), s.noisy.size());
+  const paps::ErrorStats after = paps::pointToMeshError(positions(out), truth);
+  ASSERT_EQ(after.count, s.noisy.size()) << "every output point must be finite";
+  const double factor = before / after.rmse;
+  std::printf("similarity denoising, engraved plane 40K, noise 0.25%%: RMSE %.3g -> %.3g (factor %.2f), "
+              "radius %.4g, sigma %.3g\n", before, after.rmse, factor, f.getReport().radius,
+              f.getReport().sigma);
+  EXPECT_GT(factor, 1.8) << "RMSE before " << before << ", after " << after.rmse;  // measured 2.25
+  // Random sampling leaves the odd corner point with fewer than 4 neighbours.
+  EXPECT_EQ(f.getReport().moved + f.getReport().isolated, s.noisy.size());
+  EXPECT_LT(f.getReport().isolated, s.noisy.size() / 1000);
+  EXPECT_NEAR(f.getReport().mean_neighbours, 30, 0.15 * 30);
+
+  // The baseline we must beat: the point bilateral filter at its defaults.
+  const double bilateral = paps::pointToMeshError(paps::bilateralFilterPositions(s.noisy, {}), truth).rmse;
+  std::printf("bilateral baseline on the same cloud: RMSE %.3g\n", bilateral);
+  EXPECT_LT(after.rmse, 0.95 * bilateral);  // measured 0.82
+}
+
+TEST(SimilarityDenoising, NoiseFreeSurfacesStayPut) {
+  // A tilted plane far from the origin: the residual V is zero, so points stay on it.
+  const Eigen::Vector3f n = Eigen::Vector3f(1, 1, 1).normalized();
+  const Eigen::Vector3f u = n.unitOrthogonal(), v = n.cross(u), o(100.f, -50.f, 20.f);
+  paps::Random rng(31);
+  Positions plane;
+  for (int i = 0; i < 3000; ++i) plane.push_back(o + rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v);
+  const Positions out = paps::denoiseBySimilarity(plane, {});
+  double worst_height = 0, worst_slide = 0;
+  for (std::size_t i = 0; i < plane.size(); ++i) {
+    worst_height = std::max<double>(worst_height, std::abs(n.dot(out[i] - o)));
+    worst_slide = std::max<double>(worst_slide, (out[i] - plane[i]).norm());
+  }
+  EXPECT_LT(worst_height, 1e-4);  // float coordinates near 100 have a ~1e-5 grain
+  EXPECT_LT(worst_slide, 1e-4);
+
+  // The engraved plane without noise keeps its detail: S_smooth alone (10 curvature-motion
+  // iterations) flattens the engraving to RMSE 0.0048; averaging V puts it back (measured
+  // 0.0014 with the split-half guide, under half the 0.0035 noise the filter removes above).
+  const NoisyShape s = engravedPlane(20000, 0.f);
+  const paps::PointToMeshDistance truth(s.mesh);
+  const double after = paps::pointToMeshError(paps::denoiseBySimilarity(s.clean, {}), truth).rmse;
+  std::printf("similarity denoising of the noise-free engraved plane: RMSE %.3g\n", after);
+  EXPECT_LT(after, 0.0015);
+}
+
+TEST(SimilarityDenoising, OnePatchIsTheIdentity) {
+  // similar_patches = 1 averages V over the point alone: p_S + V = p.
+  const Positions p = smallNoisyPlane(2000);
+  SimilarityDenoisingParameters params;
+  params.similar_patches = 1;
+  const Positions out = paps::denoiseBySimilarity(p, params);
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LT((out[i] - p[i]).norm(), 1e-5f) << i;
+}
+
+// ------------------------------------------------------------------ filter contract
+
+TEST(SimilarityDenoising, NaNPassThroughAndOtherFieldsKept) {
+  Positions p = smallNoisyPlane();
+  const float nan = payloadNaN();
+  const std::vector<std::size_t> holes = {0, 7, 500, 1234, 2999};
+  for (std::size_t i : holes) p[i] = Eigen::Vector3f(nan, i == 7 ? 0.5f : nan, nan);
+  p[42].x() = std::numeric_limits<float>::infinity();
+
+  auto in = toCloud<pcl::PointXYZI>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) (*in)[i].intensity = 0.25f * static_cast<float>(i);
+  ASSERT_FALSE(in->is_dense);
+  SimilarityDenoising<pcl::PointXYZI> f;
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), in->size());
+  EXPECT_EQ(out.width, in->width);
+  EXPECT_EQ(out.height, in->height);
+  EXPECT_FALSE(out.is_dense);
+  std::size_t moved = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(bitsOf(out[i].intensity), bitsOf((*in)[i].intensity)) << i;
+    if (!paps::isFinite(p[i])) {
+      EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << "non-finite point " << i << " changed";
+    } else {
+      EXPECT_TRUE(paps::isFinite(out[i].getVector3fMap())) << i;
+      moved += out[i].getVector3fMap() != p[i];
+    }
+  }
+  EXPECT_GT(moved, 0.9 * (p.size() - holes.size() - 1));
+  EXPECT_EQ(f.getReport().non_finite, holes.size() + 1);
+}
+
+TEST(SimilarityDenoising, DenseStaysDenseAndColoursKept) {
+  const Positions p = smallNoisyPlane();
+  auto in = toCloud<pcl::PointXYZRGB>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) {
+    (*in)[i].r = static_cast<std::uint8_t>(i);
+    (*in)[i].g = static_cast<std::uint8_t>(i / 7);
+    (*in)[i].b = static_cast<std::uint8_t>(255 - i % 256);
+  }
+  in->header.frame_id = "scanner";
+  SimilarityDenoising<pcl::PointXYZRGB> f;
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), in->size());
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_EQ(out.header.frame_id, "scanner");
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].rgba, (*in)[i].rgba) << i;
+    EXPECT_TRUE(paps::isFinite(out[i].getVector3fMap()));
+  }
+}
+
+TEST(SimilarityDenoising, OrganisedCloudKeepsItsShape) {
+  const Positions p = smallNoisyPlane(2000);
+  auto in = toCloud<pcl::PointXYZ>(p);
+  in->width = 50;
+  in->height = 40;
+  for (std::size_t i = 0; i < in->size(); i += 97) (*in)[i].x = (*in)[i].y = (*in)[i].z = payloadNaN();
+  in->is_dense = false;
+  SimilarityDenoising<pcl::PointXYZ> f;
+  const auto out = runFilter(f, in);
+  EXPECT_EQ(out.width, 50u);
+  EXPECT_EQ(out.height, 40u);
+  EXPECT_TRUE(out.isOrganized());
+  EXPECT_FALSE(out.is_dense);
+  for (std::size_t i = 0; i < in->size(); i += 97) EXPECT_TRUE(sameBits(out[i].getVector3fMap(), (*in)[i].getVector3fMap()));
+}
+
+TEST(SimilarityDenoising, OnlyIndexedPointsMove) {
+  const Positions p = smallNoisyPlane();
+  auto in = toCloud<pcl::PointXYZ>(p);
+  auto indices = pcl::make_shared<pcl::Indices>();
+  std::vector<bool> listed(p.size(), false);
+  for (std::size_t i = 0; i < p.size() / 2; i += 2) {
+    indices->push_back(static_cast<int>(i));
+    listed[i] = true;
+  }
+  SimilarityDenoising<pcl::PointXYZ> f;
+  f.setIndices(indices);
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), p.size()) << "the output keeps every point, indexed or not";
+  std::size_t moved_listed = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (listed[i]) moved_listed += out[i].getVector3fMap() != p[i];
+    else EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << "unlisted point " << i << " moved";
+  }
+  EXPECT_GT(moved_listed, 0.9 * indices->size());
+  EXPECT_EQ(f.getReport().moved, indices->size());
+}
+
+TEST(SimilarityDenoising, IndexOutOfRangeIsRejected) {
+  // BUG (modules/core/include/paps/core/positions.h:66, applyPositionFilter): indices are
+  // used unchecked, `movable[i] = 1` writes outside the vector for i < 0 or i >= size; with
+  // indices {0, 1, -1} on 500 points the process aborts ("double free or corruption").
+  // Expected: paps::InvalidParameter (or InvalidInput) naming the bad index. Remove this
+  // skip once fixed.
+  const Positions p = smallNoisyPlane(500);
+  for (int bad : {-1, 500, 100000}) {
+    SimilarityDenoising<pcl::PointXYZ> f;
+    f.setIndices(pcl::make_shared<pcl::Indices>(pcl::Indices{0, 1, bad}));
+    f.setInputCloud(toCloud<pcl::PointXYZ>(p));
+    pcl::PointCloud<pcl::PointXYZ> out;
+    EXPECT_THROW(f.filter(out), paps::Error) << "index " << bad;
+  }
+}
+
+TEST(SimilarityDenoising, ViewpointOrPropagationAgreeOnAPlane) {
+  // Seen from high above, every normal of the engraved plane points up, which is also what
+  // propagation seeded upwards gives: the outputs are the same.
+  const Positions p = smallNoisyPlane(3000);
+  SimilarityDenoisingParameters params;
+  params.search_checks = 0;
+  const Positions propagated = paps::denoiseBySimilarity(p, params);
+  params.use_viewpoint = true;
+  params.viewpoint = Eigen::Vector3f(0.f, 0.f, 100.f);
+  const Positions viewed = paps::denoiseBySimilarity(p, params);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) differ += (viewed[i] - propagated[i]).norm() > 1e-6f;
+  EXPECT_EQ(differ, 0u);
+  // From below every normal flips: heights change sign and v mirrors in every descriptor
+  // alike, so distances, matches and the averaged V in world space are the same. (With the
+  // approximate search, search_checks > 0, the mirrored descriptors build another tree and
+  // the matches may differ; hence the exact search here.)
+  params.viewpoint = Eigen::Vector3f(0.f, 0.f, -100.f);
+  const Positions below = paps::denoiseBySimilarity(p, params);
+  double gap = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) gap = std::max<double>(gap, (below[i] - propagated[i]).norm());
+  EXPECT_LT(gap, 1e-4);
+}
+
+TEST(SimilarityDenoising, ClassMatchesFunctionAndInPlace) {
+  const Positions p = smallNoisyPlane(2000);
+  SimilarityDenoisingParameters params;
+  params.grid_size = 3;
+  const Positions expected = paps::denoiseBySimilarity(p, params);
+  SimilarityDenoising<pcl::PointXYZ> f;
+  f.setParameters(params);
+  auto cloud = toCloud<pcl::PointXYZ>(p);
+  const auto out = runFilter(f, cloud);
+  f.filter(*cloud);  // input and output the same cloud
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    EXPECT_TRUE(sameBits(out[i].getVector3fMap(), expected[i])) << i;
+    EXPECT_TRUE(sameBits((*cloud)[i].getVector3fMap(), expected[i])) << i;
+  }
+}
+
+// ------------------------------------------------------------------------ edge cases
+
+TEST(SimilarityDenoising, EmptyAndAllNaNAreInvalidInput) {
+  SimilarityDenoising<pcl::PointXYZ> f;
+  pcl::PointCloud<pcl::PointXYZ> out;
+  f.setInputCloud(pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>());
+  EXPECT_THROW(f.filter(out), paps::InvalidInput);
+  f.setInputCloud(toCloud<pcl::PointXYZ>(Positions(10, Eigen::Vector3f::Constant(payloadNaN()))));
+  EXPECT_THROW(f.filter(out), paps::InvalidInput);
+  EXPECT_THROW(paps::denoiseBySimilarity(Positions{}, {}), paps::InvalidInput);
+}
+
+TEST(SimilarityDenoising, SinglePointUnchanged) {
+  SimilarityDenoising<pcl::PointXYZ> f;
+  const Positions one = {{0.3f, -0.2f, 1.5f}};
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(one));
+  ASSERT_EQ(out.size(), 1u);
+  EXPECT_TRUE(sameBits(out[0].getVector3fMap(), one[0]));
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_EQ(f.getReport().isolated, 1u);
+  // One finite point among NaNs.
+  const Positions mixed = {{payloadNaN(), 0, 0}, {1, 2, 3}, {0, payloadNaN(), 0}};
+  const auto out2 = runFilter(f, toCloud<pcl::PointXYZ>(mixed));
+  for (std::size_t i = 0; i < 3; ++i) EXPECT_TRUE(sameBits(out2[i].getVector3fMap(), mixed[i]));
+  EXPECT_FALSE(out2.is_dense);
+}
+
+TEST(SimilarityDenoising, DuplicatePointsGiveFiniteOutput) {
+  // Every point three times, exactly.
+  const Positions base = smallNoisyPlane(1500);
+  Positions p;
+  for (const auto& x : base)
+    for (int k = 0; k < 3; ++k) p.push_back(x);
+  SimilarityDenoising<pcl::PointXYZ> f;
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  ASSERT_EQ(out.size(), p.size());
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(paps::isFinite(out[i].getVector3fMap())) << i;
+  EXPECT_TRUE(out.is_dense);
+  // Copies of one point fall in different halves of the split-half guide, so their outputs
+  // may differ, but by less than the noise they remove: the filter does not pull them apart.
+  // The noise is 0.25% of the diagonal (about 1.4 m here).
+  const float noise = 0.0025f * paps::boundingBoxDiagonal(p);
+  double spread = 0;
+  for (std::size_t i = 0; i < out.size(); i += 3)
+    spread += (out[i].getVector3fMap() - out[i + 1].getVector3fMap()).norm();
+  spread /= static_cast<double>(out.size() / 3);
+  EXPECT_LT(spread, 0.5 * noise);
+}
+
+TEST(SimilarityDenoising, AllIdenticalPointsDoNotCrash) {
+  const Positions same(200, Eigen::Vector3f(1.f, 2.f, 3.f));
+  SimilarityDenoisingParameters params;
+  params.radius = 0.1f;  // given: every point is every other's neighbour, no normal exists
+  SimilarityDenoisingReport report;
+  const Positions out = paps::denoiseBySimilarity(same, params, &report);
+  for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(sameBits(out[i], same[i])) << i;
+  EXPECT_EQ(report.isolated, same.size());
+  // Automatic radius: there is no scale to choose; a clear InvalidInput is the contract.
+  params.radius = 0.f;
+  EXPECT_THROW(paps::denoiseBySimilarity(same, params), paps::InvalidInput);
+}
+
+TEST(SimilarityDenoising, TinyCloudsGiveFiniteOutput) {
+  // Fewer points than the target neighbour count and than the similar patches asked for.
+  paps::Random rng(77);
+  for (int n : {2, 3, 4, 5, 8, 20, 60}) {
+    Positions p;
+    for (int i = 0; i < n; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.01 * rng.gaussian());
+    const Positions out = paps::denoiseBySimilarity(p, {});
+    ASSERT_EQ(out.size(), p.size());
+    for (int i = 0; i < n; ++i) {
+      EXPECT_TRUE(paps::isFinite(out[i])) << n << " points, point " << i;
+      EXPECT_LT((out[i] - p[i]).norm(), 0.5f) << n << " points, point " << i;
+    }
+  }
+}
+
+TEST(SimilarityDenoising, TinyRadiusLeavesPointsIsolated) {
+  Positions p = smallNoisyPlane(2000);
+  p[3] = Eigen::Vector3f::Constant(payloadNaN());
+  SimilarityDenoising<pcl::PointXYZ> f;
+  f.setRadius(1e-7f);
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << i;
+  EXPECT_EQ(f.getReport().isolated, p.size() - 1);
+  EXPECT_EQ(f.getReport().moved, 0u);
+  EXPECT_EQ(f.getReport().non_finite, 1u);
+  EXPECT_EQ(f.getReport().radius, 1e-7f);
+}
+
+TEST(SimilarityDenoising, GivenRadiusAndSigmaAreUsed) {
+  const Positions p = smallNoisyPlane(2000);
+  SimilarityDenoisingParameters params;
+  params.radius = 0.05f;
+  params.sigma = 0.004f;
+  SimilarityDenoisingReport r;
+  paps::denoiseBySimilarity(p, params, &r);
+  EXPECT_EQ(r.radius, 0.05f);
+  EXPECT_FLOAT_EQ(r.sigma, 0.004f);
+  EXPECT_GT(r.mean_neighbours, 4);
+  params.radius = params.sigma = 0.f;
+  paps::denoiseBySimilarity(p, params, &r);
+  EXPECT_GT(r.radius, 0.f);
+  EXPECT_GT(r.sigma, 0.f);
+  EXPECT_NEAR(r.mean_neighbours, params.target_neighbours, 0.15 * params.target_neighbours);
+}
+
+// ------------------------------------------------------------------------ parameters
+
+template <typename Fn>
+void expectInvalidParameter(Fn fn, const std::string& name) {
+  try {
+    fn();
+    ADD_FAILURE() << "bad " << name << " accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), name) << e.what();
+    EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+  }
+}
+
+TEST(SimilarityDenoising, BadParametersAreNamed) {
+  SimilarityDenoising<pcl::PointXYZ> f;
+  const float nan = std::numeric_limits<float>::quiet_NaN();
+  expectInvalidParameter([&] { f.setRadius(-1.f); }, "radius");
+  expectInvalidParameter([&] { f.setRadius(nan); }, "radius");
+  expectInvalidParameter([&] { f.setTargetNeighbours(0); }, "target_neighbours");
+  expectInvalidParameter([&] { f.setTargetNeighbours(-5); }, "target_neighbours");
+  expectInvalidParameter([&] { f.setGridSize(0); }, "grid_size");
+  expectInvalidParameter([&] { f.setGridSize(-1); }, "grid_size");
+  expectInvalidParameter([&] { f.setSigma(-0.1f); }, "sigma");
+  expectInvalidParameter([&] { f.setSmoothingIterations(0); }, "smoothing_iterations");
+  expectInvalidParameter([&] { f.setSimilarPatches(0); }, "similar_patches");
+  expectInvalidParameter([&] { f.setSimilarPatches(-3); }, "similar_patches");
+  auto with = [&](auto change) {
+    SimilarityDenoisingParameters p;
+    change(p);
+    f.setParameters(p);
+  };
+  expectInvalidParameter([&] { with([](auto& p) { p.sigma_scale = 0.f; }); }, "sigma_scale");
+  expectInvalidParameter([&] { with([](auto& p) { p.sigma_scale = -1.f; }); }, "sigma_scale");
+  expectInvalidParameter([&] { with([](auto& p) { p.search_checks = -1; }); }, "search_checks");
+  expectInvalidParameter([&] { with([](auto& p) { p.passes = 0; }); }, "passes");
+  expectInvalidParameter([&] { with([](auto& p) { p.descriptor_smoothing = -1; }); }, "descriptor_smoothing");
+  expectInvalidParameter([&] { with([](auto& p) { p.grid_size = 17; }); }, "grid_size");
+  expectInvalidParameter([&] {
+    with([nan](auto& p) { p.use_viewpoint = true; p.viewpoint.x() = nan; });
+  }, "viewpoint");
+  // A rejected value leaves the filter as it was.
+  EXPECT_EQ(f.getParameters().radius, 0.f);
+  EXPECT_EQ(f.getParameters().grid_size, SimilarityDenoisingParameters().grid_size);
+  // The function checks too, and names a mask of the wrong size.
+  SimilarityDenoisingParameters bad;
+  bad.similar_patches = 0;
+  expectInvalidParameter([&] { paps::denoiseBySimilarity(smallNoisyPlane(100), bad); }, "similar_patches");
+  expectInvalidParameter([&] {
+    paps::denoiseBySimilarity(smallNoisyPlane(100), {}, nullptr, std::vector<std::uint8_t>(5, 1));
+  }, "movable");
+}
+
+// ----------------------------------------------------------------- threads, progress
+
+TEST(SimilarityDenoising, SameOutputWithOneOrTwoThreads) {
+  Positions p = smallNoisyPlane(6000);
+  p[10] = Eigen::Vector3f::Constant(payloadNaN());
+  const int saved = omp_get_max_threads();
+  SimilarityDenoisingReport r1, r2;
+  omp_set_num_threads(1);
+  const Positions a = paps::denoiseBySimilarity(p, {}, &r1);
+  omp_set_num_threads(2);
+  const Positions b = paps::denoiseBySimilarity(p, {}, &r2);
+  omp_set_num_threads(saved);
+  ASSERT_EQ(a.size(), b.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) differ += !sameBits(a[i], b[i]);
+  EXPECT_EQ(differ, 0u) << "points that differ between 1 and 2 threads";
+  EXPECT_EQ(r1.radius, r2.radius);
+  EXPECT_EQ(r1.sigma, r2.sigma);
+}
+
+TEST(SimilarityDenoising, ProgressReachesTheEndAndCancels) {
+  const Positions p = smallNoisyPlane(2000);
+  std::vector<std::string> finished;
+  paps::denoiseBySimilarity(p, {}, nullptr, {}, [&](const std::string& stage, float f) {
+    EXPECT_GE(f, 0.f);
+    EXPECT_LE(f, 1.f);
+    if (f >= 1.f) finished.push_back(stage);
+    return true;
+  });
+  EXPECT_GE(finished.size(), 3u);
+  int calls = 0;
+  EXPECT_THROW(paps::denoiseBySimilarity(p, {}, nullptr, {}, [&](const std::string&, float) { return ++calls < 3; }),
+               paps::Cancelled);
+}
+
+}  // namespace

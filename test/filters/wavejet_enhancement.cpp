@@ -1,0 +1,166 @@
+// Wavejet enhancement (manuscript 2.4.3) on surfaces with known answers.
+#include <cmath>
+
+#include <gtest/gtest.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+#include <paps/core/random.h>
+#include <paps/filters/wavejet_enhancement.h>
+
+namespace {
+
+using paps::Positions;
+
+// Irregular samples of z = amp sin(2 pi x / w) sin(2 pi y / w) on [-1, 1]^2.
+Positions bumps(int count, double amp, std::uint64_t seed, double noise = 0) {
+  paps::Random rng(seed);
+  Positions p;
+  const double k = 2 * M_PI / 0.5;
+  for (int i = 0; i < count; ++i) {
+    const double x = rng.uniform(-1, 1), y = rng.uniform(-1, 1);
+    p.emplace_back(static_cast<float>(x), static_cast<float>(y),
+                   static_cast<float>(amp * std::sin(k * x) * std::sin(k * y) + noise * rng.gaussian()));
+  }
+  return p;
+}
+
+double interiorAmplitude(const Positions& p) {
+  double s = 0; int n = 0;
+  for (const auto& x : p)
+    if (std::abs(x.x()) < 0.7 && std::abs(x.y()) < 0.7) { s += x.z() * x.z(); ++n; }
+  return std::sqrt(s / n);
+}
+
+paps::WavejetEnhancementParameters baseParams() {
+  paps::WavejetEnhancementParameters p;
+  p.radius = 0.1f;
+  p.wavejet.viewpoint = {0, 0, 10};
+  return p;
+}
+
+TEST(WavejetEnhancement, PositionGainScalesDetail) {
+  const Positions p = bumps(6000, 0.02, 1);
+  auto params = baseParams();
+  const double a = interiorAmplitude(p);
+  params.alpha0 = 1;
+  const double a1 = interiorAmplitude(paps::enhancePositions(p, params));
+  params.alpha0 = 2;
+  paps::WavejetEnhancementReport r;
+  const double a2 = interiorAmplitude(paps::enhancePositions(p, params, &r));
+  params.alpha0 = 0;
+  const double a0 = interiorAmplitude(paps::enhancePositions(p, params));
+  EXPECT_NEAR(a1, a, 0.01 * a);  // projection on an exact surface barely moves it
+  EXPECT_GT(a2, 1.2 * a);
+  EXPECT_LT(a0, 0.8 * a);
+  EXPECT_EQ(r.changed, p.size());
+  EXPECT_EQ(r.clamped, 0u);
+}
+
+TEST(WavejetEnhancement, ProjectionRemovesNoise) {
+  paps::Random rng(5);
+  Positions p, truth;
+  while (p.size() < 5000) {
+    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    v.normalize();
+    truth.push_back(v.cast<float>());
+    p.push_back((v * (1 + 0.005 * rng.gaussian())).cast<float>());
+  }
+  auto params = baseParams();
+  params.radius = 0.25f;
+  params.alpha0 = 1;
+  params.wavejet.order = 2;
+  const Positions q = paps::enhancePositions(p, params);
+  double before = 0, after = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    before += std::pow(p[i].norm() - 1, 2);
+    after += std::pow(q[i].norm() - 1, 2);
+  }
+  EXPECT_LT(after, 0.25 * before);
+}
+
+TEST(WavejetEnhancement, MotionClampedAtHalfRadius) {
+  const Positions p = bumps(3000, 0.05, 2);
+  auto params = baseParams();
+  params.alpha0 = 1e4f;
+  paps::WavejetEnhancementReport r;
+  const Positions q = paps::enhancePositions(p, params, &r);
+  EXPECT_GT(r.clamped, p.size() / 2);
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LE((q[i] - p[i]).norm(), 0.5f * 0.1f * 1.0001f);
+}
+
+TEST(WavejetEnhancement, NormalGain) {
+  const Positions p = bumps(6000, 0.02, 3);
+  auto params = baseParams();
+  const double k = 2 * M_PI / 0.5;
+  auto meanAngle = [&](std::complex<float> alpha) {
+    params.alpha1 = alpha;
+    const paps::Normals n = paps::enhanceNormals(p, params);
+    double s = 0; int c = 0;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      if (std::abs(p[i].x()) > 0.7 || std::abs(p[i].y()) > 0.7) continue;
+      const double x = p[i].x(), y = p[i].y();
+      const Eigen::Vector3d t(-0.02 * k * std::cos(k * x) * std::sin(k * y), -0.02 * k * std::sin(k * x) * std::cos(k * y), 1);
+      s += std::acos(std::min(1.0, n[i].cast<double>().dot(t.normalized()))) * 180 / M_PI;
+      ++c;
+    }
+    return s / c;
+  };
+  const double e1 = meanAngle({1, 0}), e2 = meanAngle({2, 0}), e3 = meanAngle({3, 0}), ei = meanAngle({1, 1});
+  EXPECT_LT(e1, 0.3);  // alpha_1 = 1: the true normals (order-4 fit of a sinusoid)
+  EXPECT_GT(e2, 1.0);
+  EXPECT_GT(e3, 1.8 * e2);  // deviation linear in alpha_1 - 1
+  EXPECT_NEAR(ei, e2, 0.2 * e2);  // |alpha_1 - 1| = 1 too, rotated (skewed) deviation
+}
+
+TEST(WavejetEnhancement, PclFilterPositionsAndNormals) {
+  const Positions p = bumps(3000, 0.02, 4);
+  pcl::PointCloud<pcl::PointNormal>::Ptr cloud(new pcl::PointCloud<pcl::PointNormal>);
+  for (const auto& x : p) {
+    pcl::PointNormal q;
+    q.getVector3fMap() = x;
+    q.getNormalVector3fMap() = Eigen::Vector3f::UnitZ();  // orientation hint
+    cloud->push_back(q);
+  }
+  pcl::PointNormal nan_point;
+  nan_point.x = nan_point.y = nan_point.z = NAN;
+  cloud->push_back(nan_point);
+  cloud->is_dense = false;
+  paps::WavejetEnhancement<pcl::PointNormal> f;
+  f.setInputCloud(cloud);
+  f.setRadius(0.1f);
+  f.setPositionGain(2.f);
+  pcl::PointCloud<pcl::PointNormal> out;
+  f.filter(out);
+  ASSERT_EQ(out.size(), cloud->size());
+  EXPECT_FALSE(out.is_dense);
+  EXPECT_EQ(f.getReport().non_finite, 1u);
+  EXPECT_GT(out[0].normal_z, 0.5f);
+  f.setNormalGain({0.f, 3.f});
+  pcl::PointCloud<pcl::PointNormal> out2;
+  f.filter(out2);
+  EXPECT_EQ(out2[10].x, (*cloud)[10].x);
+  EXPECT_GT(out2[10].normal_z, 0.f);
+  EXPECT_NE(out2[10].normal_x, out[10].normal_x);
+
+  pcl::PointCloud<pcl::PointXYZ>::Ptr xyz(new pcl::PointCloud<pcl::PointXYZ>);
+  for (const auto& x : p) xyz->push_back(pcl::PointXYZ(x.x(), x.y(), x.z()));
+  paps::WavejetEnhancement<pcl::PointXYZ> g;
+  g.setInputCloud(xyz);
+  g.setNormalGain({2.f, 0.f});
+  pcl::PointCloud<pcl::PointXYZ> o;
+  EXPECT_THROW(g.filter(o), paps::InvalidParameter);  // no normals to write
+}
+
+TEST(WavejetEnhancement, BadParameters) {
+  paps::WavejetEnhancement<pcl::PointXYZ> f;
+  EXPECT_THROW(f.setRadius(-1.f), paps::InvalidParameter);
+  EXPECT_THROW(f.setPositionGain(NAN), paps::InvalidParameter);
+  EXPECT_THROW(f.setNormalGain({INFINITY, 0.f}), paps::InvalidParameter);
+  EXPECT_THROW(f.setOrder(0), paps::InvalidParameter);
+  auto params = baseParams();
+  params.max_motion = 0;
+  EXPECT_THROW(paps::enhancePositions(bumps(100, 0.01, 1), params), paps::InvalidParameter);
+}
+
+}  // namespace

@@ -3,6 +3,7 @@
 // curvature and on a real scan mesh; plus the tilted-plane correction curve, the speed run and
 // renders of an enhanced scan. One run, one table.
 #include <algorithm>
+#include <cstdlib>
 #include <chrono>
 #include <ctime>
 #include <cmath>
@@ -362,7 +363,11 @@ int runBenchCurvature(int argc, char** argv) {
   const int order = static_cast<int>(a.number("order", 4));
   const std::size_t speed_points = static_cast<std::size_t>(a.number("speed-points", 1000000));
   const std::string out_dir = a.text("out", ".");
-  const std::string scan = a.text("scan", "/tmp/samples/x/usr/share/doc/opencv-doc/examples/surface_matching/data/rs1_normals.ply");
+  const char* samples_env = std::getenv("PAPS_SAMPLES");
+  const char* home_env = std::getenv("HOME");
+  const std::string samples_dir = samples_env ? std::string(samples_env)
+                                              : std::string(home_env ? home_env : ".") + "/.cache/paps/samples";
+  const std::string scan = a.text("scan", samples_dir + "/rs1_normals.ply");
   const int scan_step = static_cast<int>(a.number("scan-step", 4));
   requireInRange("points", static_cast<double>(npts), 1000.0, 1e7);
   requireInRange("order", order, 2, 10);

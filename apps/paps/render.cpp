@@ -46,21 +46,24 @@ View View::fit(const Positions& points, float tilt_degrees) {
 
 namespace {
 
-// Splats every point as a 2x2 pixel block with a z-buffer, colour from `colour(i)`.
+// Splats every point as a square block with a z-buffer, colour from `colour(i)`.
 template <typename ColourFn>
 void splat(const Positions& points, const View& view, int width, const std::string& png, ColourFn colour) {
   const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
   const int height = std::max(1, static_cast<int>(width * ext.y() / ext.x()));
   std::vector<unsigned char> rgb(static_cast<std::size_t>(width) * height * 3, 255);
   std::vector<float> depth(static_cast<std::size_t>(width) * height, -std::numeric_limits<float>::max());
+  // Splats as wide as the mean spacing on screen, so that the surface shows without holes.
+  const std::size_t shown = std::max<std::size_t>(1, countFinite(points));
+  const int size = std::max(2, static_cast<int>(std::ceil(1.3 * std::sqrt(double(width) * height / shown))));
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) continue;
     const Eigen::Vector3f s = view.axes * points[i];
-    const int x = static_cast<int>((s.x() - view.lo.x()) / ext.x() * (width - 2));
-    const int y = static_cast<int>((view.hi.y() - s.y()) / ext.y() * (height - 2));
+    const int x = static_cast<int>((s.x() - view.lo.x()) / ext.x() * (width - size));
+    const int y = static_cast<int>((view.hi.y() - s.y()) / ext.y() * (height - size));
     const Eigen::Vector3f c = colour(i);
-    for (int dy = 0; dy < 2; ++dy)
-      for (int dx = 0; dx < 2; ++dx) {
+    for (int dy = 0; dy < size; ++dy)
+      for (int dx = 0; dx < size; ++dx) {
         const std::size_t k = static_cast<std::size_t>(y + dy) * width + (x + dx);
         if (x + dx >= width || y + dy >= height || s.z() <= depth[k]) continue;
         depth[k] = s.z();

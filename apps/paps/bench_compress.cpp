@@ -34,8 +34,8 @@ namespace {
 
 const char* kBenchCompressUsage =
     "usage: paps bench compress [options]\n"
-    "  --mesh PATH        true surface to sample (default $PAPS_DATA/rs1_normals.ply)\n"
-    "  --scan PATH        real scan (default $PAPS_DATA/table_scene_lms400.pcd; 'none' to skip)\n"
+    "  --mesh PATH        true surface to sample (default $PAPS_SAMPLES/rs1_normals.ply)\n"
+    "  --scan PATH        real scan (default $PAPS_SAMPLES/table_scene_lms400.pcd; 'none' to skip)\n"
     "  --points N         points sampled from the mesh (default 1000000)\n"
     "  --noise F          scanner-like Gaussian noise, sigma = F x the sampling spacing (default 0.3)\n"
     "  --out DIR          CSV and PNG plots (default bench_compress)\n"
@@ -203,8 +203,10 @@ int runBenchCompress(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
   if (a.has("help")) { std::fputs(kBenchCompressUsage, stdout); return 0; }
   a.allowOnly({"mesh", "scan", "points", "noise", "out", "draco-bits", "ours"});
-  const char* env = std::getenv("PAPS_DATA");
-  const std::string data = env ? env : ".";
+  // Same sample cache as the other benches (scripts/fetch_samples.sh).
+  const char* env = std::getenv("PAPS_SAMPLES");
+  const char* home = std::getenv("HOME");
+  const std::string data = env ? std::string(env) : std::string(home ? home : ".") + "/.cache/paps/samples";
   const std::string mesh_path = a.text("mesh", data + "/rs1_normals.ply");
   const std::string scan_path = a.text("scan", data + "/table_scene_lms400.pcd");
   const long n = long(a.number("points", 1000000));

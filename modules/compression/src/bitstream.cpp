@@ -1,5 +1,6 @@
 #include <paps/compression/bitstream.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <memory>
@@ -183,7 +184,9 @@ SymbolReader::SymbolReader(const std::vector<std::uint8_t>& payload, std::size_t
   method_ = static_cast<EntropyMethod>(payload[0]);
   const std::uint8_t* p = payload.data() + 1;
   const std::size_t n = payload.size() - 1;
-  const std::size_t max_raw = 2 * max_symbols;
+  // Two bytes per symbol, and never more than 512 MiB whatever the header claims (a real
+  // stream that large would be range-coded: the range coder wins on every measured input).
+  const std::size_t max_raw = std::min<std::size_t>(2 * max_symbols, std::size_t(512) << 20);
   if (method_ == EntropyMethod::kRange) {
     range_ = std::make_unique<RangeDecoder>(p, n);
   } else if (method_ == EntropyMethod::kZstd) {

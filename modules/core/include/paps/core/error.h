@@ -55,8 +55,8 @@ std::string toString(const T& v) {
 /// Throws InvalidParameter unless value > 0 (and finite).
 template <typename T>
 void requirePositive(const char* name, T value) {
-  if (!(value > T(0)) || !(value == value) || !(value < T(1e30)))
-    throw InvalidParameter(name, detail::toString(value), "a finite value > 0");
+  const double v = static_cast<double>(value);  // no T(1e30) overflow for integer T; NaN fails
+  if (!(v > 0) || !(v < 1e30)) throw InvalidParameter(name, detail::toString(value), "a finite value > 0");
 }
 
 /// Throws InvalidParameter unless lo <= value <= hi.

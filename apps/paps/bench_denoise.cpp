@@ -66,7 +66,10 @@ std::vector<Method> sweep(float r, bool quick) {
   m.push_back({"ours", "passes 2", {{"radius", r}, {"passes", 2}}, false});
   m.push_back({"ours", "radius x2", {{"radius", 2 * r}}, false});
   m.push_back({"ours", "radius x2 passes 2", {{"radius", 2 * r}, {"passes", 2}}, false});
-  if (!quick) m.push_back({"ours", "radius x2 patches 64", {{"radius", 2 * r}, {"patches", 64}}, false});
+  if (!quick) {
+    m.push_back({"ours", "radius x2 patches 64", {{"radius", 2 * r}, {"patches", 64}}, false});
+    m.push_back({"ours", "radius x2 passes 3", {{"radius", 2 * r}, {"passes", 3}}, false});
+  }
   for (double f : quick ? std::vector<double>{1, 2} : std::vector<double>{1, 1.5, 2, 3})
     m.push_back({"mls", "radius x" + fmt("%g", f), {{"radius", r * f}, {"order", 2}, {"threads", 2}}, f == 1});
   for (double f : quick ? std::vector<double>{1, 2} : std::vector<double>{1, 1.5, 2})
@@ -82,6 +85,7 @@ int runBenchDenoise(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
   if (a.has("help")) { std::fputs(kBenchUsage, stdout); return 0; }
   a.allowOnly({"out", "samples", "points", "large", "quick"});
+  std::setvbuf(stdout, nullptr, _IOLBF, 0);  // rows appear as they are measured
   const std::string out_dir = a.text("out", "bench_out");
   const std::string samples = a.text("samples", defaultSamplesDir());
   const bool quick = a.has("quick");

@@ -41,7 +41,8 @@ int runDenoise(int argc, char** argv) {
   if (method != "similarity" && method != "bilateral")
     throw InvalidParameter("method", method, "similarity or bilateral");
 
-  pcl::PCLPointCloud2 cloud = loadCloud(in_path);
+  Eigen::Vector3f origin;
+  pcl::PCLPointCloud2 cloud = loadCloud(in_path, &origin);
   const Positions in = positionsOf(cloud);
   std::printf("read %s: %zu points (%zu finite)\n", in_path.c_str(), in.size(), countFinite(in));
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
@@ -58,13 +59,18 @@ int runDenoise(int argc, char** argv) {
     p.search_checks = static_cast<int>(a.number("checks", p.search_checks));
     p.descriptor_smoothing = static_cast<int>(a.number("guide", p.descriptor_smoothing));
     p.passes = static_cast<int>(a.number("passes", p.passes));
+    if (isFinite(origin) && origin.squaredNorm() > 0) {
+      p.use_viewpoint = true;
+      p.viewpoint = origin;
+    }
     SimilarityDenoisingReport r;
     out = denoiseBySimilarity(in, p, &r, {}, progress);
     std::printf("similarity denoising: radius %g m%s (mean %.1f neighbours), grid %dx%d, sigma %g m%s, "
                 "%d smoothing iterations, %d similar patches\n",
                 r.radius, p.radius > 0 ? "" : " (chosen)", r.mean_neighbours, p.grid_size, p.grid_size,
                 r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches);
-    std::printf("moved %zu points; %zu NaN points passed through\n", r.moved, r.non_finite);
+    std::printf("normals oriented %s; moved %zu points; %zu NaN points passed through\n",
+                p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours and were left in place\n", r.isolated);
   } else {
     PointBilateralParameters p;

@@ -494,3 +494,23 @@ TEST(SimilarityDenoising, ProgressReachesTheEndAndCancels) {
 }
 
 }  // namespace
+
+TEST(SimilarityDenoising, SensorOriginOrientsNormals) {
+  // A cloud that carries its sensor origin is processed as if that viewpoint had been given.
+  const Positions p = smallNoisyPlane(1500);
+  auto cloud = toCloud<pcl::PointXYZ>(p);
+  // Below the plane: propagation alone would orient the normals up (+z).
+  cloud->sensor_origin_ = Eigen::Vector4f(0.1f, -0.2f, -5.f, 0.f);
+  SimilarityDenoising<pcl::PointXYZ> f;
+  const auto out = runFilter(f, cloud);
+  SimilarityDenoisingParameters params;
+  params.use_viewpoint = true;
+  params.viewpoint = Eigen::Vector3f(0.1f, -0.2f, -5.f);
+  const Positions expected = paps::denoiseBySimilarity(p, params);
+  for (std::size_t i = 0; i < p.size(); ++i) ASSERT_TRUE(sameBits(out[i].getVector3fMap(), expected[i])) << i;
+  // And the origin did matter: without it the (approximate) search sees other frames.
+  const Positions propagated = paps::denoiseBySimilarity(p, {});
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) differ += !sameBits(propagated[i], expected[i]);
+  EXPECT_GT(differ, 0u);
+}

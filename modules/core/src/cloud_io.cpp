@@ -46,7 +46,8 @@ XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
 
 }  // namespace
 
-pcl::PCLPointCloud2 loadCloud(const std::string& path) {
+pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) {
+  if (origin) origin->setZero();
   std::error_code ec;
   if (!std::filesystem::is_regular_file(path, ec))
     throw IoError("cannot read '" + path + "': no such file");
@@ -62,7 +63,11 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path) {
   pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
   if (ext == ".pcd") {
     pcl::PCDReader reader;
-    rc = reader.read(path, cloud);
+    Eigen::Vector4f o = Eigen::Vector4f::Zero();
+    Eigen::Quaternionf q;
+    int version = 0;
+    rc = reader.read(path, cloud, o, q, version);
+    if (origin && rc >= 0) *origin = o.head<3>();
   } else if (ext == ".ply") {
     pcl::PLYReader reader;
     rc = reader.read(path, cloud);

@@ -12,7 +12,8 @@ namespace paps {
 
 /// Loads a .pcd or .ply file. Throws IoError naming the path when it is missing, unreadable,
 /// of another format, or has no x/y/z fields.
-pcl::PCLPointCloud2 loadCloud(const std::string& path);
+/// `origin`, when given, receives the sensor origin stored in a .pcd (zero otherwise).
+pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin = nullptr);
 
 /// Writes a .pcd (binary) or .ply (binary) file atomically. Throws IoError on failure; the
 /// target is then untouched and no temporary file is left.

@@ -70,7 +70,9 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
                               const ProgressCallback& progress = {});
 
 /// The pcl::Filter stage. The output has the input's size and fields; only the positions of
-/// the points in the indices move. NaN points pass through; is_dense is kept honest.
+/// the points in the indices move. NaN points pass through; is_dense is kept honest. When the
+/// cloud's sensor_origin_ is set (non-zero) and no viewpoint was given, normals are oriented
+/// towards it.
 template <typename PointT>
 class SimilarityDenoising : public pcl::Filter<PointT> {
   using Base = pcl::Filter<PointT>;

@@ -26,9 +26,17 @@ template <typename PointT> void SimilarityDenoising<PointT>::setSimilarPatches(i
 template <typename PointT>
 void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
+  // A cloud that knows where its sensor was gets its normals oriented towards it (2.1.2);
+  // otherwise orientation is propagated over the neighbour graph.
+  SimilarityDenoisingParameters params = params_;
+  const Eigen::Vector3f origin = this->input_->sensor_origin_.template head<3>();
+  if (!params.use_viewpoint && isFinite(origin) && origin.squaredNorm() > 0) {
+    params.use_viewpoint = true;
+    params.viewpoint = origin;
+  }
   applyPositionFilter(*this->input_, *this->indices_, output,
                       [&](const Positions& in, const std::vector<std::uint8_t>& movable) {
-                        return denoiseBySimilarity(in, params_, &report_, movable, progress_);
+                        return denoiseBySimilarity(in, params, &report_, movable, progress_);
                       });
 }
 

@@ -101,12 +101,8 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
                       const ProgressCallback& progress) {
   SimilarityDenoisingReport report;
   const std::size_t n = points.size();
-  if (n == 0) throw InvalidInput("the input cloud is empty");
-  if (!movable.empty() && movable.size() != n)
-    throw InvalidParameter("movable", detail::toString(movable.size()), "one flag per point");
-  const std::size_t finite = countFinite(points);
+  const std::size_t finite = checkMovableInput(points, movable);
   report.non_finite = n - finite;
-  if (finite == 0) throw InvalidInput("no finite point in the cloud (all NaN or Inf)");
   if (finite == 1) {
     report.isolated = 1;
     if (report_out) *report_out = report;

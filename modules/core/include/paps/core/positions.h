@@ -57,6 +57,18 @@ void writePositions(const Positions& p, pcl::PointCloud<PointT>& cloud) {
   cloud.is_dense = countFinite(p) == p.size();
 }
 
+/// The checks every point-moving stage makes on its input: throws InvalidInput when the cloud
+/// is empty or has no finite point, InvalidParameter when `movable` (one flag per point, or
+/// empty for all) has the wrong size. Returns the number of finite points.
+inline std::size_t checkMovableInput(const Positions& points, const std::vector<std::uint8_t>& movable) {
+  if (points.empty()) throw InvalidInput("the input cloud is empty");
+  if (!movable.empty() && movable.size() != points.size())
+    throw InvalidParameter("movable", detail::toString(movable.size()), "one flag per point");
+  const std::size_t finite = countFinite(points);
+  if (finite == 0) throw InvalidInput("no finite point in the cloud (all NaN or Inf)");
+  return finite;
+}
+
 /// The shape every point-moving pcl::Filter shares: copy the input (all fields, organisation),
 /// let `move(positions, movable)` return new positions for the points in `indices`, write
 /// them back and keep is_dense honest. Input empty -> InvalidInput (thrown by the caller's

@@ -92,9 +92,9 @@ void renderValues(const Positions& points, const std::vector<double>& values, do
   splat(points, view, width, png, [&](std::size_t i) {
     if (!std::isfinite(values[i])) return Eigen::Vector3f(0.6f, 0.6f, 0.6f);
     const float t = static_cast<float>(std::clamp(values[i] / vmax, 0.0, 1.0));
-    // Blue -> cyan -> yellow -> red.
-    return Eigen::Vector3f(std::clamp(2.f * t, 0.f, 1.f) , 1.f - std::abs(2.f * t - 1.f) * 0.8f,
-                           std::clamp(1.f - 2.f * t, 0.f, 1.f));
+    // Blue -> cyan -> green -> yellow -> red (no grey in between).
+    auto ramp = [](float x) { return std::clamp(1.5f - std::abs(x), 0.f, 1.f); };
+    return Eigen::Vector3f(ramp(4.f * t - 3.f), ramp(4.f * t - 2.f), ramp(4.f * t - 1.f));
   });
 }
 

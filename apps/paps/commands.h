@@ -9,4 +9,7 @@ int runBenchCurvature(int argc, char** argv);
 int runCompress(int argc, char** argv);
 int runDecompress(int argc, char** argv);
 int runBenchCompress(int argc, char** argv);
+int runSuperres(int argc, char** argv);
+int runBenchSuperres(int argc, char** argv);
+int runSuperresWorker(int argc, char** argv);
 }  // namespace paps::cli

@@ -19,6 +19,8 @@ const char* kUsage =
     "  bench compress [options]      ours vs Draco and the PCL octree coder: rate-distortion curves\n"
     "  curvature IN OUT [options]    Wavejet normals and curvatures; enhance IN OUT: details\n"
     "  bench curvature [options]     Wavejets vs PCL and CGAL jets on analytic surfaces and a scan\n"
+    "  superres IN [IN2..] OUT --factor F   QSR super-resolution (or --method apss|rimls)\n"
+    "  bench superres [options]      QSR vs APSS, RIMLS and PCL MLS upsampling (Table 2.2 protocol)\n"
     "Run 'paps COMMAND --help' for the options of a command.\n";
 }
 
@@ -38,6 +40,11 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "compress")) return paps::cli::runCompress(argc, argv);
     if (!std::strcmp(argv[1], "decompress")) return paps::cli::runDecompress(argc, argv);
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "compress")) return paps::cli::runBenchCompress(argc, argv);
+#endif
+#ifdef PAPS_HAVE_SURFACE
+    if (!std::strcmp(argv[1], "superres")) return paps::cli::runSuperres(argc, argv);
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "superres")) return paps::cli::runBenchSuperres(argc, argv);
+    if (!std::strcmp(argv[1], "bench-worker-sr")) return paps::cli::runSuperresWorker(argc, argv);
 #endif
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);

@@ -55,12 +55,14 @@ void splat(const Positions& points, const View& view, int width, const std::stri
   std::vector<float> depth(static_cast<std::size_t>(width) * height, -std::numeric_limits<float>::max());
   // Splats as wide as the mean spacing on screen, so that the surface shows without holes.
   const std::size_t shown = std::max<std::size_t>(1, countFinite(points));
-  const int size = std::max(2, static_cast<int>(std::ceil(1.3 * std::sqrt(double(width) * height / shown))));
+  const int size = std::clamp(static_cast<int>(std::ceil(1.3 * std::sqrt(double(width) * height / shown))), 2,
+                              std::max(2, std::min(width, height) / 8));
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) continue;
     const Eigen::Vector3f s = view.axes * points[i];
     const int x = static_cast<int>((s.x() - view.lo.x()) / ext.x() * (width - size));
     const int y = static_cast<int>((view.hi.y() - s.y()) / ext.y() * (height - size));
+    if (x < 0 || y < 0 || x >= width || y >= height) continue;  // outside the view
     const Eigen::Vector3f c = colour(i);
     for (int dy = 0; dy < size; ++dy)
       for (int dx = 0; dx < size; ++dx) {

@@ -1,0 +1,351 @@
+// paps bench superres: the protocol of Table 2.2 on our data. A dense cloud is subsampled to
+// 10%, Gaussian noise is added, each method restores the dense count, and the error is the
+// RMSE from the dense points to their nearest output points. Each method runs in a child
+// process (its own peak memory; a crash cannot take the bench down).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <sstream>
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <pcl/point_types.h>
+#include <pcl/search/kdtree.h>
+#include <pcl/surface/mls.h>
+
+#include <paps/core/cloud_io.h>
+#include <paps/core/error.h>
+#include <paps/core/metrics.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/random.h>
+#include <paps/core/synthetic.h>
+#include <paps/filters/similarity_denoising.h>
+#include <paps/surface/mls_upsampling.h>
+#include <paps/surface/quadric_super_resolution.h>
+
+#include "bench_worker.h"
+#include "cli_common.h"
+#include "commands.h"
+#include "render.h"
+
+namespace paps::cli {
+
+namespace {
+
+const char* kUsage =
+    "usage: paps bench superres [options]\n"
+    "  --out DIR        table (CSV), renders (PNG) and scratch files (default bench_out)\n"
+    "  --samples DIR    sample data (default $PAPS_SAMPLES or ~/.cache/paps/samples)\n"
+    "  --points N       dense points per shape (default 700000; the input is 10% of it)\n"
+    "  --speed N        input points of the speed test, super-resolved x4 (default 100000, 0: skip)\n"
+    "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n";
+
+std::string samplesDir() {
+  if (const char* e = std::getenv("PAPS_SAMPLES")) return e;
+  const char* home = std::getenv("HOME");
+  return std::string(home ? home : ".") + "/.cache/paps/samples";
+}
+
+// Child process: runs `method` on the scans in files in0.bin, in1.bin ... of `dir`.
+struct SrResult {
+  bool ok = false;
+  double seconds = 0, peak_mb = 0;
+  std::string message;
+  Positions output;
+};
+
+SrResult runChild(const std::string& dir, const std::string& method, const std::vector<Positions>& scans,
+                  const std::map<std::string, double>& params) {
+  std::vector<std::string> args = {"/proc/self/exe", "bench-worker-sr", method, dir, std::to_string(scans.size())};
+  for (std::size_t i = 0; i < scans.size(); ++i) writeRaw(dir + "/sr_in" + std::to_string(i) + ".bin", scans[i]);
+  const std::string out = dir + "/sr_out.bin", log = dir + "/sr_log.txt";
+  std::remove(out.c_str());
+  std::remove(log.c_str());
+  for (const auto& [k, v] : params) {
+    std::ostringstream s;
+    s.precision(9);
+    s << k << "=" << v;
+    args.push_back(s.str());
+  }
+  SrResult r;
+  const pid_t pid = fork();
+  if (pid == 0) {
+    std::vector<char*> argv;
+    for (auto& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv("/proc/self/exe", argv.data());
+    _exit(127);
+  }
+  int status = 0;
+  rusage usage{};
+  wait4(pid, &status, 0, &usage);
+  r.peak_mb = usage.ru_maxrss / 1024.0;
+  std::ifstream lf(log);
+  std::string line;
+  while (std::getline(lf, line)) {
+    if (line.rfind("seconds ", 0) == 0) r.seconds = std::atof(line.c_str() + 8);
+    else if (line.rfind("error ", 0) == 0) r.message = line.substr(6);
+  }
+  r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
+  if (r.ok) r.output = readRaw(out);
+  return r;
+}
+
+Positions pclMlsUpsample(const Positions& input, const std::string& mode, double radius, std::size_t target) {
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  writePositions(input, *cloud);
+  pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ> mls;
+  mls.setInputCloud(cloud);
+  mls.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+  mls.setPolynomialOrder(2);
+  mls.setSearchRadius(radius);
+  mls.setComputeNormals(false);
+  mls.setNumberOfThreads(2);
+  const double factor = static_cast<double>(target) / std::max<std::size_t>(1, countFinite(input));
+  const SpatialIndex index(input);
+  const float r30 = static_cast<float>(radius);
+  // Mean spacing s0 from the mean neighbour count at the radius.
+  std::vector<int> idx;
+  std::vector<float> d2;
+  double mean = 0;
+  int samples = 0;
+  for (std::size_t i = 0; i < input.size(); i += std::max<std::size_t>(1, input.size() / 500)) {
+    mean += index.radiusSearch(input[i], r30, idx, d2);
+    ++samples;
+  }
+  mean /= std::max(1, samples);
+  const double s0 = radius * std::sqrt(M_PI / std::max(1.0, mean));
+  if (mode == "plane") {
+    mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::SAMPLE_LOCAL_PLANE);
+    mls.setUpsamplingRadius(0.5 * s0 * 1.2);
+    mls.setUpsamplingStepSize(s0 / std::sqrt(factor) );
+  } else if (mode == "random") {
+    mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::RANDOM_UNIFORM_DENSITY);
+    mls.setPointDensity(static_cast<int>(std::lround(factor * mean)));
+  } else {
+    mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::VOXEL_GRID_DILATION);
+    mls.setDilationVoxelSize(static_cast<float>(s0 / std::sqrt(factor)));
+    mls.setDilationIterations(1);
+  }
+  pcl::PointCloud<pcl::PointXYZ> result;
+  mls.process(result);
+  Positions out = positionsOf(result);
+  out.erase(std::remove_if(out.begin(), out.end(), [](const Eigen::Vector3f& p) { return !isFinite(p); }), out.end());
+  if (out.size() > target) {  // the same count as the others: a seeded random subset
+    Random rng(3);
+    for (std::size_t i = out.size(); i > 1; --i) std::swap(out[i - 1], out[rng.below(i)]);
+    out.resize(target);
+  }
+  return out;
+}
+
+// RMSE from the dense points to their nearest output point.
+double nearestRmse(const Positions& dense, const Positions& output) {
+  if (output.empty()) return NAN;
+  const SpatialIndex index(output);
+  double s = 0;
+  std::size_t n = 0;
+#pragma omp parallel reduction(+ : s, n)
+  {
+    std::vector<int> idx;
+    std::vector<float> d2;
+#pragma omp for schedule(static)
+    for (std::int64_t i = 0; i < static_cast<std::int64_t>(dense.size()); ++i)
+      if (index.nearestK(dense[i], 1, idx, d2) == 1) { s += d2[0]; ++n; }
+  }
+  return n ? std::sqrt(s / n) : NAN;
+}
+
+std::string fmtE(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.3e", v);
+  return b;
+}
+
+}  // namespace
+
+int runSuperresWorker(int argc, char** argv) {
+  if (argc < 5) return 2;
+  const std::string method = argv[2], dir = argv[3];
+  const int n_scans = std::atoi(argv[4]);
+  std::map<std::string, double> p;
+  for (int i = 5; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto eq = a.find('=');
+    p[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
+  }
+  auto get = [&](const char* k, double d) { return p.count(k) ? p[k] : d; };
+  std::ofstream lf(dir + "/sr_log.txt");
+  try {
+    std::vector<Positions> scans;
+    for (int i = 0; i < n_scans; ++i) scans.push_back(readRaw(dir + "/sr_in" + std::to_string(i) + ".bin"));
+    const std::size_t target = static_cast<std::size_t>(get("count", 0));
+    const auto t0 = std::chrono::steady_clock::now();
+    Positions out;
+    if (method == "qsr") {
+      QuadricSuperResolutionParameters q;
+      q.output_count = target;
+      QuadricSuperResolutionReport r;
+      out = superResolveQuadric(scans, q, &r);
+      lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"
+         << r.grid_sr << " K-1 " << r.mean_similar_weight << " fallbacks " << r.plane_fallbacks << "\n";
+    } else if (method == "apss" || method == "rimls") {
+      MlsUpsamplingParameters q;
+      q.output_count = target;
+      out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, q);
+    } else if (method.rfind("pcl-mls-", 0) == 0) {
+      out = pclMlsUpsample(scans[0], method.substr(8), get("radius", 0), target);
+    } else if (method == "simden+mls") {
+      SimilarityDenoisingParameters q;
+      q.radius = static_cast<float>(get("radius", 0));
+      const Positions den = denoiseBySimilarity(scans[0], q);
+      out = pclMlsUpsample(den, "plane", get("radius", 0), target);
+    } else {
+      throw InvalidParameter("method", method, "qsr, apss, rimls, pcl-mls-{plane,random,voxel}, simden+mls");
+    }
+    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    writeRaw(dir + "/sr_out.bin", out);
+    lf << "seconds " << s << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    lf << "error " << e.what() << "\n";
+    return 1;
+  }
+}
+
+int runBenchSuperres(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
+  if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
+  a.allowOnly({"out", "samples", "points", "speed", "quick"});
+  const bool quick = a.has("quick");
+  const std::string out_dir = a.text("out", "bench_out");
+  const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
+  const std::size_t n_dense = static_cast<std::size_t>(a.number("points", quick ? 100000 : 700000));
+  const std::size_t n_speed = static_cast<std::size_t>(a.number("speed", quick ? 30000 : 100000));
+  if (n_dense < 1000) throw InvalidParameter("points", std::to_string(n_dense), "at least 1000");
+  std::filesystem::create_directories(out_dir);
+
+  struct Dataset { std::string name; TriangleMesh mesh; bool multi; };
+  std::vector<Dataset> datasets;
+  // Repeated relief: 2 mm bumps of wavelength 4 cm on a 1 m square (about 10 input points per
+  // wavelength at 70K input points).
+  datasets.push_back({"engraved-plane", synthetic::engravedPlane(1.f, 0.04f, 0.002f, 800), true});
+  if (std::filesystem::exists(rs1)) datasets.push_back({"rs1", loadTriangleMesh(rs1), false});
+  else std::fprintf(stderr, "warning: %s missing (scripts/fetch_samples.sh): rs1 rows skipped\n", rs1.c_str());
+
+  const std::vector<double> noises = {0.0001, 0.001, 0.005};
+  std::vector<std::string> methods = {"qsr", "qsr-4scans", "apss", "rimls", "pcl-mls-plane", "pcl-mls-random",
+                                      "pcl-mls-voxel", "simden+mls"};
+  std::ofstream csv(out_dir + "/superres.csv");
+  csv << "dataset,dense,input,noise,method,ok,seconds,peak_mb,output,rmse\n";
+  std::printf("bench superres: dense %zu points per shape, input 10%%, noise sigma as a fraction of the diagonal\n", n_dense);
+  std::printf("%-15s %-6s %-15s %9s %9s %9s %11s\n", "dataset", "noise", "method", "output", "time(s)", "peak MB", "RMSE");
+  for (const auto& ds : datasets) {
+    const Positions dense = synthetic::sampleMesh(ds.mesh, n_dense, 7);
+    const float diag = boundingBoxDiagonal(dense);
+    for (double noise : noises) {
+      std::vector<Positions> scans;
+      for (int s = 0; s < (ds.multi ? 4 : 1); ++s) {
+        Positions sub;
+        Random rng(100 + s);
+        const Positions& src = s == 0 ? dense : synthetic::sampleMesh(ds.mesh, n_dense, 50 + s);
+        for (const auto& p : src) if (rng.uniform() < 0.1) sub.push_back(p);
+        synthetic::addGaussianNoise(sub, static_cast<float>(noise), 11 + s);
+        scans.push_back(std::move(sub));
+      }
+      const SpatialIndex index(scans[0]);
+      const float r = radiusForMeanNeighbourCount(scans[0], index, 30);
+      const double e_in = nearestRmse(dense, scans[0]);
+      char noise_s[16];
+      std::snprintf(noise_s, sizeof noise_s, "%.2f%%", noise * 100);
+      std::printf("%-15s %-6s %-15s %9zu %9s %9s %11.3e\n", ds.name.c_str(), noise_s, "input (10%)", scans[0].size(), "-", "-", e_in);
+      csv << ds.name << "," << n_dense << "," << scans[0].size() << "," << noise << ",input,1,0,0," << scans[0].size() << "," << e_in << "\n";
+      std::map<std::string, double> best_peer;
+      std::map<std::string, Positions> outputs;
+      double e_qsr = NAN;
+      for (const auto& m : methods) {
+        if (m == "qsr-4scans" && !ds.multi) continue;
+        std::vector<Positions> in = m == "qsr-4scans" ? scans : std::vector<Positions>{scans[0]};
+        const SrResult w = runChild(out_dir, m == "qsr-4scans" ? "qsr" : m, in, {{"count", static_cast<double>(n_dense)}, {"radius", r}});
+        if (!w.ok) {
+          std::printf("%-15s %-6s %-15s failed: %s\n", ds.name.c_str(), noise_s, m.c_str(), w.message.c_str());
+          csv << ds.name << "," << n_dense << "," << scans[0].size() << "," << noise << "," << m << ",0,,,,\n";
+          continue;
+        }
+        const double e = nearestRmse(dense, w.output);
+        std::printf("%-15s %-6s %-15s %9zu %9.2f %9.0f %11.3e\n", ds.name.c_str(), noise_s, m.c_str(), w.output.size(),
+                    w.seconds, w.peak_mb, e);
+        std::fflush(stdout);
+        csv << ds.name << "," << n_dense << "," << scans[0].size() << "," << noise << "," << m << ",1," << w.seconds
+            << "," << w.peak_mb << "," << w.output.size() << "," << e << "\n";
+        if (m == "qsr") e_qsr = e;
+        if (m == "apss" || m == "rimls" || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
+        if (noise == noises.front()) outputs[m] = w.output;
+      }
+      double best = INFINITY;
+      std::string best_name;
+      for (const auto& [k, v] : best_peer) if (v < best) { best = v; best_name = k; }
+      std::printf("  -> QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f\n", best_name.c_str(), e_qsr / best);
+      if (noise == noises.front() && n_dense >= 50000) {  // render.cpp needs enough points per view
+        // Close-ups: a square of 6% of the extent around the centre of the dense cloud.
+        Eigen::Vector3f c = Eigen::Vector3f::Zero();
+        for (const auto& p : dense) c += p;
+        c /= static_cast<float>(dense.size());
+        const Eigen::Vector3f mid = dense[std::min_element(dense.begin(), dense.end(), [&](const auto& x, const auto& y) {
+                                              return (x - c).squaredNorm() < (y - c).squaredNorm(); }) - dense.begin()];
+        const float half = 0.04f * diag;
+        auto crop = [&](const Positions& pts) {
+          Positions o;
+          for (const auto& p : pts) if (((p - mid).cwiseAbs().array() < half).all()) o.push_back(p);
+          return o;
+        };
+        const Positions dc = crop(dense);
+        const View view = View::fit(dc, 0.f);
+        // render.cpp does not clip points left of or above the view: keep those inside it.
+        auto inView = [&](const Positions& pts) {
+          Positions o;
+          for (const auto& p : crop(pts)) {
+            const Eigen::Vector3f sp = view.axes * p;
+            if (sp.x() >= view.lo.x() && sp.x() <= view.hi.x() && sp.y() >= view.lo.y() && sp.y() <= view.hi.y())
+              o.push_back(p);
+          }
+          return o;
+        };
+        const std::string base = out_dir + "/superres_" + ds.name;
+        renderShaded(dc, view, 500, base + "_dense.png");
+        renderShaded(inView(scans[0]), view, 500, base + "_input.png");
+        for (const auto& [name, pts] : outputs) {
+          std::string file = name;
+          std::replace(file.begin(), file.end(), '+', '_');
+          renderShaded(inView(pts), view, 500, base + "_" + file + ".png");
+        }
+      }
+    }
+  }
+  if (n_speed > 0 && datasets.size() > 1) {
+    std::printf("\nspeed: %zu input points of rs1 (0.01%% noise) super-resolved x4, same count for all\n", n_speed);
+    Positions in = synthetic::sampleMesh(datasets[1].mesh, n_speed, 21);
+    synthetic::addGaussianNoise(in, 0.0001f, 22);
+    const SpatialIndex index(in);
+    const float r = radiusForMeanNeighbourCount(in, index, 30);
+    for (const std::string m : {"qsr", "apss", "rimls", "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel"}) {
+      const SrResult w = runChild(out_dir, m, {in}, {{"count", 4.0 * n_speed}, {"radius", r}});
+      if (!w.ok) { std::printf("%-15s failed: %s\n", m.c_str(), w.message.c_str()); continue; }
+      std::printf("%-15s %9zu points in %7.2f s, peak %5.0f MB\n", m.c_str(), w.output.size(), w.seconds, w.peak_mb);
+      csv << "speed-rs1," << n_speed * 4 << "," << n_speed << ",0.0001," << m << ",1," << w.seconds << "," << w.peak_mb
+          << "," << w.output.size() << ",\n";
+    }
+  }
+  std::printf("wrote %s/superres.csv and PNG close-ups\n", out_dir.c_str());
+  return 0;
+}
+
+}  // namespace paps::cli

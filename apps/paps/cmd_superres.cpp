@@ -1,0 +1,103 @@
+// paps superres IN [IN2 ...] OUT --factor F [options]
+#include <cstdio>
+
+#include <pcl/conversions.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/cloud_io.h>
+#include <paps/core/error.h>
+#include <paps/surface/mls_upsampling.h>
+#include <paps/surface/quadric_super_resolution.h>
+
+#include "cli_common.h"
+#include "commands.h"
+
+namespace paps::cli {
+
+namespace {
+const char* kSuperresUsage =
+    "usage: paps superres IN [IN2 ...] OUT --factor F [options]\n"
+    "  IN                     the scan to super-resolve (.pcd or .ply)\n"
+    "  IN2 ...                other scans of the same object, registered (sources of similar patches)\n"
+    "  OUT                    .pcd or .ply, x y z only, factor x the finite points of IN\n"
+    "  --factor F             output count / input count (default 4, 1 to 1000)\n"
+    "  --count N              exact output count (overrides --factor)\n"
+    "  --method M             qsr (default), apss or rimls\n"
+    "  --radius R             patch radius (QSR) or kernel support (APSS/RIMLS) in metres\n"
+    "                         (default: from --neighbours)\n"
+    "  --neighbours N         mean neighbour count that sets the radius (default 36 QSR, 30 others)\n"
+    "  --similarity S         QSR similarity radius in metres (RMS height difference; default: the\n"
+    "                         median distance of patches to their most similar patch)\n"
+    "  --grid-lr N, --grid-sr N  QSR bins per side (default: from the data)\n"
+    "  --patches K            QSR similar patches kept per patch (default 16)\n"
+    "  --kernel F             QSR aggregation kernel scale (default 0.7)\n"
+    "  --quiet, --timings     no progress bar / wall time of each stage\n";
+}  // namespace
+
+int runSuperres(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
+  if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
+  a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
+               "patches", "kernel", "quiet", "timings"});
+  if (a.positional.size() < 2)
+    throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
+  const std::string method = a.text("method", "qsr");
+  if (method != "qsr" && method != "apss" && method != "rimls")
+    throw InvalidParameter("method", method, "qsr, apss or rimls");
+  const std::string out_path = a.positional.back();
+  std::vector<Positions> scans;
+  for (std::size_t i = 0; i + 1 < a.positional.size(); ++i) {
+    scans.push_back(loadPositions(a.positional[i]));
+    std::printf("read %s: %zu points (%zu finite)\n", a.positional[i].c_str(), scans.back().size(),
+                countFinite(scans.back()));
+  }
+  const double count = a.number("count", 0);
+  if (count < 0 || count > 4e9) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
+  const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
+  Positions out;
+  if (method == "qsr") {
+    QuadricSuperResolutionParameters p;
+    p.factor = static_cast<float>(a.number("factor", p.factor));
+    p.output_count = static_cast<std::size_t>(count);
+    p.patch_radius = static_cast<float>(a.number("radius", 0));
+    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    p.similarity_radius = static_cast<float>(a.number("similarity", 0));
+    p.grid_lr = static_cast<int>(a.number("grid-lr", 0));
+    p.grid_sr = static_cast<int>(a.number("grid-sr", 0));
+    p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
+    p.kernel_scale = static_cast<float>(a.number("kernel", p.kernel_scale));
+    QuadricSuperResolutionReport r;
+    out = superResolveQuadric(scans, p, &r, progress);
+    std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
+                p.patch_radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.similarity_radius,
+                p.similarity_radius > 0 ? "" : " (chosen)");
+    std::printf("QSR: bins %dx%d low resolution%s, %dx%d super-resolution%s (mean similar weight K-1 = %.2f)\n",
+                r.grid_lr, r.grid_lr, p.grid_lr ? "" : " (chosen)", r.grid_sr, r.grid_sr, p.grid_sr ? "" : " (chosen)",
+                r.mean_similar_weight);
+    std::printf("QSR: %zu patches over %zu scan(s); %zu plane fallbacks; %zu patches without a similar patch\n",
+                r.patches, scans.size(), r.plane_fallbacks, r.without_similar);
+    if (r.unprojected) std::fprintf(stderr, "warning: %zu output points had no patch nearby and were not projected\n", r.unprojected);
+  } else {
+    if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
+    MlsUpsamplingParameters p;
+    p.factor = static_cast<float>(a.number("factor", p.factor));
+    p.output_count = static_cast<std::size_t>(count);
+    p.radius = static_cast<float>(a.number("radius", 0));
+    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    MlsUpsamplingReport r;
+    out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
+    std::printf("%s: radius %g m%s\n", method.c_str(), r.radius, p.radius > 0 ? "" : " (chosen)");
+    if (r.unprojected) std::fprintf(stderr, "warning: %zu output points could not be projected\n", r.unprojected);
+  }
+  pcl::PCLPointCloud2 cloud;
+  {
+    pcl::PointCloud<pcl::PointXYZ> xyz;
+    writePositions(out, xyz);
+    pcl::toPCLPointCloud2(xyz, cloud);
+  }
+  saveCloudAtomic(out_path, cloud);
+  std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());
+  return 0;
+}
+
+}  // namespace paps::cli

@@ -1,0 +1,105 @@
+#pragma once
+// Quadric super-resolution, QSR (manuscript 2.3.2). Every point of every input scan gets a
+// quadric+height descriptor (paps/core/quadric_height_patch.h). The patches of the first scan
+// query similar patches among all (kd-tree candidates in descriptor space, then exact
+// re-ranking with the masked distance of equation 2.3 and the weights of 2.4); the points of
+// the similar patches are aggregated on a finer grid (equation 2.5, l1 by IRLS), and the
+// output is sampled by projecting Poisson-regularised seeds on the super-resolution patches
+// with a robust partition of unity (equation 2.6).
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <pcl/surface/processing.h>
+
+#include <paps/core/positions.h>
+#include <paps/core/progress.h>
+
+namespace paps {
+
+/// Parameters of QSR. Only the patch radius and the similarity radius are the user's; zero
+/// means "choose from the data" and the report says what was chosen.
+struct QuadricSuperResolutionParameters {
+  /// Patch radius R in metres (> 0), or 0: the radius holding `target_neighbours` points.
+  float patch_radius = 0.f;
+  /// Mean neighbour count that sets R when patch_radius is 0 (9 to 1000).
+  int target_neighbours = 36;
+  /// Similarity radius r_sim in metres (RMS height difference over the shared valid bins),
+  /// or 0: the median over patches of the distance to their most similar other patch.
+  float similarity_radius = 0.f;
+  /// Multiplier of the automatic r_sim (> 0).
+  float similarity_scale = 1.f;
+  /// Output count = factor x finite count of the first scan when output_count is 0 (1 to 1000).
+  float factor = 4.f;
+  std::size_t output_count = 0;
+  /// Low-resolution bins per side (0: round(sqrt(mean neighbour count at R)), 2 to 16).
+  int grid_lr = 0;
+  /// Super-resolution bins per side (0: round(grid_lr x sqrt(K)), K the mean summed
+  /// similarity weight, at most 4 x grid_lr).
+  int grid_sr = 0;
+  /// Similar patches kept per patch at most (0 to 256).
+  int similar_patches = 16;
+  /// Kd-tree candidates per orientation before the exact masked re-ranking (1 to 1024).
+  int candidates = 24;
+  /// Descriptors compared per kd-tree query (0: exact).
+  int search_checks = 128;
+  /// Width of the aggregation kernel (2.5) in units of s0 / sqrt(1 + K), s0 the input
+  /// spacing and K - 1 the mean summed similarity weight (> 0). Measured default.
+  float kernel_scale = 0.7f;
+  /// IRLS passes of the aggregation (2.5) and of the projection (2.6) (0 to 10).
+  int irls_iterations = 2;
+  std::uint64_t seed = 1;
+  void validate() const;
+};
+
+/// What a run chose and met.
+struct QuadricSuperResolutionReport {
+  float patch_radius = 0.f, similarity_radius = 0.f;
+  int grid_lr = 0, grid_sr = 0;
+  double mean_neighbours = 0;       ///< at the patch radius, first scan
+  double mean_similar_weight = 0;   ///< K - 1: mean summed similarity weight of other patches
+  std::size_t patches = 0;          ///< descriptors over all scans
+  std::size_t plane_fallbacks = 0;  ///< patches whose quadric fit was ill-posed or flat
+  std::size_t without_similar = 0;  ///< patches of the first scan with no similar patch
+  std::size_t output = 0;
+  std::size_t unprojected = 0;      ///< output seeds with no usable patch nearby, left in place
+};
+
+/// Super-resolves scans[0] using all scans (scans[0] included) as the source of similar
+/// patches. NaN points are ignored. Throws InvalidInput when scans is empty or scans[0] has
+/// fewer than 10 finite points, InvalidParameter for bad parameters.
+Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                              QuadricSuperResolutionReport* report = nullptr, const ProgressCallback& progress = {});
+
+/// The pcl::CloudSurfaceProcessing stage: the input cloud (with its indices) is the scan to
+/// super-resolve; addScan() adds other scans of the same object, already registered.
+template <typename PointIn, typename PointOut = PointIn>
+class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, PointOut> {
+ public:
+  void setParameters(const QuadricSuperResolutionParameters& p) { p.validate(); params_ = p; }
+  const QuadricSuperResolutionParameters& getParameters() const { return params_; }
+  /// Patch radius in metres; 0 chooses it.
+  void setPatchRadius(float r) { auto p = params_; p.patch_radius = r; setParameters(p); }
+  /// Similarity radius in metres; 0 chooses it.
+  void setSimilarityRadius(float r) { auto p = params_; p.similarity_radius = r; setParameters(p); }
+  void setUpsamplingFactor(float f) { auto p = params_; p.factor = f; setParameters(p); }
+  void addScan(const typename pcl::PointCloud<PointIn>::ConstPtr& scan) { extra_.push_back(scan); }
+  void clearScans() { extra_.clear(); }
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+  const QuadricSuperResolutionReport& getReport() const { return report_; }
+
+ protected:
+  void performProcessing(pcl::PointCloud<PointOut>& output) override;
+
+ private:
+  QuadricSuperResolutionParameters params_;
+  QuadricSuperResolutionReport report_;
+  ProgressCallback progress_;
+  std::vector<typename pcl::PointCloud<PointIn>::ConstPtr> extra_;
+};
+
+}  // namespace paps
+
+#ifdef PAPS_NO_PRECOMPILE
+#include <paps/surface/impl/quadric_super_resolution.hpp>
+#endif

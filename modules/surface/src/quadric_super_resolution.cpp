@@ -1,0 +1,437 @@
+#include <paps/surface/quadric_super_resolution.h>
+#include <paps/surface/impl/quadric_super_resolution.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <pcl/point_types.h>
+
+#include <paps/core/descriptor_index.h>
+#include <paps/core/error.h>
+#include <paps/core/irls.h>
+#include <paps/core/local_frame.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/quadric_height_patch.h>
+#include <paps/surface/mls_upsampling.h>
+
+namespace paps {
+
+void QuadricSuperResolutionParameters::validate() const {
+  if (!(patch_radius >= 0) || !std::isfinite(patch_radius))
+    throw InvalidParameter("patch_radius", detail::toString(patch_radius), "0 (automatic) or a finite value > 0");
+  requireInRange("target_neighbours", target_neighbours, 9, 1000);
+  if (!(similarity_radius >= 0) || !std::isfinite(similarity_radius))
+    throw InvalidParameter("similarity_radius", detail::toString(similarity_radius), "0 (automatic) or a finite value > 0");
+  requirePositive("similarity_scale", similarity_scale);
+  requireInRange("factor", factor, 1.f, 1000.f);
+  if (grid_lr != 0) requireInRange("grid_lr", grid_lr, 2, 16);
+  if (grid_sr != 0) requireInRange("grid_sr", grid_sr, 2, 64);
+  requireInRange("similar_patches", similar_patches, 0, 256);
+  requireInRange("candidates", candidates, 1, 1024);
+  requireInRange("search_checks", search_checks, 0, 1000000);
+  requireInRange("irls_iterations", irls_iterations, 0, 10);
+  requirePositive("kernel_scale", kernel_scale);
+}
+
+namespace {
+
+// Arc length of y = a x^2 from 0 to x (signed).
+inline float arcLength(float a, float x) {
+  const float aa = std::abs(a);
+  if (aa * std::abs(x) < 1e-6f) return x;
+  const float q = std::sqrt(1.f + 4.f * aa * aa * x * x);
+  return 0.5f * x * q + std::asinh(2.f * aa * x) / (4.f * aa);
+}
+
+struct Scan {
+  const Positions* points;
+  RadiusNeighbourhood nh;
+  std::size_t offset;  // global index of its first point
+};
+
+struct Similar {
+  int patch;  // global index
+  bool flip;  // matched after a half turn
+  float weight;
+};
+
+}  // namespace
+
+Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                              QuadricSuperResolutionReport* report, const ProgressCallback& progress) {
+  params.validate();
+  if (scans.empty()) throw InvalidInput("no scan to super-resolve");
+  const std::size_t finite0 = countFinite(scans[0]);
+  if (finite0 < 10)
+    throw InvalidInput("the scan to super-resolve needs at least 10 finite points (got " + detail::toString(finite0) + ")");
+  QuadricSuperResolutionReport rep;
+
+  // 1. Neighbourhoods at the patch radius, chosen on the first scan.
+  std::vector<Scan> sc(scans.size());
+  std::size_t total = 0;
+  for (std::size_t s = 0; s < scans.size(); ++s) {
+    sc[s].points = &scans[s];
+    sc[s].offset = total;
+    total += scans[s].size();
+    if (s > 0 && countFinite(scans[s]) < 10) { sc[s].nh.radius = 0; continue; }
+    sc[s].nh = buildRadiusNeighbourhood(scans[s], s == 0 ? params.patch_radius : sc[0].nh.radius,
+                                        params.target_neighbours, 4 * params.target_neighbours, progress);
+  }
+  const float R = sc[0].nh.radius;
+  rep.patch_radius = R;
+  rep.mean_neighbours = sc[0].nh.graph.meanCount();
+  const int n_lr = params.grid_lr ? params.grid_lr
+                                  : std::clamp(static_cast<int>(std::lround(std::sqrt(rep.mean_neighbours))), 2, 16);
+  rep.grid_lr = n_lr;
+  const QuadricHeightPatch lr(n_lr, R, 0.6f, 1);
+  const int B = static_cast<int>(lr.size());
+  // Mean input spacing (metres): one point per s0^2 of surface.
+  const float s0 = R * std::sqrt(3.14159265f / static_cast<float>(std::max(1.0, rep.mean_neighbours)));
+
+  // 2. Quadric fits and descriptors of every point of every scan.
+  std::vector<QuadricFit> fits(total);
+  std::vector<float> desc(total * B, 0.f);
+  std::vector<std::uint8_t> valid(total * B, 0), usable(total, 0);
+  std::vector<int> scan_of(total);
+  std::size_t fallbacks = 0;
+  for (std::size_t s = 0; s < sc.size(); ++s) {
+    const Positions& P = *sc[s].points;
+    for (std::size_t i = 0; i < P.size(); ++i) scan_of[sc[s].offset + i] = static_cast<int>(s);
+    if (sc[s].nh.radius <= 0) continue;
+    const NeighbourGraph& g = sc[s].nh.graph;
+    Normals normals = estimateNormals(P, g);
+    orientNormalsByPropagation(P, normals, g);
+    const LocalFrames frames = estimatePrincipalFrames(normals, g);
+    ProgressReporter pr(progress, "quadric patches", P.size());
+    const std::int64_t n = static_cast<std::int64_t>(P.size());
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : fallbacks)
+    for (std::int64_t i = 0; i < n; ++i) {
+      if (pr.cancelled() || !isFinite(P[i])) continue;
+      const std::size_t gi = sc[s].offset + i;
+      const Eigen::Vector3f* nh = isFinite(normals[i]) ? &normals[i] : nullptr;
+      const Eigen::Vector3f* th = frames[i].valid() ? &frames[i].t1 : nullptr;
+      fits[gi] = fitQuadric(P, P[i], g.begin(i), g.count(i), R, nh, th);
+      if (fits[gi].isPlaneFallback()) ++fallbacks;
+      if (!fits[gi].frame.valid()) continue;
+      const int nv = lr.describe(fits[gi], P, g.begin(i), g.count(i), &desc[gi * B], &valid[gi * B]);
+      usable[gi] = nv * 2 >= B;
+      pr.advance();
+    }
+    pr.throwIfCancelled();
+    pr.finish();
+  }
+  rep.plane_fallbacks = fallbacks;
+  rep.patches = static_cast<std::size_t>(std::count(usable.begin(), usable.end(), 1));
+
+  // 3. Similar patches of the first scan: kd-tree candidates, exact masked re-ranking (2.3).
+  std::vector<int> rows;
+  for (std::size_t g = 0; g < total; ++g)
+    if (usable[g]) rows.push_back(static_cast<int>(g));
+  std::vector<float> table(rows.size() * B);
+  for (std::size_t r = 0; r < rows.size(); ++r)
+    std::copy(&desc[rows[r] * B], &desc[rows[r] * B] + B, &table[r * B]);
+  const std::size_t n0 = scans[0].size();
+  std::vector<std::vector<std::pair<float, Similar>>> cand(n0);  // squared distance, patch
+  if (params.similar_patches > 0 && rows.size() > 1) {
+    const DescriptorIndex index(table.data(), rows.size(), B, params.search_checks);
+    ProgressReporter pr(progress, "similar patches", n0);
+    const std::int64_t n = static_cast<std::int64_t>(n0);
+#pragma omp parallel
+    {
+      std::vector<int> idx;
+      std::vector<float> d2;
+      std::vector<float> rev(B);
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t i = 0; i < n; ++i) {
+        if (pr.cancelled() || !usable[i]) continue;
+        const float* a = &desc[i * B];
+        const std::uint8_t* va = &valid[i * B];
+        auto& out = cand[i];
+        for (int flip = 0; flip < 2; ++flip) {
+          if (flip) for (int b = 0; b < B; ++b) rev[b] = a[B - 1 - b];
+          index.nearestK(flip ? rev.data() : a, params.candidates, idx, d2);
+          for (int c : idx) {
+            const int g = rows[c];
+            if (g == i) continue;
+            const float* o = &desc[static_cast<std::size_t>(g) * B];
+            const std::uint8_t* vo = &valid[static_cast<std::size_t>(g) * B];
+            double s = 0;
+            int shared = 0;
+            for (int b = 0; b < B; ++b) {
+              const int bo = flip ? B - 1 - b : b;
+              if (va[b] && vo[bo]) { const float d = a[b] - o[bo]; s += d * d; ++shared; }
+            }
+            if (shared * 2 < B) continue;
+            out.push_back({static_cast<float>(s / shared), {g, flip != 0, 0.f}});
+          }
+        }
+        std::sort(out.begin(), out.end(), [](const auto& x, const auto& y) {
+          return x.first < y.first || (x.first == y.first && x.second.patch < y.second.patch);
+        });
+        // One entry per patch (the better orientation), at most similar_patches.
+        std::vector<std::pair<float, Similar>> kept;
+        for (const auto& e : out) {
+          bool dup = false;
+          for (const auto& k : kept) dup = dup || k.second.patch == e.second.patch;
+          if (!dup) kept.push_back(e);
+          if (static_cast<int>(kept.size()) >= params.similar_patches) break;
+        }
+        out.swap(kept);
+        pr.advance();
+      }
+    }
+    pr.throwIfCancelled();
+    pr.finish();
+  }
+  // Similarity radius (2.4): automatic from the best matches.
+  float rsim = params.similarity_radius;
+  if (rsim <= 0) {
+    std::vector<float> best;
+    for (const auto& c : cand) if (!c.empty()) best.push_back(std::sqrt(c.front().first));
+    if (best.empty()) rsim = 1e-3f * R;
+    else {
+      std::nth_element(best.begin(), best.begin() + best.size() / 2, best.end());
+      rsim = std::max(best[best.size() / 2], 1e-6f * R) * params.similarity_scale;
+    }
+  }
+  rep.similarity_radius = rsim;
+  std::vector<std::vector<Similar>> similar(n0);
+  double sum_w = 0;
+  std::size_t counted = 0;
+  for (std::size_t i = 0; i < n0; ++i) {
+    if (!usable[i]) continue;
+    double sw = 0;
+    for (const auto& [d2, s] : cand[i]) {
+      const float w = std::exp(-d2 / (2 * rsim * rsim));
+      if (w < 1e-3f) continue;
+      similar[i].push_back({s.patch, s.flip, w});
+      sw += w;
+    }
+    rep.without_similar += similar[i].empty();
+    sum_w += sw;
+    ++counted;
+    std::vector<std::pair<float, Similar>>().swap(cand[i]);
+  }
+  rep.mean_similar_weight = counted ? sum_w / counted : 0;
+  const int n_sr = params.grid_sr ? params.grid_sr
+                                  : std::clamp(static_cast<int>(std::lround(n_lr * std::sqrt(1 + rep.mean_similar_weight))),
+                                               n_lr, 4 * n_lr);
+  rep.grid_sr = n_sr;
+
+  // 4. Super-resolution patches (2.5), on the part of each patch the projection reads: an
+  // inner square of half-width L around the centre, SR bins at geodesic spacing d_sr. The
+  // Gaussian of 2.5 has width sigma_sr = kernel_scale x s0 / sqrt(1 + K): the aggregated
+  // points are (1 + K) times denser than the input, so the kernel holds about the same number
+  // of points whatever K (with K = 0 it is a plain interpolation at the input spacing).
+  const float d_sr = std::sqrt(2.f) * R / static_cast<float>(n_sr);
+  const float L = 1.1f * s0;
+  const int half = static_cast<int>(std::ceil(L / d_sr));
+  const int m = 2 * half + 1;
+  const float sigma_sr = params.kernel_scale * s0 / std::sqrt(1.f + static_cast<float>(rep.mean_similar_weight));
+  const float inv_2s2 = 1.f / (2.f * sigma_sr * sigma_sr), cut2 = 9.f * sigma_sr * sigma_sr;
+  const float inv_wide2 = 1.f / (2.f * s0 * s0);
+  const float reach = L + 3.f * sigma_sr;
+  std::vector<float> srh(n0 * m * m, 0.f);
+  {
+    ProgressReporter pr(progress, "super-resolution patches", n0);
+    const std::int64_t n = static_cast<std::int64_t>(n0);
+#pragma omp parallel
+    {
+      std::vector<Eigen::Vector3f> mapped;
+      std::vector<float> mw, hk, wk;
+      std::vector<Eigen::Vector2f> tk;
+      std::vector<float> xs(m), ys(m);
+#pragma omp for schedule(dynamic, 128)
+      for (std::int64_t i = 0; i < n; ++i) {
+        if (pr.cancelled() || !usable[i]) continue;
+        const QuadricFit& f0 = fits[i];
+        mapped.clear();
+        mw.clear();
+        auto gather = [&](int g, bool flip, float w) {
+          const Scan& s = sc[scan_of[g]];
+          const std::size_t li = g - s.offset;
+          const QuadricFit& fg = fits[g];
+          for (const int* j = s.nh.graph.begin(li); j != s.nh.graph.end(li); ++j) {
+            Eigen::Vector3f l = fg.frame.toLocal((*s.points)[*j] - fg.origin);
+            if (flip) { l.x() = -l.x(); l.y() = -l.y(); }
+            if (std::abs(l.x()) > reach || std::abs(l.y()) > reach) continue;
+            const float rho = l.z() - fg.height(l.x(), l.y());
+            mapped.emplace_back(l.x(), l.y(), f0.height(l.x(), l.y()) + rho);
+            mw.push_back(w);
+          }
+        };
+        gather(static_cast<int>(i), false, 1.f);
+        for (const auto& s : similar[i]) gather(s.patch, s.flip, s.weight);
+        for (int k = 0; k < m; ++k) {
+          xs[k] = parabolaAbscissaForArcLength(0.5f * f0.k1, (k - half) * d_sr);
+          ys[k] = parabolaAbscissaForArcLength(0.5f * f0.k2, (k - half) * d_sr);
+        }
+        for (int by = 0; by < m; ++by)
+          for (int bx = 0; bx < m; ++bx) {
+            const Eigen::Vector3f c(xs[bx], ys[by], f0.height(xs[bx], ys[by]));
+            const Eigen::Vector3f nb = f0.normalAt(c.x(), c.y());
+            hk.clear();
+            wk.clear();
+            tk.clear();
+            double sw = 0, sh = 0;
+            for (std::size_t k = 0; k < mapped.size(); ++k) {
+              const float dx = mapped[k].x() - c.x(), dy = mapped[k].y() - c.y();
+              if (dx * dx + dy * dy > cut2) continue;
+              const Eigen::Vector3f d = mapped[k] - c;
+              const float h = d.dot(nb);
+              const float t2 = std::max(0.f, d.squaredNorm() - h * h);
+              const float w = mw[k] * std::exp(-t2 * inv_2s2);
+              hk.push_back(h);
+              wk.push_back(w);
+              tk.emplace_back(dx, dy);
+              sw += w;
+              sh += w * h;
+            }
+            if (!(sw > 1e-6)) {  // a hole: interpolate at the input spacing
+              sw = sh = 0;
+              for (std::size_t k = 0; k < mapped.size(); ++k) {
+                const Eigen::Vector3f d = mapped[k] - c;
+                const float h = d.dot(nb);
+                const float w = mw[k] * std::exp(-std::max(0.f, d.squaredNorm() - h * h) * inv_wide2);
+                sw += w;
+                sh += w * h;
+              }
+              if (sw > 1e-12) srh[(i * m + by) * m + bx] = static_cast<float>(sh / sw);
+              continue;
+            }
+            // Local linear kernel regression h ~ c0 + c1 dx + c2 dy (first order: the slope
+            // of the residual over the quadric does not bias the bin), l1 by IRLS.
+            float est = static_cast<float>(sh / sw);
+            std::vector<float> rw(hk.size(), 1.f);
+            for (int pass = 0; pass <= params.irls_iterations; ++pass) {
+              Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+              Eigen::Vector3d bvec = Eigen::Vector3d::Zero();
+              for (std::size_t k = 0; k < hk.size(); ++k) {
+                const double w = wk[k] * rw[k];
+                const Eigen::Vector3d a(1.0, tk[k].x() / sigma_sr, tk[k].y() / sigma_sr);
+                A += w * a * a.transpose();
+                bvec += w * hk[k] * a;
+              }
+              Eigen::LDLT<Eigen::Matrix3d> ldlt(A);
+              const Eigen::Vector3d sol = ldlt.solve(bvec);
+              if (ldlt.info() == Eigen::Success && sol.allFinite() &&
+                  ldlt.vectorD().minCoeff() > 1e-3 * A(0, 0))
+                est = static_cast<float>(sol[0]);
+              else if (A(0, 0) > 1e-12)
+                est = static_cast<float>(bvec[0] / A(0, 0));
+              if (pass == params.irls_iterations) break;
+              for (std::size_t k = 0; k < hk.size(); ++k) {
+                const double pred = est + (ldlt.info() == Eigen::Success && sol.allFinite()
+                                               ? sol[1] * tk[k].x() / sigma_sr + sol[2] * tk[k].y() / sigma_sr : 0.0);
+                rw[k] = l1Weight(static_cast<float>(hk[k] - pred), 0.1f * sigma_sr);
+              }
+            }
+            srh[(i * m + by) * m + bx] = est;
+          }
+        pr.advance();
+      }
+    }
+    pr.throwIfCancelled();
+    pr.finish();
+  }
+
+  // 5. Output: Poisson-regularised seeds projected on the SR surface (2.6, robust).
+  const Positions& P0 = scans[0];
+  Normals n0s(n0, Eigen::Vector3f::Constant(NAN));
+  for (std::size_t i = 0; i < n0; ++i) if (usable[i]) n0s[i] = fits[i].frame.n;
+  const std::size_t count = params.output_count ? params.output_count
+                                                : static_cast<std::size_t>(std::llround(params.factor * finite0));
+  Positions out = upsamplingSeeds(P0, n0s, count, 1.2f * s0, params.seed);
+  {
+    const SpatialIndex& index0 = *sc[0].nh.index;
+    const float inv_2sig2 = 1.f / (2.f * 0.5f * s0 * 0.5f * s0);
+    ProgressReporter pr(progress, "projection", out.size());
+    const std::int64_t n = static_cast<std::int64_t>(out.size());
+    std::size_t unprojected = 0;
+#pragma omp parallel reduction(+ : unprojected)
+    {
+      std::vector<int> idx;
+      std::vector<float> d2;
+      std::vector<Eigen::Vector3f> proj;
+      std::vector<float> pw;
+#pragma omp for schedule(dynamic, 512)
+      for (std::int64_t q = 0; q < n; ++q) {
+        if (pr.cancelled()) continue;
+        Eigen::Vector3f x = out[q];
+        Eigen::Vector3f est = x;
+        bool any = false;
+        for (int round = 0; round < 2; ++round) {
+        index0.nearestK(x, 8, idx, d2);
+        proj.clear();
+        pw.clear();
+        for (std::size_t k = 0; k < idx.size(); ++k) {
+          const int a = idx[k];
+          if (!usable[a]) continue;
+          const QuadricFit& f = fits[a];
+          const Eigen::Vector3f l = f.frame.toLocal(x - f.origin);
+          const float u_raw = arcLength(0.5f * f.k1, l.x()) / d_sr + half;
+          const float v_raw = arcLength(0.5f * f.k2, l.y()) / d_sr + half;
+          // Far outside the inner grid the quadric extrapolation is not trusted: drop the
+          // anchor. Just outside, read the border bins (constant extrapolation).
+          if (u_raw < -0.5f * m || v_raw < -0.5f * m || u_raw > 1.5f * m || v_raw > 1.5f * m) continue;
+          const float u = std::clamp(u_raw, 0.f, static_cast<float>(m - 1));
+          const float v = std::clamp(v_raw, 0.f, static_cast<float>(m - 1));
+          const int u0 = std::min(static_cast<int>(u), m - 2 < 0 ? 0 : m - 2), v0 = std::min(static_cast<int>(v), m - 2 < 0 ? 0 : m - 2);
+          const float fu = m > 1 ? u - u0 : 0.f, fv = m > 1 ? v - v0 : 0.f;
+          const float* H = &srh[static_cast<std::size_t>(a) * m * m];
+          auto at = [&](int yy, int xx) { return H[std::min(yy, m - 1) * m + std::min(xx, m - 1)]; };
+          const float h = (1 - fv) * ((1 - fu) * at(v0, u0) + fu * at(v0, u0 + 1)) +
+                          fv * ((1 - fu) * at(v0 + 1, u0) + fu * at(v0 + 1, u0 + 1));
+          const Eigen::Vector3f onq(l.x(), l.y(), f.height(l.x(), l.y()));
+          const Eigen::Vector3f pl = onq + h * f.normalAt(l.x(), l.y());
+          const Eigen::Vector3f pw_ = f.origin + f.frame.toWorld(pl);
+          if ((pw_ - x).squaredNorm() > 9.f * s0 * s0) continue;  // a patch that does not reach q
+          proj.push_back(pw_);
+          pw.push_back(std::exp(-d2[k] * inv_2sig2) + 1e-12f);
+        }
+        if (proj.empty()) {  // no anchor close enough: the tangent plane of the nearest one
+          if (round == 0 && !idx.empty() && usable[idx[0]]) {
+            const QuadricFit& f = fits[idx[0]];
+            est = x - (x - f.origin).dot(f.frame.n) * f.frame.n;
+            any = true;
+          }
+          break;
+        }
+        any = true;
+        est = Eigen::Vector3f::Zero();
+        float sw = 0;
+        for (std::size_t k = 0; k < proj.size(); ++k) { est += pw[k] * proj[k]; sw += pw[k]; }
+        est /= sw;
+        for (int pass = 0; pass < params.irls_iterations; ++pass) {
+          Eigen::Vector3f e = Eigen::Vector3f::Zero();
+          float s = 0;
+          for (std::size_t k = 0; k < proj.size(); ++k) {
+            const float w = pw[k] * l1Weight((proj[k] - est).norm(), 0.05f * d_sr);
+            e += w * proj[k];
+            s += w;
+          }
+          if (s > 0) est = e / s;
+        }
+        x = est;
+        }
+        if (!any) { ++unprojected; pr.advance(); continue; }
+        out[q] = est;
+        pr.advance();
+      }
+    }
+    pr.throwIfCancelled();
+    pr.finish();
+    rep.unprojected = unprojected;
+  }
+  rep.output = out.size();
+  if (report) *report = rep;
+  return out;
+}
+
+template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ>;
+template class QuadricSuperResolution<pcl::PointNormal, pcl::PointNormal>;
+template class QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZ>;
+template class QuadricSuperResolution<pcl::PointXYZI, pcl::PointXYZ>;
+
+}  // namespace paps

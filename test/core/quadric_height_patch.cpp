@@ -1,0 +1,118 @@
+// Known answers: paraboloid, sphere and saddle curvatures; a plane falls back.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include <paps/core/quadric_height_patch.h>
+#include <paps/core/random.h>
+
+using namespace paps;
+
+namespace {
+
+// Points of z = f(x, y) on a jittered grid of half-width h around the origin.
+template <typename F>
+Positions heightField(F f, float h, int n, float noise = 0.f, std::uint64_t seed = 3) {
+  Positions p;
+  Random rng(seed);
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const float x = -h + 2 * h * (i + 0.5f * static_cast<float>(rng.uniform())) / n;
+      const float y = -h + 2 * h * (j + 0.5f * static_cast<float>(rng.uniform())) / n;
+      p.emplace_back(x, y, f(x, y) + noise * static_cast<float>(rng.gaussian()));
+    }
+  return p;
+}
+
+std::vector<int> all(const Positions& p) {
+  std::vector<int> v(p.size());
+  for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<int>(i);
+  return v;
+}
+
+}  // namespace
+
+TEST(QuadricFit, ParaboloidCurvatures) {
+  // z = (3 x^2 + 1 y^2) / 2: k1 = 3, k2 = 1 at the apex, t1 along x.
+  const Positions p = heightField([](float x, float y) { return 0.5f * (3 * x * x + y * y); }, 0.1f, 20);
+  const auto nb = all(p);
+  const Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+  const QuadricFit f = fitQuadric(p, Eigen::Vector3f::Zero(), nb.data(), static_cast<int>(nb.size()), 0.1f, &up);
+  EXPECT_EQ(f.status, QuadricFit::Status::Quadric);
+  EXPECT_NEAR(f.k1, 3.f, 0.05f);
+  EXPECT_NEAR(f.k2, 1.f, 0.05f);
+  EXPECT_NEAR(std::abs(f.frame.t1.x()), 1.f, 1e-3f);
+  EXPECT_NEAR(f.frame.n.z(), 1.f, 1e-3f);
+  EXPECT_NEAR(f.frame.t1.cross(f.frame.t2).dot(f.frame.n), 1.f, 1e-4f);
+}
+
+TEST(QuadricFit, SphereCurvatureIsOneOverRadius) {
+  const float r = 2.f;
+  // Lower cap of a sphere centred at (0, 0, r): normal up (towards the centre), k = 1 / r.
+  const Positions p = heightField([r](float x, float y) { return r - std::sqrt(r * r - x * x - y * y); }, 0.2f, 24);
+  const auto nb = all(p);
+  const Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+  const QuadricFit f = fitQuadric(p, Eigen::Vector3f(0.01f, -0.02f, 0.f), nb.data(), static_cast<int>(nb.size()), 0.2f, &up);
+  EXPECT_EQ(f.status, QuadricFit::Status::Quadric);
+  EXPECT_NEAR(f.k1, 0.5f, 0.01f);
+  EXPECT_NEAR(f.k2, 0.5f, 0.01f);
+}
+
+TEST(QuadricFit, SaddleAndRobustToOutliers) {
+  // z = x y: principal curvatures +1 and -1, directions at 45 degrees.
+  Positions p = heightField([](float x, float y) { return x * y; }, 0.1f, 20, 0.f);
+  for (int k = 0; k < 20; ++k) p[k * 17].z() += 0.05f;  // 5% gross outliers
+  const auto nb = all(p);
+  const Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+  const QuadricFit f = fitQuadric(p, Eigen::Vector3f::Zero(), nb.data(), static_cast<int>(nb.size()), 0.1f, &up);
+  EXPECT_NEAR(f.k1, 1.f, 0.05f);
+  EXPECT_NEAR(f.k2, -1.f, 0.05f);
+  EXPECT_NEAR(std::abs(f.frame.t1.x()), std::sqrt(0.5f), 0.02f);
+}
+
+TEST(QuadricFit, PlaneFallsBack) {
+  const Positions p = heightField([](float, float) { return 0.f; }, 0.1f, 10);
+  const auto nb = all(p);
+  const QuadricFit f = fitQuadric(p, Eigen::Vector3f::Zero(), nb.data(), static_cast<int>(nb.size()), 0.1f);
+  EXPECT_EQ(f.status, QuadricFit::Status::FlatPlane);
+  EXPECT_TRUE(f.isPlaneFallback());
+  EXPECT_EQ(f.k1, 0.f);
+  EXPECT_NEAR(std::abs(f.frame.n.z()), 1.f, 1e-4f);
+}
+
+TEST(QuadricFit, IllPosedCases) {
+  Positions line;
+  for (int i = 0; i < 10; ++i) line.emplace_back(0.01f * i, 0.f, 0.f);
+  const auto nb = all(line);
+  EXPECT_EQ(fitQuadric(line, line[0], nb.data(), 10, 0.1f).status, QuadricFit::Status::Degenerate);
+  Positions few = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.01f, 0}, {0.01f, 0.01f, 0.001f}};
+  const auto nb2 = all(few);
+  EXPECT_EQ(fitQuadric(few, few[0], nb2.data(), 4, 0.1f).status, QuadricFit::Status::TooFewPoints);
+  EXPECT_THROW(fitQuadric(few, few[0], nb2.data(), 4, -1.f), InvalidParameter);
+}
+
+TEST(QuadricHeightPatch, GeodesicBinsAndHeights) {
+  EXPECT_NEAR(parabolaAbscissaForArcLength(0.f, 0.3f), 0.3f, 1e-6f);
+  // Arc length of y = x^2 from 0 to 1 is 1.4789.
+  EXPECT_NEAR(parabolaAbscissaForArcLength(1.f, 1.47894286f), 1.f, 1e-4f);
+  EXPECT_NEAR(parabolaAbscissaForArcLength(1.f, -1.47894286f), -1.f, 1e-4f);
+  // A cylinder-like quadric with a small bump: heights are the bump, not the curvature.
+  auto surf = [](float x, float y) { return 0.5f * 4.f * x * x + 0.002f * std::cos(60.f * y); };
+  const Positions p = heightField(surf, 0.12f, 40);
+  const auto nb = all(p);
+  const Eigen::Vector3f up = Eigen::Vector3f::UnitZ();
+  const QuadricFit f = fitQuadric(p, Eigen::Vector3f::Zero(), nb.data(), static_cast<int>(nb.size()), 0.1f, &up);
+  const QuadricHeightPatch patch(5, 0.1f, 0.6f, 1);
+  std::vector<float> h(patch.size());
+  std::vector<std::uint8_t> v(patch.size());
+  EXPECT_EQ(patch.describe(f, p, nb.data(), static_cast<int>(nb.size()), h.data(), v.data()), 25);
+  double rms = 0;
+  for (float x : h) rms += x * x;
+  EXPECT_LT(std::sqrt(rms / 25), 0.003);  // the large-scale curvature (up to 0.01 m) is gone
+  // Bins along t1 are geodesically equidistant on the curve.
+  std::vector<Eigen::Vector3f> c(patch.size());
+  patch.binCentres(f, c.data());
+  const float d01 = (c[1] - c[0]).norm(), d34 = (c[3] - c[2]).norm();
+  EXPECT_NEAR(d01, d34, 0.02f * patch.binSpacing());
+}

@@ -53,50 +53,14 @@ std::string samplesDir() {
   return std::string(home ? home : ".") + "/.cache/paps/samples";
 }
 
-// Child process: runs `method` on the scans in files in0.bin, in1.bin ... of `dir`.
-struct SrResult {
-  bool ok = false;
-  double seconds = 0, peak_mb = 0;
-  std::string message;
-  Positions output;
-};
+// Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
+using SrResult = WorkerResult;
 
 SrResult runChild(const std::string& dir, const std::string& method, const std::vector<Positions>& scans,
                   const std::map<std::string, double>& params) {
-  std::vector<std::string> args = {"/proc/self/exe", "bench-worker-sr", method, dir, std::to_string(scans.size())};
   for (std::size_t i = 0; i < scans.size(); ++i) writeRaw(dir + "/sr_in" + std::to_string(i) + ".bin", scans[i]);
-  const std::string out = dir + "/sr_out.bin", log = dir + "/sr_log.txt";
-  std::remove(out.c_str());
-  std::remove(log.c_str());
-  for (const auto& [k, v] : params) {
-    std::ostringstream s;
-    s.precision(9);
-    s << k << "=" << v;
-    args.push_back(s.str());
-  }
-  SrResult r;
-  const pid_t pid = fork();
-  if (pid == 0) {
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    execv("/proc/self/exe", argv.data());
-    _exit(127);
-  }
-  int status = 0;
-  rusage usage{};
-  wait4(pid, &status, 0, &usage);
-  r.peak_mb = usage.ru_maxrss / 1024.0;
-  std::ifstream lf(log);
-  std::string line;
-  while (std::getline(lf, line)) {
-    if (line.rfind("seconds ", 0) == 0) r.seconds = std::atof(line.c_str() + 8);
-    else if (line.rfind("error ", 0) == 0) r.message = line.substr(6);
-  }
-  r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-  if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
-  if (r.ok) r.output = readRaw(out);
-  return r;
+  return spawnWorker({"bench-worker-sr", method, dir, std::to_string(scans.size())}, params,
+                     dir + "/sr_out.bin", dir + "/sr_log.txt");
 }
 
 Positions pclMlsUpsample(const Positions& input, const std::string& mode, double radius, std::size_t target) {

@@ -39,13 +39,11 @@ Positions readRaw(const std::string& path) {
   return p;
 }
 
-WorkerResult runWorker(const std::string& scratch_dir, const std::string& method,
-                       const Positions& input, const std::map<std::string, double>& params) {
-  const std::string in = scratch_dir + "/worker_in.bin", out = scratch_dir + "/worker_out.bin",
-                    log = scratch_dir + "/worker_log.txt";
-  writeRaw(in, input);
-  std::remove(out.c_str());
-  std::vector<std::string> args = {"/proc/self/exe", "bench-worker", method, in, out, log};
+WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::string, double>& params,
+                         const std::string& out_path, const std::string& log_path) {
+  std::remove(out_path.c_str());
+  std::remove(log_path.c_str());
+  args.insert(args.begin(), "/proc/self/exe");
   for (const auto& [k, v] : params) {
     std::ostringstream s;
     s.precision(9);
@@ -65,7 +63,7 @@ WorkerResult runWorker(const std::string& scratch_dir, const std::string& method
   rusage usage{};
   wait4(pid, &status, 0, &usage);
   r.peak_mb = usage.ru_maxrss / 1024.0;
-  std::ifstream lf(log);
+  std::ifstream lf(log_path);
   std::string line;
   while (std::getline(lf, line)) {
     if (line.rfind("seconds ", 0) == 0) r.seconds = std::atof(line.c_str() + 8);
@@ -73,8 +71,16 @@ WorkerResult runWorker(const std::string& scratch_dir, const std::string& method
   }
   r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
   if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
-  if (r.ok) r.output = readRaw(out);
+  if (r.ok) r.output = readRaw(out_path);
   return r;
+}
+
+WorkerResult runWorker(const std::string& scratch_dir, const std::string& method,
+                       const Positions& input, const std::map<std::string, double>& params) {
+  const std::string in = scratch_dir + "/worker_in.bin", out = scratch_dir + "/worker_out.bin",
+                    log = scratch_dir + "/worker_log.txt";
+  writeRaw(in, input);
+  return spawnWorker({"bench-worker", method, in, out, log}, params, out, log);
 }
 
 int runBenchWorker(int argc, char** argv) {

@@ -3,6 +3,7 @@
 // its own peak memory (wait4's ru_maxrss) and a crash in one method cannot take the bench down.
 #include <map>
 #include <string>
+#include <vector>
 
 #include <paps/core/positions.h>
 
@@ -15,6 +16,12 @@ struct WorkerResult {
   std::string message;     // child's error line when !ok
   Positions output;
 };
+
+/// Runs `/proc/self/exe args...` in a child process and collects what it left: the
+/// "seconds"/"error" lines of `log_path`, the positions in `out_path` (raw dump), and the
+/// child's peak memory. `params` are appended as key=value arguments.
+WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::string, double>& params,
+                         const std::string& out_path, const std::string& log_path);
 
 /// Saves `input` to a scratch file and runs `paps bench-worker METHOD ...` on it.
 WorkerResult runWorker(const std::string& scratch_dir, const std::string& method,

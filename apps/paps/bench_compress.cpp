@@ -204,9 +204,7 @@ int runBenchCompress(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kBenchCompressUsage, stdout); return 0; }
   a.allowOnly({"mesh", "scan", "points", "noise", "out", "draco-bits", "ours"});
   // Same sample cache as the other benches (scripts/fetch_samples.sh).
-  const char* env = std::getenv("PAPS_SAMPLES");
-  const char* home = std::getenv("HOME");
-  const std::string data = env ? std::string(env) : std::string(home ? home : ".") + "/.cache/paps/samples";
+  const std::string data = samplesDir();
   const std::string mesh_path = a.text("mesh", data + "/rs1_normals.ply");
   const std::string scan_path = a.text("scan", data + "/table_scene_lms400.pcd");
   const long n = long(a.number("points", 1000000));

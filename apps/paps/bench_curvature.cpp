@@ -363,11 +363,7 @@ int runBenchCurvature(int argc, char** argv) {
   const int order = static_cast<int>(a.number("order", 4));
   const std::size_t speed_points = static_cast<std::size_t>(a.number("speed-points", 1000000));
   const std::string out_dir = a.text("out", ".");
-  const char* samples_env = std::getenv("PAPS_SAMPLES");
-  const char* home_env = std::getenv("HOME");
-  const std::string samples_dir = samples_env ? std::string(samples_env)
-                                              : std::string(home_env ? home_env : ".") + "/.cache/paps/samples";
-  const std::string scan = a.text("scan", samples_dir + "/rs1_normals.ply");
+  const std::string scan = a.text("scan", samplesDir() + "/rs1_normals.ply");
   const int scan_step = static_cast<int>(a.number("scan-step", 4));
   requireInRange("points", static_cast<double>(npts), 1000.0, 1e7);
   requireInRange("order", order, 2, 10);

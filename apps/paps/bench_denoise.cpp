@@ -46,12 +46,6 @@ std::string fmt(const char* f, double v) {
   return b;
 }
 
-std::string defaultSamplesDir() {
-  if (const char* e = std::getenv("PAPS_SAMPLES")) return e;
-  const char* home = std::getenv("HOME");
-  return std::string(home ? home : ".") + "/.cache/paps/samples";
-}
-
 struct Method {
   std::string name, setting;
   std::map<std::string, double> params;
@@ -87,7 +81,7 @@ int runBenchDenoise(int argc, char** argv) {
   a.allowOnly({"out", "samples", "points", "large", "quick"});
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // rows appear as they are measured
   const std::string out_dir = a.text("out", "bench_out");
-  const std::string samples = a.text("samples", defaultSamplesDir());
+  const std::string samples = a.text("samples", samplesDir());
   const bool quick = a.has("quick");
   const std::size_t n_points = static_cast<std::size_t>(a.number("points", quick ? 50000 : 200000));
   const std::size_t n_large = static_cast<std::size_t>(a.number("large", quick ? 0 : 1000000));

@@ -47,12 +47,6 @@ const char* kUsage =
     "  --speed N        input points of the speed test, super-resolved x4 (default 100000, 0: skip)\n"
     "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n";
 
-std::string samplesDir() {
-  if (const char* e = std::getenv("PAPS_SAMPLES")) return e;
-  const char* home = std::getenv("HOME");
-  return std::string(home ? home : ".") + "/.cache/paps/samples";
-}
-
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
 using SrResult = WorkerResult;
 

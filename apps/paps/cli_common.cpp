@@ -50,6 +50,12 @@ void Arguments::allowOnly(const std::vector<std::string>& known) const {
       throw InvalidParameter(name, value, "a known option (see paps --help)");
 }
 
+std::string samplesDir() {
+  if (const char* e = std::getenv("PAPS_SAMPLES")) return e;
+  const char* home = std::getenv("HOME");
+  return std::string(home ? home : ".") + "/.cache/paps/samples";
+}
+
 ProgressCallback progressBar(bool quiet, bool timings) {
   if (timings) {
     // One line per finished stage with its wall time, for profiling runs and logs.

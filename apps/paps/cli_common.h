@@ -22,6 +22,10 @@ struct Arguments {
   void allowOnly(const std::vector<std::string>& known) const;
 };
 
+/// Where scripts/fetch_samples.sh caches the sample scans: $PAPS_SAMPLES, else
+/// ~/.cache/paps/samples.
+std::string samplesDir();
+
 /// A progress bar on stderr when it is a terminal and not `quiet`; with `timings`, one line
 /// per finished stage with its wall time instead.
 ProgressCallback progressBar(bool quiet, bool timings = false);

@@ -21,28 +21,17 @@
 #include <paps/core/synthetic.h>
 #include <paps/filters/point_bilateral_filter.h>
 
+#include "filter_test_support.h"
+
 namespace {
+
+using namespace paps::test;
 
 using paps::PointBilateralFilter;
 using paps::PointBilateralParameters;
 using paps::PointBilateralReport;
 using paps::Positions;
 
-/// A NaN with a payload, so that "passed through untouched" is checked bit for bit.
-float payloadNaN() {
-  const std::uint32_t bits = 0x7fc0beefu;
-  float f;
-  std::memcpy(&f, &bits, sizeof f);
-  return f;
-}
-std::uint32_t bitsOf(float f) {
-  std::uint32_t b;
-  std::memcpy(&b, &f, sizeof b);
-  return b;
-}
-bool sameBits(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
-  return bitsOf(a.x()) == bitsOf(b.x()) && bitsOf(a.y()) == bitsOf(b.y()) && bitsOf(a.z()) == bitsOf(b.z());
-}
 
 /// `count` points uniform on the unit sphere, with Gaussian noise of `noise` x the
 /// bounding-box diagonal (2 sqrt 3).
@@ -67,26 +56,6 @@ double sphereRmse(const Positions& p) {
       ++n;
     }
   return std::sqrt(s / n);
-}
-
-template <typename PointT>
-typename pcl::PointCloud<PointT>::Ptr toCloud(const Positions& p) {
-  auto c = pcl::make_shared<pcl::PointCloud<PointT>>();
-  c->resize(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) (*c)[i].getVector3fMap() = p[i];
-  c->width = static_cast<std::uint32_t>(p.size());
-  c->height = 1;
-  c->is_dense = paps::countFinite(p) == p.size();
-  return c;
-}
-
-template <typename PointT>
-pcl::PointCloud<PointT> runFilter(PointBilateralFilter<PointT>& f,
-                                  const typename pcl::PointCloud<PointT>::Ptr& in) {
-  pcl::PointCloud<PointT> out;
-  f.setInputCloud(in);
-  f.filter(out);
-  return out;
 }
 
 Positions smallSphere(std::size_t count = 3000) { return noisySphere(count, 0.0025f, 5); }
@@ -339,17 +308,6 @@ TEST(PointBilateralFilter, TinyRadiusLeavesPointsIsolated) {
 }
 
 // ------------------------------------------------------------------------ parameters
-
-template <typename Fn>
-void expectInvalidParameter(Fn fn, const std::string& name) {
-  try {
-    fn();
-    ADD_FAILURE() << "bad " << name << " accepted";
-  } catch (const paps::InvalidParameter& e) {
-    EXPECT_EQ(e.parameter(), name) << e.what();
-    EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
-  }
-}
 
 TEST(PointBilateralFilter, BadParametersAreNamed) {
   PointBilateralFilter<pcl::PointXYZ> f;

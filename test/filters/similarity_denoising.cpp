@@ -23,28 +23,17 @@
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
 
+#include "filter_test_support.h"
+
 namespace {
+
+using namespace paps::test;
 
 using paps::Positions;
 using paps::SimilarityDenoising;
 using paps::SimilarityDenoisingParameters;
 using paps::SimilarityDenoisingReport;
 
-/// A NaN with a payload, so that "passed through untouched" is checked bit for bit.
-float payloadNaN() {
-  const std::uint32_t bits = 0x7fc0beefu;
-  float f;
-  std::memcpy(&f, &bits, sizeof f);
-  return f;
-}
-std::uint32_t bitsOf(float f) {
-  std::uint32_t b;
-  std::memcpy(&b, &f, sizeof b);
-  return b;
-}
-bool sameBits(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
-  return bitsOf(a.x()) == bitsOf(b.x()) && bitsOf(a.y()) == bitsOf(b.y()) && bitsOf(a.z()) == bitsOf(b.z());
-}
 
 /// Engraved plane of side 1 (wavelength 0.1, amplitude 0.01) sampled with `count` points
 /// and Gaussian noise of `noise` x the bounding-box diagonal.
@@ -62,29 +51,8 @@ NoisyShape engravedPlane(std::size_t count, float noise, int resolution = 400) {
 }
 
 template <typename PointT>
-typename pcl::PointCloud<PointT>::Ptr toCloud(const Positions& p) {
-  auto c = pcl::make_shared<pcl::PointCloud<PointT>>();
-  c->resize(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) (*c)[i].getVector3fMap() = p[i];
-  c->width = static_cast<std::uint32_t>(p.size());
-  c->height = 1;
-  c->is_dense = paps::countFinite(p) == p.size();
-  return c;
-}
-
-template <typename PointT>
 Positions positions(const pcl::PointCloud<PointT>& c) {
   return paps::positionsOf(c);
-}
-
-/// Runs the filter stage on a cloud and returns the output.
-template <typename PointT>
-pcl::PointCloud<PointT> runFilter(SimilarityDenoising<PointT>& f,
-                                  const typename pcl::PointCloud<PointT>::Ptr& in) {
-  pcl::PointCloud<PointT> out;
-  f.setInputCloud(in);
-  f.filter(out);
-  return out;
 }
 
 /// A small noisy engraved plane (fast).
@@ -407,17 +375,6 @@ TEST(SimilarityDenoising, GivenRadiusAndSigmaAreUsed) {
 }
 
 // ------------------------------------------------------------------------ parameters
-
-template <typename Fn>
-void expectInvalidParameter(Fn fn, const std::string& name) {
-  try {
-    fn();
-    ADD_FAILURE() << "bad " << name << " accepted";
-  } catch (const paps::InvalidParameter& e) {
-    EXPECT_EQ(e.parameter(), name) << e.what();
-    EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
-  }
-}
 
 TEST(SimilarityDenoising, BadParametersAreNamed) {
   SimilarityDenoising<pcl::PointXYZ> f;

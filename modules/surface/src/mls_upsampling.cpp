@@ -161,43 +161,11 @@ Sphere fitApss(const Eigen::Vector3f& q0, const Positions& p, const Normals& n, 
   return s;
 }
 
-[[maybe_unused]] bool projectApss(const Eigen::Vector3f& q0, const Positions& p, const Normals& n, const int* nb, int count,
+// One APSS projection step: the sphere fitted around q0, and q0 projected on it.
+bool projectApss(const Eigen::Vector3f& q0, const Positions& p, const Normals& n, const int* nb, int count,
                  float h, Eigen::Vector3f& out) {
-  const float inv_h2 = 1.f / (h * h);
-  double sw = 0, spn = 0, spp = 0;
-  Eigen::Vector3d sp = Eigen::Vector3d::Zero(), sn = Eigen::Vector3d::Zero();
-  int used = 0;
-  for (int k = 0; k < count; ++k) {
-    const int j = nb[k];
-    if (!isFinite(n[j])) continue;
-    const Eigen::Vector3d d = ((p[j] - q0) / h).cast<double>();
-    const double w = wendland((p[j] - q0).squaredNorm(), inv_h2);
-    if (w <= 0) continue;
-    const Eigen::Vector3d nj = n[j].cast<double>();
-    sw += w; sp += w * d; sn += w * nj; spn += w * d.dot(nj); spp += w * d.squaredNorm();
-    ++used;
-  }
-  if (used < 3 || !(sw > 0)) return false;
-  const Eigen::Vector3d mp = sp / sw, mn = sn / sw;
-  const double den = spp / sw - mp.squaredNorm();
-  const double u4 = den > 1e-12 ? 0.5 * (spn / sw - mp.dot(mn)) / den : 0.0;
-  const Eigen::Vector3d u = mn - 2 * u4 * mp;
-  const double u0 = -u.dot(mp) - u4 * spp / sw;
-  Eigen::Vector3d x;
-  if (std::abs(u4) < 1e-6) {  // plane u0 + u.x = 0
-    const double un = u.norm();
-    if (!(un > 0)) return false;
-    x = -u0 / (un * un) * u;
-  } else {
-    const Eigen::Vector3d c = -u / (2 * u4);
-    const double r2 = c.squaredNorm() - u0 / u4;
-    if (!(r2 > 0)) return false;
-    const double dn = c.norm();  // q is the origin
-    if (!(dn > 0)) return false;
-    x = c - std::sqrt(r2) * c / dn;
-  }
-  out = q0 + (x * h).cast<float>();
-  return out.allFinite();
+  const Sphere s = fitApss(q0, p, n, nb, count, h);
+  return s.ok && s.project(q0, out);
 }
 
 // RIMLS (Oztireli et al. 2009): robust implicit MLS with residual and normal reweighting;

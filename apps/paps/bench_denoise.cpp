@@ -203,6 +203,8 @@ int runBenchDenoise(int argc, char** argv) {
     csv << r.dataset << "," << r.noise << "," << r.method << ",\"" << r.setting << "\"," << r.is_default << ","
         << r.run.ok << "," << r.run.seconds << "," << r.run.peak_mb << "," << r.error.rmse << "," << r.error.p95
         << "," << r.error.max << "\n";
+  for (const char* scratch : {"worker_in.bin", "worker_out.bin", "worker_log.txt"})
+    std::remove((out_dir + "/" + scratch).c_str());
   std::printf("\nwrote %s/denoise.csv and PNG renders\n", out_dir.c_str());
   return 0;
 }

@@ -12,6 +12,7 @@
 
 #include <pcl/compression/octree_pointcloud_compression.h>
 #include <pcl/conversions.h>
+#include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
 #include <pcl/io/png_io.h>
 #include <pcl/point_types.h>
@@ -40,7 +41,9 @@ const char* kBenchCompressUsage =
     "  --noise F          scanner-like Gaussian noise, sigma = F x the sampling spacing (default 0.3)\n"
     "  --out DIR          CSV and PNG plots (default bench_compress)\n"
     "  --draco-bits LIST  Draco position quantization bits (default 8,9,10,11,12,14,16)\n"
-    "  --ours LIST        patch points per patch for our rates (default 64,100,160,256,400,700,1200)\n";
+    "  --ours LIST        patch points per patch for our rates (default 64,100,160,256,400,700,1200)\n"
+    "  --save-inputs DIR  write the inputs (DIR/rs1-clean.pcd, ...) as binary PCD and stop; for timing\n"
+    "                     and measuring the memory of 'paps compress' on the same clouds\n";
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
@@ -163,8 +166,9 @@ void plot(const std::vector<Result>& rs, const std::function<double(const Result
               png.c_str(), x0, x1, log_y ? "log10 " : "", what.c_str(), y0, y1);
 }
 
-// bpp of a codec's curve at distortion `target` (log-log interpolation between its
-// points sorted by distortion); NaN outside the curve's range.
+// bpp a codec needs to reach distortion <= `target`: log-log interpolation between its points
+// sorted by distortion, or the rate of any point at or below the target when that is lower;
+// NaN when no point reaches the target.
 double bppAt(const std::vector<Result>& rs, const std::string& codec, const std::function<double(const Result&)>& y,
              double target) {
   std::vector<std::pair<double, double>> c;
@@ -179,8 +183,10 @@ double bppAt(const std::vector<Result>& rs, const std::string& codec, const std:
     const double v = std::exp(std::log(c[i - 1].second) * (1 - t) + std::log(c[i].second) * t);
     best = std::isnan(best) ? v : std::min(best, v);
   }
+  // A point of the curve with a lower error at a lower rate also reaches the target: the
+  // rate needed for "error <= target" is at most its rate (the curve's lower envelope).
   for (const auto& p : c)
-    if (p.first == target) best = std::isnan(best) ? p.second : std::min(best, p.second);
+    if (p.first <= target) best = std::isnan(best) ? p.second : std::min(best, p.second);
   return best;
 }
 
@@ -202,7 +208,7 @@ void compareAtEqualError(const std::vector<Result>& rs, const std::function<doub
 int runBenchCompress(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
   if (a.has("help")) { std::fputs(kBenchCompressUsage, stdout); return 0; }
-  a.allowOnly({"mesh", "scan", "points", "noise", "out", "draco-bits", "ours"});
+  a.allowOnly({"mesh", "scan", "points", "noise", "out", "draco-bits", "ours", "save-inputs"});
   // Same sample cache as the other benches (scripts/fetch_samples.sh).
   const std::string data = samplesDir();
   const std::string mesh_path = a.text("mesh", data + "/rs1_normals.ply");
@@ -250,6 +256,19 @@ int runBenchCompress(int argc, char** argv) {
     sets.push_back(std::move(scan));
   }
 
+  if (a.has("save-inputs")) {
+    const std::string dir = a.text("save-inputs", ".");
+    std::filesystem::create_directories(dir);
+    for (const Dataset& d : sets) {
+      pcl::PointCloud<pcl::PointXYZ> c;
+      writePositions(d.points, c);
+      const std::string path = dir + "/" + d.name + ".pcd";
+      if (pcl::io::savePCDFileBinary(path, c) != 0) throw IoError("cannot write " + path);
+      std::printf("wrote %s: %zu points, spacing %.4g\n", path.c_str(), d.points.size(), d.spacing);
+    }
+    std::filesystem::remove_all(tmp);
+    return 0;
+  }
   std::ofstream csv(out + "/rate_distortion.csv");
   csv << "dataset,codec,setting,input_points,bytes,bpp,d1_rmse,d1_psnr,d2_rmse,d2_psnr,share_above_spacing,"
          "to_surface_rmse,from_surface_rmse,encode_s,decode_s,output_points\n";

@@ -4,6 +4,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <cstring>
+#include <sstream>
 
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
@@ -75,6 +77,112 @@ void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b
   }
 }
 
+// Binary PCD with float x y z (any other fields are skipped): read straight into Positions,
+// without PCL's whole-file buffer, so the peak memory of `compress` stays near the cloud's
+// own 12 bytes per point. Returns false for any other file (the caller then uses PCL).
+bool readBinaryPcdXyz(const std::string& path, Positions& out) {
+  if (std::filesystem::path(path).extension() != ".pcd") return false;
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return false;
+  std::vector<std::string> fields;
+  std::vector<int> sizes, counts;
+  std::vector<char> types;
+  std::size_t points = 0;
+  bool have_points = false;
+  std::string line;
+  for (int lines = 0; lines < 32 && std::getline(f, line); ++lines) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (line.empty() || line[0] == '#') continue;
+    std::istringstream ss(line);
+    std::string key, v;
+    ss >> key;
+    if (key == "FIELDS") { while (ss >> v) fields.push_back(v); }
+    else if (key == "SIZE") { while (ss >> v) sizes.push_back(std::atoi(v.c_str())); }
+    else if (key == "TYPE") { while (ss >> v) types.push_back(v.empty() ? '?' : v[0]); }
+    else if (key == "COUNT") { while (ss >> v) counts.push_back(std::atoi(v.c_str())); }
+    else if (key == "POINTS") { long long c = -1; ss >> c; if (c < 0) return false; points = std::size_t(c); have_points = true; }
+    else if (key == "DATA") {
+      ss >> v;
+      if (v != "binary" || !have_points || fields.empty() || sizes.size() != fields.size() || types.size() != fields.size())
+        return false;
+      if (counts.empty()) counts.assign(fields.size(), 1);
+      if (counts.size() != fields.size()) return false;
+      int step = 0, off[3] = {-1, -1, -1};
+      for (std::size_t i = 0; i < fields.size(); ++i) {
+        const char* xyz[3] = {"x", "y", "z"};
+        for (int a = 0; a < 3; ++a)
+          if (fields[i] == xyz[a]) {
+            if (types[i] != 'F' || sizes[i] != 4 || counts[i] != 1) return false;
+            off[a] = step;
+          }
+        if (sizes[i] <= 0 || counts[i] <= 0) return false;
+        step += sizes[i] * counts[i];
+      }
+      if (off[0] < 0 || off[1] < 0 || off[2] < 0) return false;
+      const std::streampos data = f.tellg();
+      f.seekg(0, std::ios::end);
+      const std::uint64_t left = std::uint64_t(f.tellg() - data);
+      if (left < std::uint64_t(points) * step) throw IoError("cannot read '" + path + "': truncated data");
+      f.seekg(data);
+      out.clear();
+      out.reserve(points);
+      std::vector<char> buf;
+      const std::size_t chunk = 65536;
+      for (std::size_t done = 0; done < points;) {
+        const std::size_t m = std::min(chunk, points - done);
+        buf.resize(m * step);
+        if (!f.read(buf.data(), std::streamsize(buf.size()))) throw IoError("cannot read '" + path + "': truncated data");
+        for (std::size_t i = 0; i < m; ++i) {
+          Eigen::Vector3f p;
+          for (int a = 0; a < 3; ++a) std::memcpy(&p[a], buf.data() + i * step + off[a], 4);
+          out.push_back(p);
+        }
+        done += m;
+      }
+      return true;
+    }
+  }
+  return false;
+}
+
+// Writes float x y z as binary PCD or PLY straight from Positions (no PCL copies of the
+// cloud), atomically: a temporary file renamed at the end, removed on failure.
+void writeXyzAtomic(const std::string& path, const Positions& pts) {
+  const bool pcd = std::filesystem::path(path).extension() == ".pcd";
+  std::string header;
+  const std::string n = std::to_string(pts.size());
+  if (pcd) {
+    header = "# .PCD v0.7 - Point Cloud Data file format\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"
+             "COUNT 1 1 1\nWIDTH " + n + "\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS " + n + "\nDATA binary\n";
+  } else {
+    header = "ply\nformat binary_little_endian 1.0\nelement vertex " + n +
+             "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+  }
+  const std::string tmp = path + ".tmp-paps";
+  bool ok = true;
+  {
+    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+    ok = bool(f);
+    f.write(header.data(), std::streamsize(header.size()));
+    std::vector<float> buf;
+    for (std::size_t i = 0; i < pts.size() && f; i += 65536) {
+      const std::size_t m = std::min<std::size_t>(65536, pts.size() - i);
+      buf.resize(3 * m);
+      for (std::size_t j = 0; j < m; ++j)
+        for (int a = 0; a < 3; ++a) buf[3 * j + a] = pts[i + j][a];
+      f.write(reinterpret_cast<const char*>(buf.data()), std::streamsize(buf.size() * 4));
+    }
+    f.flush();
+    ok = ok && bool(f);
+  }
+  std::error_code ec;
+  if (ok) std::filesystem::rename(tmp, path, ec);
+  if (!ok || ec) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError("cannot write '" + path + "'");
+  }
+}
+
 double seconds(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -101,7 +209,8 @@ int runCompress(int argc, char** argv) {
   p.output_spacing = float(a.number("spacing", p.output_spacing));
   p.validate();
 
-  const Positions in = loadPositions(a.positional[0]);
+  Positions in;
+  if (!readBinaryPcdXyz(a.positional[0], in)) in = loadPositions(a.positional[0]);
   std::printf("read %s: %zu points (%zu finite)\n", a.positional[0].c_str(), in.size(), countFinite(in));
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   EncodeReport r;
@@ -163,11 +272,7 @@ int runDecompress(int argc, char** argv) {
               "regularisation, %.2f s (%.0f points/s)\n",
               r.points, r.encoded_points, bytes.size() * 8.0 / double(std::max<std::size_t>(1, r.encoded_points)),
               r.removed_by_regularisation, t, double(r.points) / t);
-  pcl::PointCloud<pcl::PointXYZ> cloud;
-  writePositions(out, cloud);
-  pcl::PCLPointCloud2 blob;
-  pcl::toPCLPointCloud2(cloud, blob);
-  saveCloudAtomic(out_path, blob);
+  writeXyzAtomic(out_path, out);
   std::printf("wrote %s\n", out_path.c_str());
   return 0;
 }

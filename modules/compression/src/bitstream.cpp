@@ -6,6 +6,7 @@
 #include <memory>
 
 #include <lzma.h>
+#include <new>
 #include <zstd.h>
 
 namespace paps::compression {
@@ -151,8 +152,19 @@ void SymbolWriter::put(AdaptiveModel& m, int s) {
 std::vector<std::uint8_t> SymbolWriter::finish(EntropyMethod* chosen, std::size_t* sizes) {
   std::vector<std::uint8_t> best = range_.finish();
   EntropyMethod m = EntropyMethod::kRange;
+  // zstd and lzma with windows of at most 512 KB: the symbol streams are a few MB at most and
+  // the range coder wins on every measured input, so the comparison need not cost the 40-50 MB
+  // of lzma's default match finder (the decoder reads any window size).
   std::vector<std::uint8_t> z(ZSTD_compressBound(raw_.size()));
-  const std::size_t zn = ZSTD_compress(z.data(), z.size(), raw_.data(), raw_.size(), 9);
+  std::size_t zn = 0;
+  {
+    ZSTD_CCtx* cctx = ZSTD_createCCtx();
+    if (!cctx) throw std::bad_alloc();
+    ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, 9);
+    ZSTD_CCtx_setParameter(cctx, ZSTD_c_windowLog, 19);
+    zn = ZSTD_compress2(cctx, z.data(), z.size(), raw_.data(), raw_.size());
+    ZSTD_freeCCtx(cctx);
+  }
   std::size_t zsize = 0, xsize = 0;
   if (!ZSTD_isError(zn)) {
     zsize = zn;
@@ -160,8 +172,14 @@ std::vector<std::uint8_t> SymbolWriter::finish(EntropyMethod* chosen, std::size_
   }
   std::vector<std::uint8_t> x(raw_.size() + raw_.size() / 2 + 1024);
   std::size_t xpos = 0;
-  if (lzma_easy_buffer_encode(4, LZMA_CHECK_NONE, nullptr, raw_.data(), raw_.size(),
-                              x.data(), &xpos, x.size()) == LZMA_OK) {
+  lzma_options_lzma opt;
+  lzma_lzma_preset(&opt, 4);
+  std::uint32_t dict = LZMA_DICT_SIZE_MIN;
+  while (dict < raw_.size() && dict < (1u << 19)) dict <<= 1;
+  opt.dict_size = dict;
+  lzma_filter filters[2] = {{LZMA_FILTER_LZMA2, &opt}, {LZMA_VLI_UNKNOWN, nullptr}};
+  if (lzma_stream_buffer_encode(filters, LZMA_CHECK_NONE, nullptr, raw_.data(), raw_.size(),
+                                x.data(), &xpos, x.size()) == LZMA_OK) {
     xsize = xpos;
     x.resize(xpos);
   }

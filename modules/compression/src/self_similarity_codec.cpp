@@ -9,6 +9,9 @@
 #include <Eigen/Eigenvalues>
 
 #include <paps/compression/seed_coder.h>
+#include <array>
+
+#include "point_grid.h"
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
@@ -148,8 +151,13 @@ LocalFrame correctedFrame(const LocalFrame& pred, int qa, int qb, int qg, int le
 struct RadialLayout {
   int rings, sectors;
   float dr;
-  explicit RadialLayout(const Header& h) : rings(h.rings()), sectors(h.sectors()), dr(1.f / (h.rings() + 0.5f)) {}
-  bool height(const float* y, const std::uint8_t* valid, float u, float v, float& out) const {
+  float step;  // heights are held as 16-bit integers of R / 8192 (range +-4 R): half the memory of floats
+  explicit RadialLayout(const Header& h)
+      : rings(h.rings()), sectors(h.sectors()), dr(1.f / (h.rings() + 0.5f)), step(h.radius / 8192.f) {}
+  std::int16_t quantize(float y) const {
+    return std::int16_t(std::clamp(std::lround(y / step), -32767L, 32767L));
+  }
+  bool height(const std::int16_t* y, const std::uint8_t* valid, float u, float v, float& out) const {
     const float rho = std::sqrt(u * u + v * v);
     const float t = rho / dr;
     if (t > rings + 0.5f) return false;
@@ -162,7 +170,7 @@ struct RadialLayout {
     auto ring = [&](int r, float w) {
       if (w <= 0) return;
       if (r == 0) {
-        if (valid[0]) { wsum += w; hsum += w * y[0]; }
+        if (valid[0]) { wsum += w; hsum += w * float(y[0]); }
         return;
       }
       float sigma = phi * sectors / (2 * kPi) - 0.5f * (r % 2);
@@ -172,13 +180,13 @@ struct RadialLayout {
       if (s0 < 0) s0 += sectors;
       const int s1 = (s0 + 1) % sectors;
       const int base = 1 + (r - 1) * sectors;
-      if (valid[base + s0]) { wsum += w * (1 - g); hsum += w * (1 - g) * y[base + s0]; }
-      if (valid[base + s1]) { wsum += w * g; hsum += w * g * y[base + s1]; }
+      if (valid[base + s0]) { wsum += w * (1 - g); hsum += w * (1 - g) * float(y[base + s0]); }
+      if (valid[base + s1]) { wsum += w * g; hsum += w * g * float(y[base + s1]); }
     };
     ring(r0, 1 - f);
     if (r0 < rings) ring(r0 + 1, f);
     if (wsum < 0.5f) return false;
-    out = hsum / wsum;
+    out = hsum / wsum * step;
     return true;
   }
 };
@@ -279,7 +287,7 @@ class FastRadialDescriber {
 
 void CompressionParameters::validate() const {
   if (!(patch_radius == 0.f || (patch_radius > 0.f && patch_radius < 1e30f)))
-    throw InvalidParameter("patch_radius", detail::toString(patch_radius), "0 (automatic) or a finite value > 0");
+    throw InvalidParameter("patch_radius", paps::detail::toString(patch_radius), "0 (automatic) or a finite value > 0");
   requireInRange("patch_points", patch_points, 8, 100000);
   requireInRange("bins", bins, 4, 32);
   if (bins % 2) throw InvalidParameter("bins", std::to_string(bins), "an even value in [4, 32]");
@@ -292,7 +300,7 @@ void CompressionParameters::validate() const {
   requireInRange("ksvd_iterations", ksvd_iterations, 0, 200);
   requireInRange("max_training_patches", max_training_patches, 16, 10000000);
   if (!(output_spacing == 0.f || (output_spacing > 0.f && output_spacing < 1e30f)))
-    throw InvalidParameter("output_spacing", detail::toString(output_spacing), "0 (automatic) or a finite value > 0");
+    throw InvalidParameter("output_spacing", paps::detail::toString(output_spacing), "0 (automatic) or a finite value > 0");
 }
 
 std::vector<std::string> compressionPresetNames() { return {"compact", "balanced", "fine"}; }
@@ -311,6 +319,81 @@ CompressionParameters compressionPreset(const std::string& name) {
   return p;
 }
 
+namespace {
+
+// Radius whose ball holds `target` finite points on average, measured on a deterministic
+// sample of at most 2000 points, and a grid of about that cell size. The first guess comes
+// from the area the points cover (occupied cells of a fine grid); then the surface law
+// count ~ r^2 corrects it until within 3%.
+float chooseRadius(const Positions& pts, std::size_t finite, float diag, int target, const std::vector<int>& sample,
+                   std::unique_ptr<detail::PointGrid>& grid) {
+  // Every stride-th point, cells holding about 4 of them.
+  const std::size_t stride = std::max<std::size_t>(1, finite / 65536);
+  const float c0 = std::max(diag * std::sqrt(4.f * float(stride) / float(finite)), diag * 1e-6f);
+  detail::CellHash occupied;
+  occupied.reset(std::min<std::size_t>(finite / stride, 1u << 16));
+  {
+    const float inv = 1.f / c0;
+    for (std::size_t i = 0; i < pts.size(); i += stride)
+      if (isFinite(pts[i]))
+        occupied.insert(detail::packCell(std::int64_t(std::floor(pts[i].x() * inv)),
+                                         std::int64_t(std::floor(pts[i].y() * inv)),
+                                         std::int64_t(std::floor(pts[i].z() * inv))));
+  }
+  const double area = double(occupied.size()) * c0 * c0 / 1.5;
+  float r = float(std::sqrt(double(target) * area / (kPi * double(finite))));
+  if (!(r > 0) || !std::isfinite(r)) r = diag * 1e-2f;
+  grid = std::make_unique<detail::PointGrid>(pts, r);
+  for (int iter = 0; iter < 12; ++iter) {
+    // A quarter of the sample steers the radius (as before); the caller measures on all.
+    double total = 0, used = 0;
+    for (std::size_t s = 0; s < sample.size(); s += 4) { total += grid->countWithin(pts[sample[s]], r); used += 1; }
+    const double mean = total / used;
+    if (mean <= 0) break;
+    if (std::abs(mean - target) < 0.03 * target) break;
+    r *= float(std::clamp(std::sqrt(target / mean), 0.5, 2.0));
+    if (r > 1.6f * grid->cell() || r < 0.6f * grid->cell()) grid = std::make_unique<detail::PointGrid>(pts, r);
+  }
+  return r;
+}
+
+// Dart throwing (a maximal Poisson-disk subset at radius rho): the grid's cells are visited
+// by blocks of 8 x 8 x 8 cells, and the points of a block in a seeded random order, so the
+// darts are as random locally and the memory traffic stays local. Returns increasing indices.
+std::vector<int> throwSeeds(const Positions& pts, const detail::PointGrid& grid, float rho, std::uint64_t seed) {
+  const std::size_t cells = grid.cellCount();
+  std::vector<std::pair<std::uint64_t, int>> order(cells);
+  for (std::size_t c = 0; c < cells; ++c) {
+    const Eigen::Vector3f& p = pts[*grid.cellBegin(c)];
+    const std::int64_t x = grid.coord(p, 0), y = grid.coord(p, 1), z = grid.coord(p, 2);
+    const std::uint64_t block = detail::packCell(x >> 3, y >> 3, z >> 3);
+    const std::uint64_t inner = std::uint64_t(((z & 7) << 6) | ((y & 7) << 3) | (x & 7));
+    order[c] = {(block << 9) | inner, int(c)};
+  }
+  std::sort(order.begin(), order.end());
+  Random rng(seed);
+  detail::ThinningGrid kept(rho, 1024);
+  Positions kept_pts;
+  std::vector<int> chosen, candidates;
+  for (std::size_t a = 0; a < cells;) {
+    std::size_t b = a;
+    candidates.clear();
+    while (b < cells && (order[b].first >> 9) == (order[a].first >> 9)) {
+      const int c = order[b].second;
+      candidates.insert(candidates.end(), grid.cellBegin(c), grid.cellEnd(c));
+      ++b;
+    }
+    for (std::size_t i = candidates.size(); i > 1; --i) std::swap(candidates[i - 1], candidates[rng.below(i)]);
+    for (const int i : candidates)
+      if (kept.offer(pts[i], kept_pts)) chosen.push_back(i);
+    a = b;
+  }
+  std::sort(chosen.begin(), chosen.end());
+  return chosen;
+}
+
+}  // namespace
+
 std::vector<std::uint8_t> compressPositions(const Positions& input, const CompressionParameters& prm,
                                             EncodeReport* report, const ProgressCallback& progress) {
   prm.validate();
@@ -323,65 +406,80 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
     return t;
   };
   rep.input_points = input.size();
-  Positions pts;
-  pts.reserve(input.size());
-  for (const auto& p : input)
-    if (isFinite(p)) pts.push_back(p);
-  rep.dropped_non_finite = input.size() - pts.size();
+  // The input is used in place: the non-finite points are skipped by every stage (the grid
+  // indexes the finite ones only), so no copy of the cloud is made.
+  const Positions& pts = input;
+  std::size_t finite = 0;
+  for (const auto& p : pts) finite += isFinite(p);
+  rep.dropped_non_finite = input.size() - finite;
   constexpr std::size_t kMinPoints = 16;
-  if (pts.empty()) throw InvalidInput("the cloud has no finite points");
-  if (pts.size() < kMinPoints)
-    throw InvalidInput(std::to_string(pts.size()) + " finite points, fewer than one patch needs (" +
+  if (finite == 0) throw InvalidInput("the cloud has no finite points");
+  if (finite < kMinPoints)
+    throw InvalidInput(std::to_string(finite) + " finite points, fewer than one patch needs (" +
                        std::to_string(kMinPoints) + ")");
-  if (pts.size() > 0xFFFFFFF0u) throw InvalidInput("more than 2^32 points");
-  Eigen::Vector3f lo = pts[0], hi = pts[0];
+  if (finite > 0xFFFFFFF0u) throw InvalidInput("more than 2^32 points");
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& p : pts) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); mean += p.cast<double>(); }
-  mean /= double(pts.size());
+  for (const auto& p : pts)
+    if (isFinite(p)) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); mean += p.cast<double>(); }
+  mean /= double(finite);
   const float extent = (hi - lo).maxCoeff();
   if (!(extent > 0)) throw InvalidInput("all points are identical");
   {
     Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (const auto& p : pts) { const Eigen::Vector3d d = p.cast<double>() - mean; cov += d * d.transpose(); }
+    for (const auto& p : pts)
+      if (isFinite(p)) { const Eigen::Vector3d d = p.cast<double>() - mean; cov += d * d.transpose(); }
     Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
     if (es.eigenvalues()[1] <= 1e-10 * es.eigenvalues()[2])
       throw InvalidInput("the points lie on a line; a surface codec needs a surface");
   }
 
-  // Radius and spacing.
-  SpatialIndex index(pts);
+  // Radius and spacing, on a deterministic sample of the finite points.
+  std::vector<int> sample;
+  {
+    const std::size_t m = std::min<std::size_t>(2000, finite);
+    std::vector<int> fin;
+    fin.reserve(finite == pts.size() ? 0 : finite);
+    const double stride = double(finite) / double(m);
+    if (finite == pts.size()) {
+      for (std::size_t s = 0; s < m; ++s) sample.push_back(int(std::size_t(s * stride)));
+    } else {
+      for (std::size_t i = 0; i < pts.size(); ++i)
+        if (isFinite(pts[i])) fin.push_back(int(i));
+      for (std::size_t s = 0; s < m; ++s) sample.push_back(fin[std::size_t(s * stride)]);
+    }
+  }
+  std::unique_ptr<detail::PointGrid> grid;
   float R = prm.patch_radius;
-  if (R == 0.f) R = radiusForMeanNeighbourCount(pts, index, prm.patch_points);
+  if (R == 0.f) R = chooseRadius(pts, finite, (hi - lo).norm(), prm.patch_points, sample, grid);
+  if (!grid || R > 1.25f * grid->cell() || R < 0.8f * grid->cell()) {
+    grid.reset();
+    grid = std::make_unique<detail::PointGrid>(pts, R);
+  }
   // Each point owns pi R^2 / (points in its R-ball) of surface; the mean of that area gives
   // the output spacing (a harmonic mean of the counts, right on unevenly sampled scans).
   double mean_count = 0, mean_inverse = 0;
-  {
-    std::vector<int> nb;
-    std::vector<float> d2;
-    const std::size_t samples = std::min<std::size_t>(2000, pts.size());
-    for (std::size_t s = 0; s < samples; ++s) {
-      const std::size_t i = s * pts.size() / samples;
-      const int c = index.radiusSearch(pts[i], R, nb, d2);
-      mean_count += c;
-      mean_inverse += 1.0 / std::max(c, 1);
-    }
-    mean_count /= double(samples);
-    mean_inverse /= double(samples);
+  for (const int i : sample) {
+    const int c = grid->countWithin(pts[i], R);
+    mean_count += c;
+    mean_inverse += 1.0 / std::max(c, 1);
   }
+  mean_count /= double(sample.size());
+  mean_inverse /= double(sample.size());
   if (mean_count < 8)
-    throw InvalidInput("patch radius " + detail::toString(R) + " m holds only " + detail::toString(mean_count) +
-                       " points on average (fewer points than one patch needs, at least 8)");
+    throw InvalidInput("patch radius " + paps::detail::toString(R) + " m holds only " +
+                       paps::detail::toString(mean_count) + " points on average (fewer points than one patch needs, at least 8)");
   float spacing = prm.output_spacing > 0 ? prm.output_spacing : R * std::sqrt(kPi * float(mean_inverse));
-  if (R / spacing > 64.f) throw InvalidParameter("output_spacing", detail::toString(spacing), "at least patch radius / 64");
-  if (R / spacing < 0.25f) throw InvalidParameter("output_spacing", detail::toString(spacing), "at most 4 x patch radius");
+  if (R / spacing > 64.f) throw InvalidParameter("output_spacing", paps::detail::toString(spacing), "at least patch radius / 64");
+  if (R / spacing < 0.25f) throw InvalidParameter("output_spacing", paps::detail::toString(spacing), "at most 4 x patch radius");
   rep.patch_radius = R;
   rep.output_spacing = spacing;
   rep.seconds_setup = lap();
 
   // Seeds: dart throwing, quantization, kd-tree coding.
-  const std::vector<int> seed_idx = poissonDiskSubset(pts, prm.seed_spacing * R, prm.random_seed, progress);
+  const std::vector<int> seed_idx = throwSeeds(pts, *grid, prm.seed_spacing * R, prm.random_seed);
   Header h;
-  h.points = std::uint32_t(pts.size());
+  h.points = std::uint32_t(finite);
   h.bins = prm.bins; h.atoms = prm.atoms; h.sparsity = prm.sparsity; h.seed_bits = prm.seed_bits;
   h.coefficient_bits = prm.coefficient_bits; h.angle_bits = prm.angle_bits;
   h.radius = R; h.spacing = spacing;
@@ -400,7 +498,8 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   }
   std::sort(vox.begin(), vox.end());
   vox.erase(std::unique(vox.begin(), vox.end()), vox.end());
-  if (vox.size() > (std::size_t(1) << 22)) throw InvalidParameter("patch_radius", detail::toString(R), "a radius giving at most 2^22 seeds");
+  if (vox.size() > (std::size_t(1) << 22))
+    throw InvalidParameter("patch_radius", paps::detail::toString(R), "a radius giving at most 2^22 seeds");
   const std::vector<std::uint8_t> seed_bytes = encodeVoxels(vox, prm.seed_bits);
   h.seeds = std::uint32_t(vox.size());
   const std::size_t n = vox.size();
@@ -414,115 +513,125 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   const LocalFrames pred = predictFrames(seeds);
   const int L = h.angleLevels(), k = h.samples();
   std::vector<std::array<int, 3>> qangles(n);
-  Eigen::MatrixXf Y(k, n);
-  std::vector<std::uint8_t> valid(std::size_t(k) * n);
+  // Validity masks, bit-packed, one run of whole words per seed (no word is shared by two
+  // seeds, so the threads never write the same word).
+  const std::size_t mask_words = (std::size_t(k) + 63) / 64;
+  std::vector<std::uint64_t> mask_bits(mask_words * n, 0);
+  auto isValid = [&](std::size_t i, int s) { return (mask_bits[i * mask_words + s / 64] >> (s % 64)) & 1u; };
   const FastRadialDescriber patch(SamplingPattern::radial(h.rings(), h.sectors()), R);
-  ProgressReporter prog(progress, "patch descriptors", n);
   const int max_nb = std::max(64, prm.patch_points * 4);
-#pragma omp parallel
-  {
-    std::vector<int> nb;
-    std::vector<float> d2;
-#pragma omp for schedule(dynamic, 16)
-    for (long i = 0; i < long(n); ++i) {
-      const int cnt = index.radiusSearch(seeds[i], R, nb, d2, max_nb);
-      LocalFrame f0 = pred[i];
-      int qa = quantizeAngle(0, L), qb = qa, qg = qa;
-      if (cnt >= 3) {
-        Eigen::Vector3f c = Eigen::Vector3f::Zero();
-        for (int j = 0; j < cnt; ++j) c += pts[nb[j]];
-        c /= float(cnt);
-        Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
-        for (int j = 0; j < cnt; ++j) { const Eigen::Vector3f d = pts[nb[j]] - c; cov += d * d.transpose(); }
-        Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
-        Eigen::Vector3f nt = es.eigenvectors().col(0);
-        if (isFinite(nt) && nt.squaredNorm() > 0.5f) {
-          if (nt.dot(f0.n) < 0) nt = -nt;
-          const Eigen::Vector3f l = f0.toLocal(nt);
-          qa = quantizeAngle(std::atan2(l.x(), l.z()), L);
-          qb = quantizeAngle(std::asin(std::clamp(l.y(), -1.f, 1.f)), L);
-        }
-        // Principal direction of the heights (quadric fit) sets the turn about the normal.
-        const LocalFrame f1 = correctedFrame(f0, qa, qb, qg, L);
-        Eigen::Matrix<float, 6, 6> A = Eigen::Matrix<float, 6, 6>::Zero();
-        Eigen::Matrix<float, 6, 1> bvec = Eigen::Matrix<float, 6, 1>::Zero();
-        for (int j = 0; j < cnt; ++j) {
-          const Eigen::Vector3f l = f1.toLocal(pts[nb[j]] - seeds[i]);
-          const float u = l.x() / R, v = l.y() / R;
-          Eigen::Matrix<float, 6, 1> row;
-          row << u * u, u * v, v * v, u, v, 1.f;
-          A += row * row.transpose();
-          bvec += row * l.z();
-        }
-        if (cnt >= 8) {
-          const Eigen::Matrix<float, 6, 1> x = A.ldlt().solve(bvec);
-          if (x.allFinite()) {
-            Eigen::Matrix2f H;
-            H << 2 * x[0], x[1], x[1], 2 * x[2];
-            Eigen::SelfAdjointEigenSolver<Eigen::Matrix2f> e2(H);
-            const Eigen::Vector2f lam = e2.eigenvalues();
-            if (std::abs(lam[1] - lam[0]) * 0.5f > 0.5f * spacing) {
-              const int m = std::abs(lam[1]) >= std::abs(lam[0]) ? 1 : 0;
-              const Eigen::Vector2f dir = e2.eigenvectors().col(m);
-              float th = std::atan2(dir.y(), dir.x());
-              if (th >= 0.5f * kPi) th -= kPi;
-              if (th < -0.5f * kPi) th += kPi;
-              qg = quantizeAngle(th, L);
-            }
+  // Frame correction and descriptor of seed i (deterministic, thread-safe).
+  auto describeSeed = [&](std::size_t i, std::vector<int>& nb, std::vector<float>& d2, float* col,
+                          std::vector<std::uint8_t>& vi) {
+    const int cnt = grid->radiusSearch(seeds[i], R, nb, d2, max_nb);
+    LocalFrame f0 = pred[i];
+    int qa = quantizeAngle(0, L), qb = qa, qg = qa;
+    if (cnt >= 3) {
+      Eigen::Vector3f c = Eigen::Vector3f::Zero();
+      for (int j = 0; j < cnt; ++j) c += pts[nb[j]];
+      c /= float(cnt);
+      Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
+      for (int j = 0; j < cnt; ++j) { const Eigen::Vector3f d = pts[nb[j]] - c; cov += d * d.transpose(); }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
+      Eigen::Vector3f nt = es.eigenvectors().col(0);
+      if (isFinite(nt) && nt.squaredNorm() > 0.5f) {
+        if (nt.dot(f0.n) < 0) nt = -nt;
+        const Eigen::Vector3f l = f0.toLocal(nt);
+        qa = quantizeAngle(std::atan2(l.x(), l.z()), L);
+        qb = quantizeAngle(std::asin(std::clamp(l.y(), -1.f, 1.f)), L);
+      }
+      // Principal direction of the heights (quadric fit) sets the turn about the normal.
+      const LocalFrame f1 = correctedFrame(f0, qa, qb, qg, L);
+      Eigen::Matrix<float, 6, 6> A = Eigen::Matrix<float, 6, 6>::Zero();
+      Eigen::Matrix<float, 6, 1> bvec = Eigen::Matrix<float, 6, 1>::Zero();
+      for (int j = 0; j < cnt; ++j) {
+        const Eigen::Vector3f l = f1.toLocal(pts[nb[j]] - seeds[i]);
+        const float u = l.x() / R, v = l.y() / R;
+        Eigen::Matrix<float, 6, 1> row;
+        row << u * u, u * v, v * v, u, v, 1.f;
+        A.selfadjointView<Eigen::Lower>().rankUpdate(row);
+        bvec += row * l.z();
+      }
+      A.triangularView<Eigen::StrictlyUpper>() = A.transpose();
+      if (cnt >= 8) {
+        const Eigen::Matrix<float, 6, 1> x = A.ldlt().solve(bvec);
+        if (x.allFinite()) {
+          Eigen::Matrix2f H;
+          H << 2 * x[0], x[1], x[1], 2 * x[2];
+          Eigen::SelfAdjointEigenSolver<Eigen::Matrix2f> e2(H);
+          const Eigen::Vector2f lam = e2.eigenvalues();
+          if (std::abs(lam[1] - lam[0]) * 0.5f > 0.5f * spacing) {
+            const int m = std::abs(lam[1]) >= std::abs(lam[0]) ? 1 : 0;
+            const Eigen::Vector2f dir = e2.eigenvectors().col(m);
+            float th = std::atan2(dir.y(), dir.x());
+            if (th >= 0.5f * kPi) th -= kPi;
+            if (th < -0.5f * kPi) th += kPi;
+            qg = quantizeAngle(th, L);
           }
         }
       }
-      qangles[i] = {qa, qb, qg};
-      const LocalFrame f = correctedFrame(f0, qa, qb, qg, L);
-      float* col = Y.col(i).data();
-      std::uint8_t* vi = valid.data() + std::size_t(i) * k;
-      patch.describe(f, seeds[i], pts, nb.data(), cnt, col, vi);
-      // Close one-sample holes along the rings: they cost mask bits and are not real holes.
-      const int S = h.sectors();
-      for (int r = 1; r <= h.rings(); ++r) {
-        const int base = 1 + (r - 1) * S;
-        for (int q = 0; q < S; ++q) {
-          const int a = base + (q + S - 1) % S, b = base + q, c = base + (q + 1) % S;
-          if (!vi[b] && vi[a] == 1 && vi[c] == 1) { col[b] = 0.5f * (col[a] + col[c]); vi[b] = 2; }
-        }
-        for (int q = 0; q < S; ++q)
-          if (vi[base + q] == 2) vi[base + q] = 1;
-      }
-      prog.advance();
     }
-  }
-  prog.finish();
-  prog.throwIfCancelled();
-  rep.seconds_descriptors = lap();
+    qangles[i] = {qa, qb, qg};
+    const LocalFrame f = correctedFrame(f0, qa, qb, qg, L);
+    vi.resize(k);
+    patch.describe(f, seeds[i], pts, nb.data(), cnt, col, vi.data());
+    // Close one-sample holes along the rings: they cost mask bits and are not real holes.
+    const int S = h.sectors();
+    for (int r = 1; r <= h.rings(); ++r) {
+      const int base = 1 + (r - 1) * S;
+      for (int q = 0; q < S; ++q) {
+        const int a = base + (q + S - 1) % S, b = base + q, c = base + (q + 1) % S;
+        if (!vi[b] && vi[a] == 1 && vi[c] == 1) { col[b] = 0.5f * (col[a] + col[c]); vi[b] = 2; }
+      }
+      for (int q = 0; q < S; ++q)
+        if (vi[base + q] == 2) vi[base + q] = 1;
+    }
+    std::uint64_t* w = mask_bits.data() + i * mask_words;
+    for (int s = 0; s < k; ++s)
+      if (vi[s]) w[s / 64] |= std::uint64_t(1) << (s % 64);
+  };
 
-  // Frame stream.
-  SymbolWriter fw;
-  {
-    AdaptiveModel ma(L), mb(L), mg(L);
-    for (std::size_t i = 0; i < n; ++i) { fw.put(ma, qangles[i][0]); fw.put(mb, qangles[i][1]); fw.put(mg, qangles[i][2]); }
-  }
-  const std::vector<std::uint8_t> frame_bytes = fw.finish(&rep.frames_method, rep.frames_sizes);
-
-  // Dictionary: K-SVD on a subset, quantized; codes on the quantized dictionary.
-  Eigen::MatrixXf train;
+  // Pass 1: descriptors of the training subset (all seeds when there are few), K-SVD.
+  std::vector<long> train_of(n, -1);
+  std::vector<long> train_seeds;
   if (long(n) > prm.max_training_patches) {
     std::vector<long> order(n);
     std::iota(order.begin(), order.end(), 0L);
     Random rng(prm.random_seed + 7);
     for (std::size_t i = n - 1; i > 0; --i) std::swap(order[i], order[rng.below(i + 1)]);
-    train.resize(k, prm.max_training_patches);
-    for (int c = 0; c < prm.max_training_patches; ++c) train.col(c) = Y.col(order[c]);
+    train_seeds.assign(order.begin(), order.begin() + prm.max_training_patches);
+    std::sort(train_seeds.begin(), train_seeds.end());
+  } else {
+    train_seeds.resize(n);
+    std::iota(train_seeds.begin(), train_seeds.end(), 0L);
   }
+  for (std::size_t t = 0; t < train_seeds.size(); ++t) train_of[train_seeds[t]] = long(t);
+  ProgressReporter prog(progress, "patch descriptors", n);
+  Eigen::MatrixXf train(k, long(train_seeds.size()));
+#pragma omp parallel
+  {
+    std::vector<int> nb;
+    std::vector<float> d2;
+    std::vector<std::uint8_t> vi;
+#pragma omp for schedule(dynamic, 16)
+    for (long t = 0; t < long(train_seeds.size()); ++t) {
+      if (prog.cancelled()) continue;
+      describeSeed(std::size_t(train_seeds[t]), nb, d2, train.col(t).data(), vi);
+      prog.advance();
+    }
+  }
+  prog.throwIfCancelled();
+  rep.seconds_descriptors = lap();
   KSvdParameters kp;
   kp.atoms = prm.atoms;
   kp.sparsity = prm.sparsity;
   kp.iterations = prm.ksvd_iterations;
   kp.seed = prm.random_seed;
-  const KSvdResult ks = learnDictionaryKSvd(train.size() ? train : Y, kp, progress);
   ByteWriter dict;
-  SymbolWriter dw;
   Eigen::MatrixXf D(k, prm.atoms);
   {
+    const KSvdResult ks = learnDictionaryKSvd(train, kp, progress);
+    SymbolWriter dw;
     AdaptiveModel first(2 * kDictionaryLevels + 1), delta(4 * kDictionaryLevels + 1);
     for (int j = 0; j < prm.atoms; ++j) {
       float scale = ks.dictionary.col(j).cwiseAbs().maxCoeff();
@@ -538,10 +647,60 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
         D(s, j) = float(q) * scale / kDictionaryLevels;
       }
     }
+    dict.raw(dw.finish());
   }
-  dict.raw(dw.finish());
-  const std::vector<SparseCode> codes = orthogonalMatchingPursuit(D, Y, prm.sparsity);
   rep.seconds_dictionary = lap();
+
+  // Pass 2: by blocks of seeds, the descriptors not computed yet and the sparse codes on the
+  // quantized dictionary; only one block of descriptors is held at a time.
+  std::vector<SparseCode> codes(n);
+  double err2 = 0, nvalid = 0;
+  {
+    constexpr long kBlock = 2048;
+    Eigen::MatrixXf Yb;
+    for (long b0 = 0; b0 < long(n); b0 += kBlock) {
+      const long bn = std::min<long>(kBlock, long(n) - b0);
+      Yb.resize(k, bn);
+#pragma omp parallel
+      {
+        std::vector<int> nb;
+        std::vector<float> d2;
+        std::vector<std::uint8_t> vi;
+#pragma omp for schedule(dynamic, 16)
+        for (long j = 0; j < bn; ++j) {
+          if (prog.cancelled()) continue;
+          const long i = b0 + j;
+          if (train_of[i] >= 0) {
+            Yb.col(j) = train.col(train_of[i]);
+          } else {
+            describeSeed(std::size_t(i), nb, d2, Yb.col(j).data(), vi);
+            prog.advance();
+          }
+        }
+      }
+      prog.throwIfCancelled();
+      std::vector<SparseCode> bc = orthogonalMatchingPursuit(D, Yb, prm.sparsity);
+      for (long j = 0; j < bn; ++j) {
+        const std::size_t i = std::size_t(b0 + j);
+        Eigen::VectorXf yr = Eigen::VectorXf::Zero(k);
+        for (std::size_t a = 0; a < bc[j].size(); ++a) yr += D.col(bc[j].atoms[a]) * bc[j].values[a];
+        for (int s = 0; s < k; ++s)
+          if (isValid(i, s)) { err2 += double(yr[s] - Yb(s, j)) * (yr[s] - Yb(s, j)); nvalid += 1; }
+        codes[i] = std::move(bc[j]);
+      }
+    }
+  }
+  train.resize(0, 0);
+  prog.finish();
+  rep.seconds_dictionary += lap();
+
+  // Frame stream.
+  SymbolWriter fw;
+  {
+    AdaptiveModel ma(L), mb(L), mg(L);
+    for (std::size_t i = 0; i < n; ++i) { fw.put(ma, qangles[i][0]); fw.put(mb, qangles[i][1]); fw.put(mg, qangles[i][2]); }
+  }
+  const std::vector<std::uint8_t> frame_bytes = fw.finish(&rep.frames_method, rep.frames_sizes);
 
   // Coefficients: scalar quantization, then the patch symbol stream.
   float cmax = 0;
@@ -551,21 +710,22 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   h.coefficient_step = cmax > 0 && std::isfinite(cmax) ? cmax / float(qlim) : 1.f;
   PatchModels pm(h);
   SymbolWriter pw;
-  double nnz = 0, err2 = 0, nvalid = 0;
+  double nnz = 0;
   auto cost = [](const AdaptiveModel& m, int sym) { return -std::log2(double(m.frequency(sym)) / m.total()); };
+  std::vector<std::uint8_t> vi(k);
+  std::vector<std::pair<int, int>> q;
   for (std::size_t i = 0; i < n; ++i) {
-    const std::uint8_t* vi = valid.data() + i * k;
     bool all = true;
-    for (int s = 0; s < k; ++s) all = all && vi[s];
+    for (int s = 0; s < k; ++s) { vi[s] = std::uint8_t(isValid(i, s)); all = all && vi[s]; }
     rep.bits_masks += cost(pm.all_valid, all ? 1 : 0);
     pw.put(pm.all_valid, all ? 1 : 0);
     if (!all)
       for (int s = 0; s < k; ++s) {
-        AdaptiveModel& mm = pm.mask[maskContext(vi, s, h.sectors())];
+        AdaptiveModel& mm = pm.mask[maskContext(vi.data(), s, h.sectors())];
         rep.bits_masks += cost(mm, vi[s]);
         pw.put(mm, vi[s]);
       }
-    std::vector<std::pair<int, int>> q;
+    q.clear();
     for (std::size_t a = 0; a < codes[i].size(); ++a) {
       const int v = std::clamp(int(std::lround(codes[i].values[a] / h.coefficient_step)), -qlim, qlim);
       if (v != 0) q.push_back({codes[i].atoms[a], v});
@@ -573,18 +733,14 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
     std::sort(q.begin(), q.end());
     pw.put(pm.count, int(q.size()));
     int prev = -1;
-    Eigen::VectorXf yr = Eigen::VectorXf::Zero(k);
     for (const auto& [atom, v] : q) {
       rep.bits_atoms += cost(pm.gap, atom - prev - 1);
       pw.put(pm.gap, atom - prev - 1);
       prev = atom;
       rep.bits_values += cost(pm.value[atom], zigzag(v));
       pw.put(pm.value[atom], zigzag(v));
-      yr += D.col(atom) * (float(v) * h.coefficient_step);
     }
     nnz += double(q.size());
-    for (int s = 0; s < k; ++s)
-      if (vi[s]) { err2 += double(yr[s] - Y(s, i)) * (yr[s] - Y(s, i)); nvalid += 1; }
   }
   const std::vector<std::uint8_t> patch_bytes = pw.finish(&rep.patches_method, rep.patches_sizes);
   rep.mean_nonzeros = nnz / double(n);
@@ -670,7 +826,8 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
   }
 
   // Patches: heights and masks.
-  std::vector<float> heights(std::size_t(k) * n);
+  const RadialLayout layout(h);
+  std::vector<std::int16_t> heights(std::size_t(k) * n);
   std::vector<std::uint8_t> valid(std::size_t(k) * n);
   {
     PatchModels pm(h);
@@ -693,101 +850,118 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
         if (v < -qlim || v > qlim) throw CorruptStream("patch coefficient out of range");
         y += D.col(atom) * (float(v) * h.coefficient_step);
       }
-      std::copy(y.data(), y.data() + k, heights.data() + i * k);
+      if (!y.allFinite()) throw CorruptStream("decoded heights are not finite");
+      for (int s = 0; s < k; ++s) heights[i * k + s] = layout.quantize(y[s]);
     }
     pr.checkEnd();
   }
-  if (!std::all_of(heights.begin(), heights.end(), [](float v) { return std::isfinite(v); }))
-    throw CorruptStream("decoded heights are not finite");
 
   // Point generation: a grid at the output spacing in each patch, kept in the seed's
   // Voronoi cell (where a neighbouring patch with data is closer, that patch places it),
-  // then consolidated where the nearby patches agree.
+  // then consolidated where the nearby patches agree. Seeds are processed by blocks (in
+  // parallel inside a block); the points of a block are then regularised in seed order by
+  // streaming Poisson-disk thinning at half the spacing, so only one block of unthinned
+  // points is ever held.
   const float R = h.radius, s = h.spacing;
-  const RadialLayout layout(h);
   SpatialIndex seed_index(seeds);
-  std::vector<Positions> per_seed(n);
   ProgressReporter prog(progress, "decoding patches", n);
   const int G = int(std::ceil(R / s));
-#pragma omp parallel
+  DecodeReport rep;
+  Positions out;
   {
-    std::vector<int> nb, close;
-    std::vector<float> d2;
+    // At most the grid points of every disk; the encoder's count is a good guess of the
+    // output size. Both are bounded by max_points (checked with the header).
+    const double per_seed_bound = double(kPi) * (R / s + 1.5) * (R / s + 1.5);
+    const double bound = std::min(double(n) * per_seed_bound, double(o.max_points));
+    out.reserve(std::size_t(std::min(bound, double(h.points) * 1.05 + 1024.0)));
+  }
+  detail::ThinningGrid thin(0.5f * s, out.capacity());
+  if (o.regularise) thin.reserve(out.capacity());
+  std::size_t generated = 0;
+  constexpr long kBlock = 1024;
+  std::vector<Positions> per_seed(std::min<std::size_t>(n, kBlock));
+  for (long b0 = 0; b0 < long(n); b0 += kBlock) {
+    const long bn = std::min<long>(kBlock, long(n) - b0);
+#pragma omp parallel
+    {
+      std::vector<int> nb, close;
+      std::vector<float> d2;
 #pragma omp for schedule(dynamic, 16)
-    for (long i = 0; i < long(n); ++i) {
-      if (prog.cancelled()) continue;
-      const float* yi = heights.data() + std::size_t(i) * k;
-      const std::uint8_t* vi = valid.data() + std::size_t(i) * k;
-      const LocalFrame& fi = frames[i];
-      const int cnt = seed_index.radiusSearch(seeds[i], 2.05f * R, nb, d2);
-      Positions& out = per_seed[i];
-      for (int gy = -G; gy < G; ++gy)
-        for (int gx = -G; gx < G; ++gx) {
-          const float u = (gx + 0.5f) * s, v = (gy + 0.5f) * s;
-          if (u * u + v * v > R * R) continue;
-          float hh;
-          if (!layout.height(yi, vi, u / R, v / R, hh)) continue;
-          Eigen::Vector3f p = seeds[i] + fi.toWorld(Eigen::Vector3f(u, v, hh));
-          const float di = (p - seeds[i]).squaredNorm();
-          bool mine = true;
-          close.clear();
-          for (int c = 0; c < cnt && mine; ++c) {
-            const int j = nb[c];
-            if (j == i) continue;
-            const float dj = (p - seeds[j]).squaredNorm();
-            if (dj < R * R) close.push_back(j);
-            if (dj < di) {
-              const Eigen::Vector3f l = frames[j].toLocal(p - seeds[j]);
-              float hj;
-              if (layout.height(heights.data() + std::size_t(j) * k, valid.data() + std::size_t(j) * k, l.x() / R,
-                                l.y() / R, hj))
-                mine = false;
+      for (long bi = 0; bi < bn; ++bi) {
+        const long i = b0 + bi;
+        Positions& mine_out = per_seed[bi];
+        mine_out.clear();
+        if (prog.cancelled()) continue;
+        const std::int16_t* yi = heights.data() + std::size_t(i) * k;
+        const std::uint8_t* vi = valid.data() + std::size_t(i) * k;
+        const LocalFrame& fi = frames[i];
+        const int cnt = seed_index.radiusSearch(seeds[i], 2.05f * R, nb, d2);
+        for (int gy = -G; gy < G; ++gy)
+          for (int gx = -G; gx < G; ++gx) {
+            const float u = (gx + 0.5f) * s, v = (gy + 0.5f) * s;
+            if (u * u + v * v > R * R) continue;
+            float hh;
+            if (!layout.height(yi, vi, u / R, v / R, hh)) continue;
+            Eigen::Vector3f p = seeds[i] + fi.toWorld(Eigen::Vector3f(u, v, hh));
+            const float di = (p - seeds[i]).squaredNorm();
+            bool mine = true;
+            close.clear();
+            for (int c = 0; c < cnt && mine; ++c) {
+              const int j = nb[c];
+              if (j == i) continue;
+              const float dj = (p - seeds[j]).squaredNorm();
+              if (dj < R * R) close.push_back(j);
+              if (dj < di) {
+                const Eigen::Vector3f l = frames[j].toLocal(p - seeds[j]);
+                float hj;
+                if (layout.height(heights.data() + std::size_t(j) * k, valid.data() + std::size_t(j) * k, l.x() / R,
+                                  l.y() / R, hj))
+                  mine = false;
+              }
             }
-          }
-          if (!mine) continue;
-          if (o.consolidate && !close.empty()) {
-            const float wi0 = 1.f - di / (R * R);
-            float wsum = wi0 * wi0;
-            Eigen::Vector3f acc = p * wsum;
-            for (const int j : close) {
-              const Eigen::Vector3f l = frames[j].toLocal(p - seeds[j]);
-              float hj;
-              if (!layout.height(heights.data() + std::size_t(j) * k, valid.data() + std::size_t(j) * k, l.x() / R,
-                                 l.y() / R, hj))
-                continue;
-              const Eigen::Vector3f q = seeds[j] + frames[j].toWorld(Eigen::Vector3f(l.x(), l.y(), hj));
-              const float t = 1.f - (p - seeds[j]).squaredNorm() / (R * R);
-              const float w = t * t;
-              acc += w * q;
-              wsum += w;
+            if (!mine) continue;
+            if (o.consolidate && !close.empty()) {
+              const float wi0 = 1.f - di / (R * R);
+              float wsum = wi0 * wi0;
+              Eigen::Vector3f acc = p * wsum;
+              for (const int j : close) {
+                const Eigen::Vector3f l = frames[j].toLocal(p - seeds[j]);
+                float hj;
+                if (!layout.height(heights.data() + std::size_t(j) * k, valid.data() + std::size_t(j) * k, l.x() / R,
+                                   l.y() / R, hj))
+                  continue;
+                const Eigen::Vector3f q = seeds[j] + frames[j].toWorld(Eigen::Vector3f(l.x(), l.y(), hj));
+                const float t = 1.f - (p - seeds[j]).squaredNorm() / (R * R);
+                const float w = t * t;
+                acc += w * q;
+                wsum += w;
+              }
+              if (wsum > 0) p = acc / wsum;
             }
-            if (wsum > 0) p = acc / wsum;
+            mine_out.push_back(p);
           }
-          out.push_back(p);
-        }
-      prog.advance();
+        prog.advance();
+      }
+    }
+    prog.throwIfCancelled();
+    for (long bi = 0; bi < bn; ++bi) {
+      generated += per_seed[bi].size();
+      if (generated > o.max_points) throw CorruptStream("decoded point count exceeds the limit");
+      if (o.regularise) {
+        for (const auto& p : per_seed[bi]) thin.offer(p, out);
+      } else {
+        out.insert(out.end(), per_seed[bi].begin(), per_seed[bi].end());
+      }
     }
   }
   prog.finish();
-  prog.throwIfCancelled();
-  std::size_t total = 0;
-  for (const auto& v : per_seed) total += v.size();
-  if (total > o.max_points) throw CorruptStream("decoded point count exceeds the limit");
-  Positions out;
-  out.reserve(total);
-  for (auto& v : per_seed) { out.insert(out.end(), v.begin(), v.end()); Positions().swap(v); }
-  DecodeReport rep;
+  per_seed.clear();
+  per_seed.shrink_to_fit();
   rep.seeds = n;
   rep.patch_radius = R;
   rep.output_spacing = s;
   rep.encoded_points = h.points;
-  if (o.regularise && !out.empty()) {
-    const std::vector<int> keep = poissonDiskSubsetOrdered(out, 0.5f * s, {});
-    rep.removed_by_regularisation = out.size() - keep.size();
-    Positions kept(keep.size());
-    for (std::size_t i = 0; i < keep.size(); ++i) kept[i] = out[keep[i]];
-    out.swap(kept);
-  }
+  rep.removed_by_regularisation = generated - out.size();
   rep.points = out.size();
   if (report) *report = rep;
   return out;

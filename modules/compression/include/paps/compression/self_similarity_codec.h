@@ -39,8 +39,9 @@ struct CompressionParameters {
   float seed_spacing = 1.f;
   /// K-SVD rounds, in [0, 200].
   int ksvd_iterations = 10;
-  /// At most this many patches train the dictionary (all are coded), in [16, 10^7].
-  int max_training_patches = 20000;
+  /// At most this many patches (a seeded random subset) train the dictionary; all are
+  /// coded. In [16, 10^7].
+  int max_training_patches = 4096;
   /// Spacing of the decoded points in metres. 0 = the measured input spacing (sqrt of the
   /// area per input point). Valid: 0 or a finite value > 0.
   float output_spacing = 0.f;

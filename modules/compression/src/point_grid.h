@@ -203,23 +203,29 @@ class ThinningGrid {
     cells_.reset(expected / 8 + 16);
   }
   bool offer(const Eigen::Vector3f& p, Positions& out) {
-    std::int64_t a[3], b[3];
+    std::int64_t a[3], b[3], own[3];
     for (int d = 0; d < 3; ++d) {
       a[d] = std::int64_t(std::floor((p[d] - r_) * inv_));
       b[d] = std::int64_t(std::floor((p[d] + r_) * inv_));
+      own[d] = std::int64_t(std::floor(p[d] * inv_));
     }
+    auto blocked = [&](int c) {
+      if (c < 0) return false;
+      for (int j = head_[c]; j >= 0; j = next_[j])
+        if ((out[j] - p).squaredNorm() < r2_) return true;
+      return false;
+    };
+    // The point's own cell first: it holds the blocking point most of the time.
+    const std::uint64_t own_key = packCell(own[0], own[1], own[2]);
+    if (blocked(cells_.find(own_key))) return false;
     for (std::int64_t z = a[2]; z <= b[2]; ++z)
       for (std::int64_t y = a[1]; y <= b[1]; ++y)
         for (std::int64_t x = a[0]; x <= b[0]; ++x) {
-          const int c = cells_.find(packCell(x, y, z));
-          if (c < 0) continue;
-          for (int j = head_[c]; j >= 0; j = next_[j])
-            if ((out[j] - p).squaredNorm() < r2_) return false;
+          if (x == own[0] && y == own[1] && z == own[2]) continue;
+          if (blocked(cells_.find(packCell(x, y, z)))) return false;
         }
-    const std::int64_t cx = std::int64_t(std::floor(p[0] * inv_)), cy = std::int64_t(std::floor(p[1] * inv_)),
-                       cz = std::int64_t(std::floor(p[2] * inv_));
     bool fresh = false;
-    const int c = cells_.insert(packCell(cx, cy, cz), &fresh);
+    const int c = cells_.insert(own_key, &fresh);
     if (fresh) head_.push_back(-1);
     next_.push_back(head_[c]);
     head_[c] = int(out.size());

@@ -691,6 +691,7 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
     }
   }
   train.resize(0, 0);
+  grid.reset();  // the cloud's index is not needed to code the symbols
   prog.finish();
   rep.seconds_dictionary += lap();
 

@@ -262,19 +262,66 @@ TEST(WavejetEstimation, DeterministicAcrossThreadCounts) {
   Positions p = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; }, 4000, 1.0, 8);
   paps::Random rng(2);
   for (auto& x : p) x.z() += static_cast<float>(0.002 * rng.gaussian());
-  paps::WavejetParameters params;
-  params.irls_iterations = 3;
-  const int threads = omp_get_max_threads();
-  omp_set_num_threads(1);
-  const auto a = paps::estimateWavejets(p, 0.12f, params);
-  omp_set_num_threads(std::max(2, threads));
-  const auto b = paps::estimateWavejets(p, 0.12f, params);
-  omp_set_num_threads(threads);
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    ASSERT_EQ(a[i].k1, b[i].k1);
-    ASSERT_EQ(a[i].normal, b[i].normal);
-    ASSERT_EQ(a[i].a0, b[i].a0);
+  // Both solvers: normal equations (default) and QR (IRLS), with order selection.
+  for (const int irls : {0, 3}) {
+    paps::WavejetParameters params;
+    params.irls_iterations = irls;
+    params.select_order = irls == 0;
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const auto a = paps::estimateWavejets(p, 0.12f, params);
+    omp_set_num_threads(std::max(2, threads));
+    const auto b = paps::estimateWavejets(p, 0.12f, params);
+    omp_set_num_threads(threads);
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      ASSERT_EQ(a[i].k1, b[i].k1);
+      ASSERT_EQ(a[i].normal, b[i].normal);
+      ASSERT_EQ(a[i].a0, b[i].a0);
+    }
   }
+}
+
+TEST(Wavejet, CloudRunUsesExactlyTheBallNeighbours) {
+  // A sphere: points on the extreme planes of the bounding box sit on cell borders of the
+  // neighbour grid. Every point must see exactly its ball (mean count equal to brute force)
+  // and give the same fit as with brute-force neighbour lists.
+  paps::Random rng(5);
+  Positions p;
+  p.emplace_back(2.f, 0.f, 0.f);
+  p.emplace_back(-2.f, 0.f, 0.f);
+  p.emplace_back(0.f, 0.f, -2.f);
+  while (p.size() < 3000) {
+    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    p.push_back((2.0 * v.normalized()).cast<float>());
+  }
+  paps::Normals out(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = p[i].normalized();
+  paps::WavejetParameters params;
+  for (const float r : {0.45f, 0.3f, 0.7f, 0.61f}) {  // cell borders fall differently
+    paps::WavejetReport report;
+    paps::estimateWavejets(p, r, params, &report, nullptr, nullptr, &out);
+    EXPECT_EQ(report.fitted, p.size()) << "radius " << r;
+  }
+  const float radius = 0.5f;
+  paps::WavejetReport report;
+  const auto res = paps::estimateWavejets(p, radius, params, &report, nullptr, nullptr, &out);
+  EXPECT_EQ(report.fitted, p.size());
+  double brute_sum = 0;
+  auto ws = paps::makeWavejetWorkspace();
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    std::vector<int> nb;
+    for (std::size_t j = 0; j < p.size(); ++j)
+      if ((p[j] - p[i]).squaredNorm() <= radius * radius) nb.push_back(static_cast<int>(j));
+    brute_sum += static_cast<double>(nb.size());
+    if (i % 100 != 0 && i > 2) continue;
+    const auto r = paps::fitWavejet(p, nb.data(), static_cast<int>(nb.size()), p[i], radius, params, *ws,
+                                    Eigen::Vector3f::Constant(NAN), out[i]);
+    ASSERT_TRUE(r.valid());
+    EXPECT_NEAR(res[i].k1, r.k1, 1e-4);
+    EXPECT_NEAR(res[i].k2, r.k2, 1e-4);
+    EXPECT_LT(angleDeg(res[i].normal, r.normal), 1e-3);
+  }
+  EXPECT_DOUBLE_EQ(report.mean_neighbours, brute_sum / static_cast<double>(p.size()));
 }
 
 TEST(Wavejet, IrlsResistsOutliers) {

@@ -39,6 +39,60 @@ std::complex<float> WavejetCoefficients::integralInvariant(int n, float s) const
   return std::complex<float>(a);
 }
 
+namespace {
+// Orders up to this use the normal equations (Cholesky of the Gram matrix, accumulated
+// row by row): the same nested least-squares solutions as the Householder QR below (the
+// Cholesky factor of A^T A is the R of A = QR up to signs), at a fraction of the cost and
+// without per-point allocations. Above it, or when the Gram matrix is ill-conditioned
+// (squared condition number), the QR path is used.
+constexpr int kGramMaxOrder = 6;
+
+// The Gram matrix A^T A and A^T b of the basis of buildRows() from moments: every product
+// of two basis functions r^k e^{i n theta} is r2^j z^n or r2^j zbar^n for some j, n, so the
+// sums over the neighbours of r2^j z^n (2j + n <= 2K) and of z r2^j z^n give every entry:
+// about (K+1)^2 complex sums per neighbour instead of the m (m + 1) / 2 products of the
+// design matrix (m = (K+1)(K+2)/2).
+struct GramFromMoments {
+  static constexpr int kJ = kGramMaxOrder + 1, kN = 2 * kGramMaxOrder + 1;
+  double mr[kJ][kN], mi[kJ][kN];  // sum r2^j z^n (real, imaginary)
+  double qr[kJ][kN], qi[kJ][kN];  // sum h r2^j z^n, 2j + n <= K (h: height)
+  double hh;                      // sum h^2
+
+  void accumulate(const std::vector<Eigen::Vector3d>& local, int order) {
+    const int k2 = 2 * order;
+    for (int j = 0; j <= order; ++j)
+      for (int n = 0; n + 2 * j <= k2; ++n) mr[j][n] = mi[j][n] = qr[j][n] = qi[j][n] = 0.0;
+    hh = 0;
+    double zr[kN], zi[kN], r2p[kJ];
+    for (const Eigen::Vector3d& q : local) {
+      zr[0] = 1; zi[0] = 0;
+      for (int n = 1; n <= k2; ++n) {
+        zr[n] = zr[n - 1] * q.x() - zi[n - 1] * q.y();
+        zi[n] = zr[n - 1] * q.y() + zi[n - 1] * q.x();
+      }
+      const double r2 = q.x() * q.x() + q.y() * q.y(), h = q.z();
+      r2p[0] = 1;
+      for (int j = 1; j <= order; ++j) r2p[j] = r2p[j - 1] * r2;
+      hh += h * h;
+      for (int j = 0; j <= order; ++j) {
+        const double w = r2p[j], wh = w * h;
+        const int nmax = k2 - 2 * j;
+        for (int n = 0; n <= nmax; ++n) { mr[j][n] += w * zr[n]; mi[j][n] += w * zi[n]; }
+        for (int n = 0; n + 2 * j <= order; ++n) { qr[j][n] += wh * zr[n]; qi[j][n] += wh * zi[n]; }
+      }
+    }
+  }
+  // sum A B and sum A conj(B) for A = r2^a z^na, B = r2^b z^nb.
+  void products(int a, int na, int b, int nb, double& ab_r, double& ab_i, double& acb_r, double& acb_i) const {
+    ab_r = mr[a + b][na + nb];
+    ab_i = mi[a + b][na + nb];
+    if (na >= nb) { acb_r = mr[a + b + nb][na - nb]; acb_i = mi[a + b + nb][na - nb]; }
+    else { acb_r = mr[a + b + na][nb - na]; acb_i = -mi[a + b + na][nb - na]; }
+  }
+};
+
+}  // namespace
+
 struct WavejetWorkspace {
   std::vector<int> finite;
   Eigen::MatrixXd a, aw;
@@ -48,6 +102,14 @@ struct WavejetWorkspace {
   std::vector<Eigen::Vector3d> local;
   std::vector<std::complex<double>> zpow;
   std::vector<double> r2pow;
+  // Normal-equations path (fixed orders up to kGramMaxOrder, no IRLS): row-major design
+  // rows, Gram matrix and its Cholesky factor, right-hand side. Reused across points.
+  std::vector<double> rows;
+  std::vector<double> gram, rhs, cvec;
+  GramFromMoments moments;
+  // Per-point scratch of fitWavejet and the Corollary 2 product.
+  std::vector<std::complex<double>> phi, mono_f, mono_d, mono_prod;
+  WavejetCoefficients coefficients;
 };
 void WavejetWorkspaceDeleter::operator()(WavejetWorkspace* w) const { delete w; }
 WavejetWorkspacePtr makeWavejetWorkspace() { return WavejetWorkspacePtr(new WavejetWorkspace); }
@@ -60,8 +122,10 @@ const float kNaN = std::numeric_limits<float>::quiet_NaN();
 // c[p][q] = phi_{p+q, p-q}. Used for the products of Corollary 2.
 struct MonomialTable {
   int order;
-  std::vector<std::complex<double>> c;
-  explicit MonomialTable(int k) : order(k), c(std::size_t(k + 1) * (k + 1), 0.0) {}
+  std::vector<std::complex<double>>& c;  // storage reused from the workspace
+  MonomialTable(int k, std::vector<std::complex<double>>& storage) : order(k), c(storage) {
+    c.assign(std::size_t(k + 1) * (k + 1), 0.0);
+  }
   std::complex<double>& at(int p, int q) { return c[std::size_t(p) * (order + 1) + q]; }
 };
 
@@ -98,11 +162,118 @@ void buildRows(WavejetWorkspace& ws, int order) {
   }
 }
 
+
+// Fills ws.gram (m x m), ws.rhs (m) and returns |b|^2, for the columns of buildRows():
+// n = 0: Re e; n > 0: 2 Re e and -2 Im e, e = r2^((k-n)/2) z^n.
+double buildGram(WavejetWorkspace& ws, int order) {
+  GramFromMoments& g = ws.moments;
+  g.accumulate(ws.local, order);
+  const int m = wavejetUnknowns(order);
+  // Columns: (j, n, part, factor), part 0 = real, 1 = imaginary.
+  int cj[64], cn[64], cp[64];
+  double cf[64];
+  int c = 0;
+  for (int k = 0; k <= order; ++k)
+    for (int n = k & 1; n <= k; n += 2) {
+      const int j = (k - n) / 2;
+      if (n == 0) { cj[c] = j; cn[c] = 0; cp[c] = 0; cf[c] = 1; ++c; }
+      else {
+        cj[c] = j; cn[c] = n; cp[c] = 0; cf[c] = 2; ++c;
+        cj[c] = j; cn[c] = n; cp[c] = 1; cf[c] = -2; ++c;
+      }
+    }
+  ws.gram.resize(std::size_t(m) * m);
+  ws.rhs.resize(m);
+  for (int u = 0; u < m; ++u) {
+    for (int v = u; v < m; ++v) {
+      double abr, abi, acbr, acbi;
+      g.products(cj[u], cn[u], cj[v], cn[v], abr, abi, acbr, acbi);
+      double t;
+      if (cp[u] == 0 && cp[v] == 0) t = 0.5 * (abr + acbr);
+      else if (cp[u] == 1 && cp[v] == 1) t = 0.5 * (acbr - abr);
+      else if (cp[u] == 0) t = 0.5 * (abi - acbi);  // Re A Im B
+      else t = 0.5 * (abi + acbi);                  // Im A Re B
+      const double e = cf[u] * cf[v] * t;
+      ws.gram[std::size_t(u) * m + v] = e;
+      ws.gram[std::size_t(v) * m + u] = e;
+    }
+    const double qv = cp[u] == 0 ? g.qr[cj[u]][cn[u]] : g.qi[cj[u]][cn[u]];
+    ws.rhs[u] = cf[u] * qv;
+  }
+  return g.hh;
+}
+
+// Normal-equations solve with the same order selection as solve(). Returns 1 on success,
+// -1 when the Gram matrix is too ill-conditioned to decide (the caller then uses the QR
+// path, which also judges rank deficiency).
+int solveGram(WavejetWorkspace& ws, int& order, bool select_order) {
+  const int rows = static_cast<int>(ws.local.size());
+  const int m = wavejetUnknowns(order);
+  const double btb = buildGram(ws, order);
+  double* g = ws.gram.data();
+  // Cholesky G = R^T R, R upper triangular, stored in the upper triangle of g.
+  double rmax = 0, rmin = INFINITY;
+  for (int i = 0; i < m; ++i) {
+    double* gi = g + std::size_t(i) * m;
+    for (int k = 0; k < i; ++k) gi[i] -= g[std::size_t(k) * m + i] * g[std::size_t(k) * m + i];
+    if (!(gi[i] > 0)) return -1;  // let the QR path judge the rank
+    const double rii = std::sqrt(gi[i]);
+    gi[i] = rii;
+    rmax = std::max(rmax, rii);
+    rmin = std::min(rmin, rii);
+    const double inv = 1.0 / rii;
+    for (int j = i + 1; j < m; ++j) {
+      double v = gi[j];
+      for (int k = 0; k < i; ++k) v -= g[std::size_t(k) * m + i] * g[std::size_t(k) * m + j];
+      gi[j] = v * inv;
+    }
+  }
+  // The Gram matrix squares the condition number: below 1e-6 the pivots are not trusted.
+  if (!(rmin > 1e-6 * rmax)) return -1;
+  // c = R^{-T} A^T b: the coordinates of b on the orthonormalised columns (Q^T b).
+  ws.cvec.resize(m);
+  for (int i = 0; i < m; ++i) {
+    double v = ws.rhs[i];
+    for (int k = 0; k < i; ++k) v -= g[std::size_t(k) * m + i] * ws.cvec[k];
+    ws.cvec[i] = v / g[std::size_t(i) * m + i];
+  }
+  int mk = m;
+  if (select_order && order > 2) {
+    // GCV(m) = L RSS_m / (L - m)^2, RSS_m = |b|^2 - |c_0..m|^2, nested orders 2..K.
+    double head = 0;
+    for (int i = 0; i < m; ++i) head += ws.cvec[i] * ws.cvec[i];
+    double best = INFINITY;
+    int best_order = order;
+    for (int k = order; k >= 2; --k) {
+      const int mkk = wavejetUnknowns(k);
+      if (k < order)
+        for (int i = mkk; i < wavejetUnknowns(k + 1); ++i) head -= ws.cvec[i] * ws.cvec[i];
+      const double rss = std::max(0.0, btb - head);
+      const double gcv = rss / ((rows - mkk) * double(rows - mkk));
+      if (gcv < best * 0.999999) { best = gcv; best_order = k; }
+    }
+    order = best_order;
+    mk = wavejetUnknowns(order);
+  }
+  // x = R_mk^{-1} c_mk (the leading block of R is the factor of the leading block of G).
+  ws.x.resize(mk);
+  for (int i = mk - 1; i >= 0; --i) {
+    double v = ws.cvec[i];
+    for (int j = i + 1; j < mk; ++j) v -= g[std::size_t(i) * m + j] * ws.x[j];
+    ws.x[i] = v / g[std::size_t(i) * m + i];
+  }
+  return 1;
+}
+
 // Least squares by Householder QR (columns ordered by increasing order, so the residual of
 // every lower order comes from the same factorisation), optional order selection by
 // generalized cross-validation, optional IRLS. Returns false when the system is rank
 // deficient; `order` may be lowered by the selection.
 bool solve(WavejetWorkspace& ws, int& order, int irls_iterations, bool select_order) {
+  if (irls_iterations <= 0 && order <= kGramMaxOrder) {
+    const int r = solveGram(ws, order, select_order);
+    if (r >= 0) return r == 1;
+  }
   buildRows(ws, order);
   const int rows = static_cast<int>(ws.a.rows());
   int m = static_cast<int>(ws.a.cols());
@@ -184,9 +355,10 @@ std::complex<double> coef(const std::vector<std::complex<double>>& phi, int k, i
 // (x, y, h) to (x, y + gamma h, h - gamma y); solving H(X, Y) to first order gives
 // H = f - gamma f f_y - gamma Y, i.e. g = (0, -gamma); this is eq. 2.15-2.16 written
 // convention-free in the monomials z^p zbar^q.) Orders k >= 3 only change.
-void correctCoefficients(std::vector<std::complex<double>>& phi, int order, double gx, double gy) {
+void correctCoefficients(std::vector<std::complex<double>>& phi, int order, double gx, double gy,
+                         WavejetWorkspace& ws) {
   if (order < 3) return;
-  MonomialTable f(order), d(order), prod(order);
+  MonomialTable f(order, ws.mono_f), d(order, ws.mono_d), prod(order, ws.mono_prod);
   for (int p = 0; p <= order; ++p)
     for (int q = 0; p + q <= order; ++q)
       if (p + q >= 2) f.at(p, q) = coef(phi, p + q, p - q);
@@ -214,6 +386,94 @@ Eigen::Vector3d anyTangent(const Eigen::Vector3d& n) {
   return (a - n * n.dot(a)).normalized();
 }
 
+// Fixed-radius neighbour search on a uniform grid of cells of side R_phi: the finite points
+// are sorted once by cell (x fastest), so a query scans the 3 x 3 rows of 3 consecutive
+// cells around its own. The points are also copied in cell order, so that the points fitted
+// one after the other and their neighbours are close in memory. Neighbours come in cell
+// order then index order: a fixed order, whatever the thread count.
+class CellGrid {
+ public:
+  // False when the extent is too large for 21-bit cell coordinates (then use the kd-tree).
+  bool build(const Positions& points, float radius) {
+    Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
+    for (const auto& p : points)
+      if (isFinite(p)) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
+    if (!(lo.x() <= hi.x())) return false;
+    cell_ = radius;
+    inv_ = 1.0 / double(radius);
+    // Two cells of margin: every cell index is >= 1 even after rounding, so index - 1 is valid.
+    origin_ = lo.cast<double>() - Eigen::Vector3d::Constant(2 * cell_);
+    if (((hi.cast<double>() - origin_) * inv_).maxCoeff() > double((1 << 21) - 4)) return false;
+    std::vector<std::pair<std::uint64_t, int>> keyed;
+    keyed.reserve(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (isFinite(points[i])) keyed.emplace_back(keyOf(points[i]), static_cast<int>(i));
+    std::sort(keyed.begin(), keyed.end());
+    original_.resize(keyed.size());
+    sorted_.resize(keyed.size());
+    keys_.clear();
+    start_.clear();
+    for (std::size_t s = 0; s < keyed.size(); ++s) {
+      original_[s] = keyed[s].second;
+      sorted_[s] = points[keyed[s].second];
+      if (s == 0 || keyed[s].first != keyed[s - 1].first) {
+        keys_.push_back(keyed[s].first);
+        start_.push_back(static_cast<int>(s));
+      }
+    }
+    start_.push_back(static_cast<int>(keyed.size()));
+    return true;
+  }
+  // Finite points in cell order, and their indices in the input.
+  const Positions& sorted() const { return sorted_; }
+  const std::vector<int>& original() const { return original_; }
+  // The 3 x 3 rows of 3 cells around a cell: each row is one contiguous range of sorted()
+  // (consecutive keys are adjacent). Kept between queries from the same cell.
+  struct Ranges {
+    std::uint64_t key = ~std::uint64_t(0);
+    int count = 0;
+    int begin[9], end[9];
+  };
+  // Indices (into sorted()) of the points within `radius` (<= the cell side) of q.
+  int query(const Eigen::Vector3f& q, float radius, std::vector<int>& out, Ranges& ranges) const {
+    out.clear();
+    const float r2 = radius * radius;
+    const std::uint64_t key = keyOf(q);
+    if (key != ranges.key) {
+      ranges.key = key;
+      ranges.count = 0;
+      const std::uint64_t mask = (std::uint64_t(1) << 21) - 1;
+      const std::uint64_t ix = key & mask, iy = (key >> 21) & mask, iz = key >> 42;
+      for (std::uint64_t z = iz - 1; z <= iz + 1; ++z)
+        for (std::uint64_t y = iy - 1; y <= iy + 1; ++y) {
+          const std::uint64_t first = pack(ix - 1, y, z), last = pack(ix + 1, y, z);
+          auto lo = std::lower_bound(keys_.begin(), keys_.end(), first);
+          auto hi = std::upper_bound(lo, keys_.end() - lo > 3 ? lo + 3 : keys_.end(), last);
+          if (lo == hi) continue;
+          ranges.begin[ranges.count] = start_[static_cast<std::size_t>(lo - keys_.begin())];
+          ranges.end[ranges.count] = start_[static_cast<std::size_t>(hi - keys_.begin())];
+          ++ranges.count;
+        }
+    }
+    for (int r = 0; r < ranges.count; ++r)
+      for (int s = ranges.begin[r]; s < ranges.end[r]; ++s)
+        if ((sorted_[s] - q).squaredNorm() <= r2) out.push_back(s);
+    return static_cast<int>(out.size());
+  }
+
+ private:
+  static std::uint64_t pack(std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | (y << 21) | (z << 42); }
+  std::uint64_t keyOf(const Eigen::Vector3f& p) const {
+    const Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+    return pack(std::uint64_t(c.x()), std::uint64_t(c.y()), std::uint64_t(c.z()));
+  }
+  double cell_ = 0, inv_ = 0;
+  Eigen::Vector3d origin_;
+  std::vector<std::uint64_t> keys_;
+  std::vector<int> start_, original_;
+  Positions sorted_;
+};
+
 }  // namespace
 
 WavejetResult fitWavejet(const Positions& points, const int* neighbours, int count,
@@ -236,15 +496,18 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   if (isFinite(initial_normal) && initial_normal.norm() > 0) {
     n = initial_normal.cast<double>().normalized();
   } else {
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const int j : ws.finite) mean += points[j].cast<double>();
-    mean /= l;
-    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    // One pass, relative to p: sums of the offsets and of their products.
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d prod = Eigen::Matrix3d::Zero();
     for (const int j : ws.finite) {
-      const Eigen::Vector3d d = points[j].cast<double>() - mean;
-      cov += d * d.transpose();
+      const Eigen::Vector3d d = (points[j] - pf).cast<double>();
+      sum += d;
+      prod.noalias() += d * d.transpose();
     }
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
+    const Eigen::Vector3d mean = sum / l;
+    const Eigen::Matrix3d cov = prod - double(l) * mean * mean.transpose();
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+    eig.computeDirect(cov);
     n = eig.eigenvectors().col(0).normalized();
   }
   const Eigen::Vector3d toward = isFinite(orientation) ? Eigen::Vector3d(orientation.cast<double>())
@@ -254,7 +517,7 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
 
   const double inv_r = 1.0 / radius;
   const double refit_tan = std::tan(params.refit_angle * M_PI / 180.0);
-  std::vector<std::complex<double>> phi;
+  std::vector<std::complex<double>>& phi = ws.phi;
   double gx = 0, gy = 0;
   for (int refits = 0;; ++refits) {
     ws.local.resize(l);
@@ -309,7 +572,7 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   t1_t = (t1_t - n_t * n_t.dot(t1_t)).normalized();
   dir = (dir - n_t * n_t.dot(dir)).normalized();
   const double cos_tilt = 1.0 / w;
-  correctCoefficients(phi, order, gx, gy);
+  correctCoefficients(phi, order, gx, gy, ws);
   phi[wavejetIndex(1, 1)] = 0.0;
 
   res.order = order;
@@ -320,8 +583,7 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   res.mean_curvature = static_cast<float>(mean);
   res.gaussian_curvature = static_cast<float>(gauss);
   res.offset = static_cast<float>(phi[0].real() * cos_tilt * radius);
-  WavejetCoefficients local;
-  WavejetCoefficients& c = coefficients ? *coefficients : local;
+  WavejetCoefficients& c = coefficients ? *coefficients : ws.coefficients;
   c.order = order;
   c.radius = radius;
   c.frame.n = res.normal;
@@ -348,31 +610,61 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (orientation && orientation->size() != points.size())
     throw InvalidParameter("orientation", detail::toString(orientation->size()), "one per point");
   if (countFinite(points) == 0) throw InvalidInput("no finite point");
-  SpatialIndex index(points);
-  if (radius == 0) radius = radiusForMeanNeighbourCount(points, index, target_neighbours);
+  if (radius == 0) {
+    SpatialIndex index(points);
+    radius = radiusForMeanNeighbourCount(points, index, target_neighbours);
+  }
   const std::int64_t count = static_cast<std::int64_t>(points.size());
   std::vector<WavejetResult> out(points.size());
   std::vector<int> neighbour_count(points.size(), 0);
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   ProgressReporter reporter(progress, "wavejets", points.size());
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
+  CellGrid grid;
+  if (grid.build(points, radius)) {
+    // Points visited in cell order (memory locality); results stored at their input index.
+    const Positions& sorted = grid.sorted();
+    const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
 #pragma omp parallel
-  {
-    WavejetWorkspacePtr ws = makeWavejetWorkspace();
-    std::vector<int> idx;
-    std::vector<float> d2;
+    {
+      WavejetWorkspacePtr ws = makeWavejetWorkspace();
+      std::vector<int> idx;
+      idx.reserve(256);
+      CellGrid::Ranges ranges;
 #pragma omp for schedule(dynamic, 256)
-    for (std::int64_t i = 0; i < count; ++i) {
-      if (reporter.cancelled()) continue;
-      if (isFinite(points[i])) {
-        const int found = index.radiusSearch(points[i], radius, idx, d2);
+      for (std::int64_t s = 0; s < finite; ++s) {
+        if (reporter.cancelled()) continue;
+        const int i = grid.original()[s];
+        const int found = grid.query(sorted[s], radius, idx, ranges);
         neighbour_count[i] = found;
-        out[i] = fitWavejet(points, idx.data(), found, points[i], radius, params, *ws,
+        out[i] = fitWavejet(sorted, idx.data(), found, sorted[s], radius, params, *ws,
                             initial_normals ? (*initial_normals)[i] : nan3,
                             orientation ? (*orientation)[i] : nan3,
                             coefficients ? &(*coefficients)[i] : nullptr);
+        reporter.advance();
       }
-      reporter.advance();
+    }
+    reporter.advance(static_cast<std::size_t>(count - finite));
+  } else {
+    SpatialIndex index(points);
+#pragma omp parallel
+    {
+      WavejetWorkspacePtr ws = makeWavejetWorkspace();
+      std::vector<int> idx;
+      std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t i = 0; i < count; ++i) {
+        if (reporter.cancelled()) continue;
+        if (isFinite(points[i])) {
+          const int found = index.radiusSearch(points[i], radius, idx, d2);
+          neighbour_count[i] = found;
+          out[i] = fitWavejet(points, idx.data(), found, points[i], radius, params, *ws,
+                              initial_normals ? (*initial_normals)[i] : nan3,
+                              orientation ? (*orientation)[i] : nan3,
+                              coefficients ? &(*coefficients)[i] : nullptr);
+        }
+        reporter.advance();
+      }
     }
   }
   reporter.throwIfCancelled();

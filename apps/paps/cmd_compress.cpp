@@ -219,10 +219,10 @@ int runCompress(int argc, char** argv) {
   const double t_enc = seconds(t0);
   if (r.dropped_non_finite) std::printf("dropped %zu non-finite (NaN) points\n", r.dropped_non_finite);
   std::printf("patch radius %g m%s, output spacing %g m%s, %zu seeds, N_bins %d, %d atoms, T0 %d, "
-              "%.2f non-zero coefficients per patch, sparse-code RMSE %.3g m\n",
+              "%.2f non-zero coefficients per patch, sparse-code RMSE %.3g m, %.1f%% of pattern samples with data\n",
               r.patch_radius, p.patch_radius > 0 ? "" : " (chosen)", r.output_spacing,
               p.output_spacing > 0 ? "" : " (measured)", r.seeds, p.bins, p.atoms, p.sparsity, r.mean_nonzeros,
-              r.ksvd_rmse);
+              r.ksvd_rmse, 100.0 * r.valid_fraction);
   const std::size_t n = in.size() - r.dropped_non_finite;
   std::printf("bytes: header %zu, seeds %zu, frames %zu (%s), dictionary %zu, patches %zu (%s; range %zu, zstd %zu, "
               "lzma %zu)\n",

@@ -56,13 +56,17 @@ struct Method {
 std::vector<Method> sweep(float r, bool quick) {
   std::vector<Method> m;
   m.push_back({"ours", "default", {{"radius", r}}, true});
-  m.push_back({"ours", "manuscript (guide 0, k 16)", {{"radius", r}, {"guide", 0}, {"patches", 16}}, false});
-  m.push_back({"ours", "passes 2", {{"radius", r}, {"passes", 2}}, false});
-  m.push_back({"ours", "radius x2", {{"radius", 2 * r}}, false});
+  m.push_back({"ours", "manuscript (centre, guide 0, k 16)",
+               {{"radius", r}, {"centre", 1}, {"guide", 0}, {"patches", 16}}, false});
+  m.push_back({"ours", "centre, radius x2, refilter x3", {{"radius", 2 * r}, {"centre", 1}, {"passes", 3}, {"guided", 0}},
+               false});
+  m.push_back({"ours", "radius x1.5 guide 0", {{"radius", 1.5 * r}, {"guide", 0}}, false});
   m.push_back({"ours", "radius x2 passes 2", {{"radius", 2 * r}, {"passes", 2}}, false});
+  m.push_back({"ours", "radius x2 refilter x2", {{"radius", 2 * r}, {"passes", 2}, {"guided", 0}}, false});
   if (!quick) {
-    m.push_back({"ours", "radius x2 patches 64", {{"radius", 2 * r}, {"patches", 64}}, false});
+    m.push_back({"ours", "radius x1.5 passes 2", {{"radius", 1.5 * r}, {"passes", 2}}, false});
     m.push_back({"ours", "radius x2 passes 3", {{"radius", 2 * r}, {"passes", 3}}, false});
+    m.push_back({"ours", "radius x2.5 refilter x2", {{"radius", 2.5 * r}, {"passes", 2}, {"guided", 0}}, false});
   }
   for (double f : quick ? std::vector<double>{1, 2} : std::vector<double>{1, 1.5, 2, 3})
     m.push_back({"mls", "radius x" + fmt("%g", f), {{"radius", r * f}, {"order", 2}, {"threads", 2}}, f == 1});

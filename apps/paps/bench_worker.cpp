@@ -108,6 +108,8 @@ int runBenchWorker(int argc, char** argv) {
       q.search_checks = static_cast<int>(get("checks", q.search_checks));
       q.passes = static_cast<int>(get("passes", q.passes));
       q.descriptor_smoothing = static_cast<int>(get("guide", q.descriptor_smoothing));
+      q.guided_passes = get("guided", 1) != 0;
+      if (get("centre", 0) != 0) q.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
       output = denoiseBySimilarity(input, q);
     } else if (method == "bilateral") {
       PointBilateralParameters q;

@@ -23,6 +23,10 @@ const char* kDenoiseUsage =
     "  --smoothing N          mean-curvature-motion iterations (default 10)\n"
     "  --guide N              smoothing iterations of the points descriptors are built from (default 3)\n"
     "  --passes N             times the filter is applied (default 1)\n"
+    "  --refilter             later passes filter the previous output (default: they average the\n"
+    "                         input again, guided by the previous output)\n"
+    "  --aggregate A          patch (default: fit over the union of the similar patches) or\n"
+    "                         centre (manuscript: average of the similar points' residuals)\n"
     "  --patches K            similar patches averaged (default 32)\n"
     "  --checks N             descriptors compared per similarity query (default 128, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
@@ -30,10 +34,11 @@ const char* kDenoiseUsage =
     "  --timings              print the wall time of each stage\n";
 
 int runDenoise(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
-               "patches", "iterations", "quiet", "timings", "checks", "guide", "passes"});
+               "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
+               "refilter", "aggregate"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
@@ -59,6 +64,10 @@ int runDenoise(int argc, char** argv) {
     p.search_checks = static_cast<int>(a.number("checks", p.search_checks));
     p.descriptor_smoothing = static_cast<int>(a.number("guide", p.descriptor_smoothing));
     p.passes = static_cast<int>(a.number("passes", p.passes));
+    p.guided_passes = !a.has("refilter");
+    const std::string aggregate = a.text("aggregate", "patch");
+    if (aggregate == "centre") p.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
+    else if (aggregate != "patch") throw InvalidParameter("aggregate", aggregate, "patch or centre");
     if (isFinite(origin) && origin.squaredNorm() > 0) {
       p.use_viewpoint = true;
       p.viewpoint = origin;

@@ -113,12 +113,54 @@ TEST(SimilarityDenoising, NoiseFreeSurfacesStayPut) {
 }
 
 TEST(SimilarityDenoising, OnePatchIsTheIdentity) {
-  // similar_patches = 1 averages V over the point alone: p_S + V = p.
+  // Centre aggregation with similar_patches = 1 averages V over the point alone: p_S + V = p.
   const Positions p = smallNoisyPlane(2000);
   SimilarityDenoisingParameters params;
   params.similar_patches = 1;
+  params.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
   const Positions out = paps::denoiseBySimilarity(p, params);
   for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LT((out[i] - p[i]).norm(), 1e-5f) << i;
+}
+
+TEST(SimilarityDenoising, OnePatchFitIsExactOnAQuadric) {
+  // Patch aggregation with similar_patches = 1 is a weighted quadratic fit of the point's own
+  // neighbourhood over its tangent plane: on a noise-free paraboloid it reproduces the surface,
+  // whatever the smoothing did to the base point.
+  paps::Random rng(5);
+  Positions p;
+  for (int i = 0; i < 4000; ++i) {
+    const float x = static_cast<float>(rng.uniform(-1, 1)), y = static_cast<float>(rng.uniform(-1, 1));
+    p.emplace_back(x, y, 0.3f * x * x - 0.2f * y * y);
+  }
+  SimilarityDenoisingParameters params;
+  params.similar_patches = 1;
+  const Positions out = paps::denoiseBySimilarity(p, params);
+  double worst = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const Eigen::Vector3f& q = out[i];
+    if (std::abs(p[i].x()) > 0.9f || std::abs(p[i].y()) > 0.9f) continue;  // border fits are one-sided
+    worst = std::max<double>(worst, std::abs(q.z() - (0.3f * q.x() * q.x() - 0.2f * q.y() * q.y())));
+  }
+  EXPECT_LT(worst, 2e-4);  // the radius is ~0.05: curvature-motion moved points ~1e-3 off it
+}
+
+TEST(SimilarityDenoising, PatchAggregationBeatsCentreAndGuidedPassesHelp) {
+  // The union of the similar patches holds ~30x more samples than their centres: at the same
+  // radius the error is lower (measured 1.37e-3 against 1.45e-3 here; 1.52e-3 against 1.92e-3
+  // at 200K points). A second pass guided by the first output lowers it again (1.12e-3).
+  const NoisyShape s = engravedPlane(40000, 0.0025f);
+  const paps::PointToMeshDistance truth(s.mesh);
+  SimilarityDenoisingParameters params;
+  const double patch = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, params), truth).rmse;
+  params.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
+  const double centre = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, params), truth).rmse;
+  params.aggregation = SimilarityDenoisingParameters::Aggregation::Patch;
+  params.passes = 2;
+  const double guided = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, params), truth).rmse;
+  std::printf("engraved plane 40K, noise 0.25%%: patch %.3g, centre %.3g, patch 2 guided passes %.3g\n", patch,
+              centre, guided);
+  EXPECT_LT(patch, 0.97 * centre);
+  EXPECT_LT(guided, 0.9 * patch);
 }
 
 // ------------------------------------------------------------------ filter contract

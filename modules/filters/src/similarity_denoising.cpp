@@ -2,9 +2,11 @@
 #include <paps/filters/impl/similarity_denoising.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 
+#include <Eigen/Cholesky>
 #include <pcl/point_types.h>
 
 #include <paps/core/descriptor_index.h>
@@ -93,12 +95,78 @@ std::vector<int> halfTurnPermutation(const SamplingPattern& pattern) {
   return perm;
 }
 
+// Weighted least-squares normal equations of h = c0 + c1 u + c2 v + c3 u^2 + c4 uv + c5 v^2
+// over one patch: the heights of a point's neighbours above its smoothed position, in its
+// frame, in units of the radius, with Gaussian weights exp(-(u^2 + v^2)). A half turn of the
+// frame (u, v) -> (-u, -v) flips the sign of the linear monomials only.
+// Stored per point in float (half the memory; the sums are of ~30 terms of order 1), summed
+// across patches in double.
+template <typename Scalar>
+struct PatchMoments {
+  static constexpr int kTerms = 6;
+  // Upper triangle of the 6 x 6 matrix (21 values), then the right-hand side (6).
+  std::array<Scalar, 27> m{};
+
+  static std::array<double, kTerms> monomials(double u, double v) { return {1, u, v, u * u, u * v, v * v}; }
+  static bool odd(int t) { return t == 1 || t == 2; }
+
+  void addSample(double u, double v, double h, double w) {
+    const auto phi = monomials(u, v);
+    int e = 0;
+    for (int a = 0; a < kTerms; ++a)
+      for (int b = a; b < kTerms; ++b) m[e++] += static_cast<Scalar>(w * phi[a] * phi[b]);
+    for (int a = 0; a < kTerms; ++a) m[e++] += static_cast<Scalar>(w * phi[a] * h);
+  }
+  template <typename Other>
+  void add(const PatchMoments<Other>& o, double w, bool turned) {
+    int e = 0;
+    for (int a = 0; a < kTerms; ++a)
+      for (int b = a; b < kTerms; ++b, ++e) m[e] += (turned && (odd(a) != odd(b)) ? -w : w) * o.m[e];
+    for (int a = 0; a < kTerms; ++a, ++e) m[e] += (turned && odd(a) ? -w : w) * o.m[e];
+  }
+  // c0 of the fit; the quadratic terms are dropped (then the linear ones) when the samples do
+  // not determine them, and NaN when there is nothing at all.
+  double heightAtCentre() const {
+    Eigen::Matrix<double, kTerms, kTerms> A;
+    Eigen::Matrix<double, kTerms, 1> b;
+    int e = 0;
+    for (int a = 0; a < kTerms; ++a)
+      for (int c = a; c < kTerms; ++c, ++e) A(a, c) = A(c, a) = m[e];
+    for (int a = 0; a < kTerms; ++a, ++e) b(a) = m[e];
+    for (int terms : {6, 3}) {
+      Eigen::LDLT<Eigen::MatrixXd> ldlt(A.topLeftCorner(terms, terms));
+      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) continue;
+      const Eigen::VectorXd d = ldlt.vectorD();
+      if (d.minCoeff() <= 1e-9 * std::max(d.maxCoeff(), 1e-300)) continue;
+      return ldlt.solve(b.head(terms))(0);
+    }
+    return A(0, 0) > 0 ? b(0) / A(0, 0) : std::numeric_limits<double>::quiet_NaN();
+  }
+};
+
+std::vector<PatchMoments<float>> patchMoments(const Positions& points, const Positions& smooth, const LocalFrames& frames,
+                                       const NeighbourGraph& graph, const std::vector<std::uint8_t>& usable,
+                                       float radius) {
+  std::vector<PatchMoments<float>> out(points.size());
+  const double inv_r = 1.0 / radius;
+  const std::int64_t n = static_cast<std::int64_t>(points.size());
+#pragma omp parallel for schedule(dynamic, 1024)
+  for (std::int64_t i = 0; i < n; ++i) {
+    if (!usable[i]) continue;
+    for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
+      const Eigen::Vector3d l = frames[i].toLocal(points[*j] - smooth[i]).cast<double>() * inv_r;
+      out[i].addSample(l.x(), l.y(), l.z(), std::exp(-(l.x() * l.x() + l.y() * l.y())));
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 namespace {
 Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParameters& params,
                       SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
-                      const ProgressCallback& progress) {
+                      const ProgressCallback& progress, const Positions* estimate = nullptr) {
   SimilarityDenoisingReport report;
   const std::size_t n = points.size();
   const std::size_t finite = checkMovableInput(points, movable);
@@ -136,7 +204,11 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
   // share that noise, and averaging them keeps it).
   auto half = [](int i) { return i & 1; };
   Positions guide = points;
-  if (params.descriptor_smoothing > 0) {
+  if (estimate) {
+    // A first estimate guides (as in two-stage non-local means, e.g. BM3D): it is far less
+    // noisy, and each point's own noise is diluted in it over many samples.
+    guide = *estimate;
+  } else if (params.descriptor_smoothing > 0) {
     const NeighbourGraph half_graph = graph.filtered([&](int i, int j) { return half(i) == half(j); });
     std::vector<std::uint8_t> half_usable(usable);
     for (std::size_t i = 0; i < n; ++i) half_usable[i] = usable[i] && half_graph.count(i) >= kMinNeighbours;
@@ -144,8 +216,12 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
     guide = meanCurvatureMotion(points, half_graph, half_normals, half_usable, params.descriptor_smoothing,
                                 progress, "guide");
   }
-  const NeighbourGraph describe_graph = graph.filtered([&](int i, int j) { return half(i) != half(j); });
+  const NeighbourGraph describe_graph =
+      estimate ? graph : graph.filtered([&](int i, int j) { return half(i) != half(j); });
   normals = smooth_normals;
+  // Heights are read above this base, in descriptors and in the patch fits alike.
+  const bool patch_mode = params.aggregation == SimilarityDenoisingParameters::Aggregation::Patch;
+  const Positions& base = patch_mode && estimate ? *estimate : smooth;
   // 3. Principal frames on S_smooth and plane+height descriptors of S in them.
   // The principal directions come from the guide, which still carries the detail that S_smooth
   // has lost (on S_smooth they would be noise); the normal and the height plane are S_smooth's.
@@ -155,6 +231,9 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
     for (std::size_t i = 0; i < n; ++i)
       if (isFinite(guide_normals[i]) && isFinite(normals[i]) && guide_normals[i].dot(normals[i]) < 0)
         guide_normals[i] = -guide_normals[i];
+    if (estimate)  // the estimate's normals are far less noisy than S_smooth's
+      for (std::size_t i = 0; i < n; ++i)
+        if (isFinite(guide_normals[i])) normals[i] = guide_normals[i];
     frames = estimatePrincipalFrames(guide_normals, graph);
     for (std::size_t i = 0; i < n; ++i) {
       LocalFrame& f = frames[i];
@@ -191,12 +270,12 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
         float* d0 = &desc[rows_of_point[i] * dims];
         // The point itself is left out of its descriptor: otherwise patches that share its
         // own noise would look most similar and the average would keep that noise.
-        patch.describe(frames[i], smooth[i], guide, describe_graph.begin(i) + 1, describe_graph.count(i) - 1,
+        patch.describe(frames[i], base[i], guide, describe_graph.begin(i) + 1, describe_graph.count(i) - 1,
                        d0, valid.data());
         if (orientations == 2) {
           float* d1 = d0 + dims;
           if (!perm.empty()) for (std::size_t s = 0; s < dims; ++s) d1[s] = d0[perm[s]];
-          else patch.describe(frames[i].rotatedHalfTurn(), smooth[i], guide, describe_graph.begin(i) + 1,
+          else patch.describe(frames[i].rotatedHalfTurn(), base[i], guide, describe_graph.begin(i) + 1,
                               describe_graph.count(i) - 1, d1, valid.data());
         }
       }
@@ -272,11 +351,43 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
   }
   report.sigma = std::sqrt(sigma2);
 
-  // 5. The three sums of 2.2.2: V of the similar points, read in their own frames (turned
-  //    by half a turn for the second orientation), averaged and re-expressed in p's frame.
   Positions out = points;
   const std::int64_t sn = static_cast<std::int64_t>(n);
   std::size_t moved = 0;
+  if (params.aggregation == SimilarityDenoisingParameters::Aggregation::Patch) {
+    // 5'. Non-local MLS: the weighted normal equations of every patch (its points' heights
+    //     over its own tangent plane, in units of the radius, Gaussian weights) are computed
+    //     once; a point's fit sums those of its similar patches, so the union of about
+    //     k x neighbours samples costs k small additions.
+    const std::vector<PatchMoments<float>> moments = patchMoments(points, base, frames, graph, usable, nb.radius);
+#pragma omp parallel for schedule(static) reduction(+ : moved)
+    for (std::int64_t i = 0; i < sn; ++i) {
+      if (!isMoving(i)) continue;
+      PatchMoments<double> acc;
+      double w_max = 0;
+      for (int m = 0; m < k; ++m) {
+        const int row = match[i * k + m];
+        if (row < 0) break;
+        const int q = point_of_row[row];
+        const bool turned = orientations == 2 && (row & 1);
+        const double w = std::exp(-static_cast<double>(match_d2[i * k + m]) / sigma2);
+        acc.add(moments[q], w, turned);
+        w_max = std::max(w_max, w);
+      }
+      acc.add(moments[i], w_max > 0 ? w_max : 1.0, false);
+      const double h = acc.heightAtCentre() * nb.radius;
+      if (std::isfinite(h)) {
+        out[i] = base[i] + static_cast<float>(h) * frames[i].n;
+        ++moved;
+      }
+    }
+    report.moved = moved;
+    if (report_out) *report_out = report;
+    return out;
+  }
+
+  // 5. The three sums of 2.2.2: V of the similar points, read in their own frames (turned
+  //    by half a turn for the second orientation), averaged and re-expressed in p's frame.
 #pragma omp parallel for schedule(static) reduction(+ : moved)
   for (std::int64_t i = 0; i < sn; ++i) {
     if (!isMoving(i)) continue;
@@ -317,7 +428,8 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
     // Later passes keep the radius of the first, so the scale does not drift.
     SimilarityDenoisingParameters p = params;
     if (pass > 0) p.radius = report.radius;
-    cur = denoiseOnce(cur, p, &report, movable, progress);
+    if (pass > 0 && params.guided_passes) cur = denoiseOnce(points, p, &report, movable, progress, &cur);
+    else cur = denoiseOnce(cur, p, &report, movable, progress);
   }
   if (report_out) *report_out = report;
   return cur;

@@ -37,11 +37,24 @@ struct SimilarityDenoisingParameters {
   int descriptor_smoothing = 3;
   /// Times the whole filter is applied (1 to 100).
   int passes = 1;
+  /// Later passes average the input again, with the previous pass's output as the guide for
+  /// frames, descriptors and heights (two-stage, as BM3D does for images), instead of
+  /// filtering that output again.
+  bool guided_passes = true;
   /// Number of most similar patches averaged, the point's own included (1 to 1000).
   int similar_patches = 32;
   /// Descriptors compared per similarity query at most (0: exact search, slow on noisy
   /// data). Measured default, see docs/denoising.md.
   int search_checks = 128;
+  /// How the similar patches are combined.
+  ///  - Centre (manuscript 2.2.2): the residual V of each similar point (the patch centre),
+  ///    read in its frame, is averaged.
+  ///  - Patch: every similar patch brings all its points, read in its frame; the height at the
+  ///    point is then a Gaussian-weighted quadratic fit over the union (non-local MLS). The
+  ///    average runs over about k x neighbours samples instead of k, so noise drops further at
+  ///    the same detail. Measured default, see docs/denoising.md.
+  enum class Aggregation { Centre, Patch };
+  Aggregation aggregation = Aggregation::Patch;
   /// Index both frame orientations of every patch (manuscript 2.1.2).
   bool both_orientations = true;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.

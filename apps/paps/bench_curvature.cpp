@@ -153,11 +153,13 @@ void orientLike(std::vector<Estimate>& est, const std::vector<Eigen::Vector3f>& 
 
 // ---- the three methods, same radius ----
 
+// select_order: the noise setting of docs/wavejets.md, BIC order selection with beta = 3.
 std::vector<Estimate> runWavejets(const Positions& p, float radius, int order, const Normals& hints, double& secs,
                                   WavejetReport* report = nullptr, bool select_order = false) {
   WavejetParameters params;
   params.order = order;
   params.select_order = select_order;
+  if (select_order) params.beta = 3.f;
   const auto t0 = Clock::now();
   const auto res = estimateWavejets(p, radius, params, report, nullptr, nullptr, &hints);
   secs = since(t0);
@@ -169,7 +171,8 @@ std::vector<Estimate> runWavejets(const Positions& p, float radius, int order, c
 // PCL: normals by NormalEstimation, curvatures by PrincipalCurvaturesEstimation (unsigned,
 // variance of the projected normals: pc1 >= pc2). `calibrated` then holds
 // s sqrt(pc) with the least-squares best s against the true magnitudes (an oracle favour).
-std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, bool threads) {
+std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, bool threads, float curv_radius = 0) {
+  if (curv_radius <= 0) curv_radius = radius;
   pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
   cloud->resize(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) (*cloud)[i].getVector3fMap() = p[i];
@@ -190,7 +193,7 @@ std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, boo
   pcl::PrincipalCurvaturesEstimation<pcl::PointXYZ, pcl::Normal, pcl::PrincipalCurvatures> pc;
   pc.setInputCloud(cloud);
   pc.setInputNormals(normals);
-  pc.setRadiusSearch(radius);
+  pc.setRadiusSearch(curv_radius);
   pc.compute(pcs);
   secs = since(t0);
   std::vector<Estimate> out(p.size());
@@ -210,6 +213,18 @@ std::vector<Estimate> calibratePcl(std::vector<Estimate> est, const std::vector<
   }
   const double s = den > 0 ? num / den : 0;
   for (auto& e : est) { e.k1 = float(s * std::sqrt(std::max(0.f, e.k1))); e.k2 = float(s * std::sqrt(std::max(0.f, e.k2))); }
+  return est;
+}
+
+// Oracle-free reading of PCL's output: the projected neighbour normals vary like S d (S the
+// shape operator, d the tangential offset), and over a uniformly sampled disk of radius rho
+// the offsets have variance rho^2 / 4 along any direction, so pc = k^2 rho^2 / 4 and
+// |k| = 2 sqrt(pc) / rho, rho the curvature search radius.
+std::vector<Estimate> geometricPcl(std::vector<Estimate> est, float curv_radius) {
+  for (auto& e : est) {
+    e.k1 = float(2 * std::sqrt(std::max(0.f, e.k1)) / curv_radius);
+    e.k2 = float(2 * std::sqrt(std::max(0.f, e.k2)) / curv_radius);
+  }
   return est;
 }
 
@@ -379,11 +394,18 @@ int runBenchCurvature(int argc, char** argv) {
   std::printf("\n## Analytic surfaces (noise sigma in %% of R_phi; evaluated on points farther than 0.8 from the border)\n");
   std::printf("curvature error = RMSE(k1, k2) / RMS(true k1, k2); normal error = mean angle (deg)\n");
   std::printf("PCL raw = pc1, pc2 of PrincipalCurvaturesEstimation against |k|; PCL cal. = s*sqrt(pc) with the oracle best s\n\n");
-  std::printf("ours = fixed order K; ours sel. = order chosen in [2, K] per point by GCV (--select-order)\n\n");
-  std::printf("| surface | noise | R_phi | ours curv | ours sel. curv | CGAL curv | PCL cal. curv | PCL raw curv | ours normal | ours sel. normal | CGAL normal | PCL normal | ours s | CGAL s | PCL s |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("ours = fixed order K; ours sel. = order chosen in [2, K] per point by BIC (--select-order), beta 3\n");
+  std::printf("ours sel. 2R = the same at radius 2 R_phi: the support PCL's estimator sees (its curvature at p\n"
+              "averages normals of neighbours within R_phi, each fitted over R_phi)\n");
+  std::printf("PCL geom. = 2 sqrt(pc) / R_phi, the oracle-free reading of pc (uniform disk: pc = k^2 R^2 / 4)\n");
+  std::printf("PCL(R/2) cal. = PCL with R_phi / 2 for normals and curvatures (effective support R_phi, as ours\n"
+              "and ours sel.), oracle-calibrated\n\n");
+  std::printf("| surface | noise | R_phi | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal | ours s | ours sel. 2R s | CGAL s | PCL s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   const double noise_levels[] = {0.0, 0.0025, 0.005, 0.01};
   double worst_ratio_pcl = 0, worst_ratio_cgal = 0, worst_sel_pcl = 0, worst_raw_pcl = 0;
+  double worst_sel2_pcl = 0, worst_sel2_geom = 0, worst_sel2_raw = 0, worst_sel_half = 0, worst_sel_cgal = 0,
+         worst_sel2_cgal = 0;
   std::uint64_t seed = 1;
   for (const Surface& s : analyticSurfaces()) {
     Positions clean;
@@ -405,13 +427,20 @@ int runBenchCurvature(int argc, char** argv) {
       double t_sel = 0;
       auto ours = runWavejets(p, radius, order, tn, t_ours);
       auto sel = runWavejets(p, radius, order, tn, t_sel, nullptr, true);
+      double t_sel2 = 0, t_half = 0;
+      auto sel2 = runWavejets(p, 2 * radius, order, tn, t_sel2, nullptr, true);
       auto pcl_est = runPcl(p, radius, t_pcl, true);
+      auto pcl_half = runPcl(p, radius / 2, t_half, true);
       orientLike(ours, tn);
       orientLike(sel, tn);
+      orientLike(sel2, tn);
       const Errors eo = score(ours, truth, eval, false);
       const Errors es = score(sel, truth, eval, false);
+      const Errors es2 = score(sel2, truth, eval, false);
       const Errors ep = score(pcl_est, truth, eval, true);
       const Errors epc = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
+      const Errors epg = score(geometricPcl(pcl_est, radius), truth, eval, true);
+      const Errors eph = score(calibratePcl(pcl_half, truth, eval), truth, eval, true);
       Errors ec;
 #ifdef PAPS_HAVE_CGAL
       auto cg = runCgal(p, radius, order, t_cgal);
@@ -422,15 +451,29 @@ int runBenchCurvature(int argc, char** argv) {
       worst_sel_pcl = std::max(worst_sel_pcl, es.curv_rel / epc.curv_rel);
       worst_raw_pcl = std::max(worst_raw_pcl, eo.curv_rel / ep.curv_rel);
       // Ratios to CGAL only where CGAL's error is measurable (> 1e-3).
-      if (ec.curv_rel > 1e-3) worst_ratio_cgal = std::max(worst_ratio_cgal, eo.curv_rel / ec.curv_rel);
-      std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f |\n",
-                  s.name.c_str(), noise * 100, radius, eo.curv_rel, es.curv_rel, ec.curv_rel, epc.curv_rel, ep.curv_rel,
-                  eo.normal_deg, es.normal_deg, ec.normal_deg, ep.normal_deg, t_ours, t_cgal, t_pcl);
+      if (ec.curv_rel > 1e-3) {
+        worst_ratio_cgal = std::max(worst_ratio_cgal, eo.curv_rel / ec.curv_rel);
+        worst_sel_cgal = std::max(worst_sel_cgal, es.curv_rel / ec.curv_rel);
+        worst_sel2_cgal = std::max(worst_sel2_cgal, es2.curv_rel / ec.curv_rel);
+      }
+      worst_sel2_pcl = std::max(worst_sel2_pcl, es2.curv_rel / epc.curv_rel);
+      worst_sel2_geom = std::max(worst_sel2_geom, es2.curv_rel / epg.curv_rel);
+      worst_sel2_raw = std::max(worst_sel2_raw, es2.curv_rel / ep.curv_rel);
+      worst_sel_half = std::max(worst_sel_half, es.curv_rel / eph.curv_rel);
+      std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
+                  s.name.c_str(), noise * 100, radius, eo.curv_rel, es.curv_rel, es2.curv_rel, ec.curv_rel, epc.curv_rel,
+                  epg.curv_rel, ep.curv_rel, eph.curv_rel, eo.normal_deg, es.normal_deg, es2.normal_deg, ec.normal_deg,
+                  ep.normal_deg, t_ours, t_sel2, t_cgal, t_pcl);
       std::fflush(stdout);
     }
   }
   std::printf("\nworst ratios over the table: ours / PCL raw %.3f; ours / PCL calibrated %.3f; ours sel. / PCL calibrated "
               "%.3f; ours / CGAL %.3f (where CGAL > 1e-3)\n", worst_raw_pcl, worst_ratio_pcl, worst_sel_pcl, worst_ratio_cgal);
+  std::printf("same support 2 R_phi: ours sel. 2R / PCL calibrated %.3f, / PCL geom. %.3f, / PCL raw %.3f\n", worst_sel2_pcl,
+              worst_sel2_geom, worst_sel2_raw);
+  std::printf("same support R_phi: ours sel. / PCL(R/2) calibrated %.3f\n", worst_sel_half);
+  std::printf("against CGAL (degree %d, where CGAL > 1e-3): ours sel. %.3f, ours sel. 2R %.3f\n", order, worst_sel_cgal,
+              worst_sel2_cgal);
 
   // ---- 2. tilted parameterization plane ----
   std::printf("\n## Tilted parameterization plane (no noise): normal error (deg) after correction, max over evaluated points\n");
@@ -535,9 +578,16 @@ int runBenchCurvature(int argc, char** argv) {
       auto sel = runWavejets(p, radius, order, tn, t_sel, nullptr, true);
       orientLike(sel, tn);
       const Errors es = score(sel, truth, eval, false);
+      double t_sel2 = 0, t_half = 0;
+      auto sel2 = runWavejets(p, 2 * radius, order, tn, t_sel2, nullptr, true);
+      orientLike(sel2, tn);
+      const Errors es2 = score(sel2, truth, eval, false);
       auto pcl_est = runPcl(p, radius, t_pcl, true);
+      auto pcl_half = runPcl(p, radius / 2, t_half, true);
       const Errors eo = score(ours, truth, eval, false), ep = score(pcl_est, truth, eval, true);
       const Errors epc = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
+      const Errors epg = score(geometricPcl(pcl_est, radius), truth, eval, true);
+      const Errors eph = score(calibratePcl(pcl_half, truth, eval), truth, eval, true);
       Errors ec;
 #ifdef PAPS_HAVE_CGAL
       auto cg = runCgal(p, radius, order, t_cgal);
@@ -547,10 +597,11 @@ int runBenchCurvature(int argc, char** argv) {
       std::printf("\n## Scan %s: %zu of %zu vertices (every %d-th), %zu evaluated (border left out); reference: dense\n"
                   "## mesh, per-face second fundamental form from vertex normals, averaged over R_phi/2\n",
                   scan.c_str(), p.size(), mesh.vertices.size(), scan_step, eval.size());
-      std::printf("| R_phi | ours curv | ours sel. curv | CGAL curv | PCL cal. curv | PCL raw curv | ours normal | ours sel. normal | CGAL normal | PCL normal | ours s | CGAL s | PCL s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-      std::printf("| %.3f | %.4f | %.4f | %.4f | %.4f | %.3g | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f |\n", radius, eo.curv_rel,
-                  es.curv_rel, ec.curv_rel, epc.curv_rel, ep.curv_rel, eo.normal_deg, es.normal_deg, ec.normal_deg, ep.normal_deg,
-                  t_ours, t_cgal, t_pcl);
+      std::printf("| R_phi | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal | ours s | ours sel. 2R s | CGAL s | PCL s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      std::printf("| %.3f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
+                  radius, eo.curv_rel, es.curv_rel, es2.curv_rel, ec.curv_rel, epc.curv_rel, epg.curv_rel, ep.curv_rel,
+                  eph.curv_rel, eo.normal_deg, es.normal_deg, es2.normal_deg, ec.normal_deg, ep.normal_deg, t_ours, t_sel2,
+                  t_cgal, t_pcl);
 
       // Renders of the enhanced scan (full resolution): original, positions alpha0 = 2,
       // normals alpha1 = 3 and alpha1 = 3i (skewed).

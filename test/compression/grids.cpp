@@ -7,6 +7,7 @@
 #include <omp.h>
 #include <gtest/gtest.h>
 
+#include <paps/compression/rate_distortion.h>
 #include <paps/compression/self_similarity_codec.h>
 #include <paps/core/random.h>
 #include <paps/core/synthetic.h>
@@ -90,4 +91,22 @@ TEST(SelfSimilarityCodec, OutputDoesNotDependOnTheThreadCount) {
   ASSERT_EQ(d1.size(), d2.size());
   EXPECT_TRUE(std::equal(d1.begin(), d1.end(), d2.begin()));
   EXPECT_GT(d1.size(), pts.size() / 2);
+}
+
+TEST(PreparedReference, KnownAnswerOnAShiftedPlaneAndSameAsCompareClouds) {
+  // A plane z = 0 and the same points lifted by 0.01: D1 = D2 = 0.01 both ways.
+  Positions ref;
+  for (int y = 0; y < 60; ++y)
+    for (int x = 0; x < 60; ++x) ref.emplace_back(0.05f * x, 0.05f * y, 0.f);
+  Positions dec = ref;
+  for (auto& p : dec) p.z() += 0.01f;
+  const PreparedReference prepared(ref);
+  const CloudErrors e = prepared.compare(dec, 0.005);
+  EXPECT_NEAR(e.d1_rmse, 0.01, 1e-5);
+  EXPECT_NEAR(e.d2_rmse, 0.01, 1e-5);
+  EXPECT_DOUBLE_EQ(e.share_above_tolerance, 1.0);
+  const CloudErrors f = compareClouds(ref, dec, 0.005);
+  EXPECT_EQ(e.d2_rmse, f.d2_rmse);
+  EXPECT_EQ(e.d1_rmse, f.d1_rmse);
+  EXPECT_EQ(prepared.compare(dec, 0.02).share_above_tolerance, 0.0);
 }

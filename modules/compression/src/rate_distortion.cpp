@@ -30,24 +30,47 @@ Eigen::Vector3f pcaNormal(const Positions& pts, const std::vector<int>& nb, int 
 double psnr(double peak, double mse) { return mse > 0 ? 10.0 * std::log10(peak * peak / mse) : 999.0; }
 }  // namespace
 
-CloudErrors compareClouds(const Positions& reference_in, const Positions& decoded_in, double tolerance,
-                          int normal_neighbours) {
-  const Positions ref = finiteOnly(reference_in), dec = finiteOnly(decoded_in);
-  if (ref.size() < 3 || dec.size() < 3) throw InvalidInput("comparing clouds needs 3 finite points in each");
-  SpatialIndex ri(ref), di(dec);
-  const long nr = long(ref.size()), nd = long(dec.size());
-  Normals rn(ref.size());
-  double a1 = 0, a2 = 0, b1 = 0, b2 = 0;
-  std::size_t above = 0;
+struct PreparedReference::Data {
+  Positions ref;
+  std::unique_ptr<SpatialIndex> index;
+  Normals normals;
+};
+
+PreparedReference::PreparedReference(const Positions& reference_in, int normal_neighbours) : d_(new Data) {
+  d_->ref = finiteOnly(reference_in);
+  const Positions& ref = d_->ref;
+  if (ref.size() < 3) throw InvalidInput("comparing clouds needs 3 finite points in each");
+  d_->index = std::make_unique<SpatialIndex>(ref);
+  const long nr = long(ref.size());
+  d_->normals.resize(ref.size());
 #pragma omp parallel
   {
     std::vector<int> nb;
     std::vector<float> d2;
 #pragma omp for schedule(static)
     for (long i = 0; i < nr; ++i) {
-      const int c = ri.nearestK(ref[i], std::min<long>(normal_neighbours, nr), nb, d2);
-      rn[i] = pcaNormal(ref, nb, c);
+      const int c = d_->index->nearestK(ref[i], int(std::min<long>(normal_neighbours, nr)), nb, d2);
+      d_->normals[i] = pcaNormal(ref, nb, c);
     }
+  }
+}
+
+PreparedReference::~PreparedReference() = default;
+
+CloudErrors PreparedReference::compare(const Positions& decoded_in, double tolerance) const {
+  const Positions& ref = d_->ref;
+  const Positions dec = finiteOnly(decoded_in);
+  if (dec.size() < 3) throw InvalidInput("comparing clouds needs 3 finite points in each");
+  const SpatialIndex& ri = *d_->index;
+  const Normals& rn = d_->normals;
+  SpatialIndex di(dec);
+  const long nr = long(ref.size()), nd = long(dec.size());
+  double a1 = 0, a2 = 0, b1 = 0, b2 = 0;
+  std::size_t above = 0;
+#pragma omp parallel
+  {
+    std::vector<int> nb;
+    std::vector<float> d2;
 #pragma omp for schedule(static) reduction(+ : a1, a2, above)
     for (long i = 0; i < nr; ++i) {  // reference -> decoded
       const int c = di.nearestK(ref[i], int(std::min<long>(8, nd)), nb, d2);
@@ -78,6 +101,12 @@ CloudErrors compareClouds(const Positions& reference_in, const Positions& decode
   r.d2_psnr = psnr(r.peak, mse2);
   r.share_above_tolerance = double(above) / double(nr);
   return r;
+}
+
+CloudErrors compareClouds(const Positions& reference, const Positions& decoded, double tolerance,
+                          int normal_neighbours) {
+  if (finiteOnly(decoded).size() < 3) throw InvalidInput("comparing clouds needs 3 finite points in each");
+  return PreparedReference(reference, normal_neighbours).compare(decoded, tolerance);
 }
 
 }  // namespace paps::compression

@@ -4,6 +4,8 @@
 // symmetric (the worse of the two directions), as RMSE and PSNR with the bounding-box
 // diagonal of the reference as the peak; and the share of reference points farther than a
 // tolerance from the decoded surface (Table 2.1, last column).
+#include <memory>
+
 #include <paps/core/positions.h>
 
 namespace paps::compression {
@@ -22,5 +24,20 @@ struct CloudErrors {
 /// cloud has fewer than 3 finite points.
 CloudErrors compareClouds(const Positions& reference, const Positions& decoded, double tolerance,
                           int normal_neighbours = 12);
+
+/// A reference cloud prepared once (finite points, spatial index, PCA normals), for comparing
+/// many decoded clouds against it: same results as compareClouds, without redoing that work.
+class PreparedReference {
+ public:
+  explicit PreparedReference(const Positions& reference, int normal_neighbours = 12);
+  ~PreparedReference();
+  PreparedReference(const PreparedReference&) = delete;
+  PreparedReference& operator=(const PreparedReference&) = delete;
+  CloudErrors compare(const Positions& decoded, double tolerance) const;
+
+ private:
+  struct Data;
+  std::unique_ptr<Data> d_;
+};
 
 }  // namespace paps::compression

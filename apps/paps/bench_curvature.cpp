@@ -656,7 +656,7 @@ int runBenchCurvature(int argc, char** argv) {
     const double cpu_all = double(std::clock() - c0) / CLOCKS_PER_SEC;
     std::printf("\n## Speed: %zu points (monkey saddle), order %d, mean %.1f neighbours, R_phi %.4f\n", p.size(), order,
                 rep.mean_neighbours, radius);
-    std::printf("ours, %d threads: %.2f s wall, %.2f s CPU over all threads (neighbour search and kd-tree build "
+    std::printf("ours, %d threads: %.2f s wall, %.2f s CPU over all threads (neighbour search and grid build "
                 "included)\n", threads, t_all, cpu_all);
     const std::size_t sub = std::min<std::size_t>(p.size(), 100000);
     Positions ps(p.begin(), p.begin() + sub);

@@ -28,7 +28,7 @@ const char* kDenoiseUsage =
     "  --aggregate A          patch (default: fit over the union of the similar patches) or\n"
     "                         centre (manuscript: average of the similar points' residuals)\n"
     "  --patches K            similar patches averaged (default 32)\n"
-    "  --checks N             descriptors compared per similarity query (default 128, 0 = exact)\n"
+    "  --checks N             descriptors compared per similarity query (default 64, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";

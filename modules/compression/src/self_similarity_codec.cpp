@@ -155,7 +155,8 @@ struct RadialLayout {
   explicit RadialLayout(const Header& h)
       : rings(h.rings()), sectors(h.sectors()), dr(1.f / (h.rings() + 0.5f)), step(h.radius / 8192.f) {}
   std::int16_t quantize(float y) const {
-    return std::int16_t(std::clamp(std::lround(y / step), -32767L, 32767L));
+    // Clamped as a float first: y / step may overflow to infinity on a corrupt stream.
+    return std::int16_t(std::lround(std::clamp(y / step, -32767.f, 32767.f)));
   }
   bool height(const std::int16_t* y, const std::uint8_t* valid, float u, float v, float& out) const {
     const float rho = std::sqrt(u * u + v * v);

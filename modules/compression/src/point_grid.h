@@ -198,7 +198,7 @@ class PointGrid {
 class ThinningGrid {
  public:
   /// `expected`: about how many points will be kept (sizes the table once).
-  ThinningGrid(float r, std::size_t expected) : r2_(r * r), side_(6 * r), inv_(1.f / (6 * r)), r_(r) {
+  ThinningGrid(float r, std::size_t expected) : r2_(r * r), inv_(1.f / (6 * r)), r_(r) {
     // Cells of side 6r hold about 8 kept points on a surface sampled at 2r.
     cells_.reset(expected / 8 + 16);
   }
@@ -236,7 +236,7 @@ class ThinningGrid {
   std::size_t bytes() const { return cells_.bytes() + head_.capacity() * 4 + next_.capacity() * 4; }
 
  private:
-  float r2_, side_, inv_, r_;
+  float r2_, inv_, r_;
   CellHash cells_;
   std::vector<int> head_, next_;
 };

@@ -155,10 +155,11 @@ int runSuperresWorker(int argc, char** argv) {
       out = superResolveQuadric(scans, q, &r);
       lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"
          << r.grid_sr << " K-1 " << r.mean_similar_weight << " fallbacks " << r.plane_fallbacks << "\n";
-    } else if (method == "apss" || method == "rimls") {
+    } else if (method == "apss" || method == "rimls" || method == "apss-refit" || method == "rimls-refit") {
       MlsUpsamplingParameters q;
       q.output_count = target;
-      out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, q);
+      q.fit_per_input_point = method.find("-refit") == std::string::npos;
+      out = upsampleMls(scans[0], method.rfind("apss", 0) == 0 ? MlsSurface::Apss : MlsSurface::Rimls, q);
     } else if (method.rfind("pcl-mls-", 0) == 0) {
       out = pclMlsUpsample(scans[0], method.substr(8), get("radius", 0), target);
     } else if (method == "simden+mls") {
@@ -167,7 +168,7 @@ int runSuperresWorker(int argc, char** argv) {
       const Positions den = denoiseBySimilarity(scans[0], q);
       out = pclMlsUpsample(den, "plane", get("radius", 0), target);
     } else {
-      throw InvalidParameter("method", method, "qsr, apss, rimls, pcl-mls-{plane,random,voxel}, simden+mls");
+      throw InvalidParameter("method", method, "qsr, apss[-refit], rimls[-refit], pcl-mls-{plane,random,voxel}, simden+mls");
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     writeRaw(dir + "/sr_out.bin", out);
@@ -200,7 +201,10 @@ int runBenchSuperres(int argc, char** argv) {
   else std::fprintf(stderr, "warning: %s missing (scripts/fetch_samples.sh): rs1 rows skipped\n", rs1.c_str());
 
   const std::vector<double> noises = {0.0001, 0.001, 0.005};
-  std::vector<std::string> methods = {"qsr", "qsr-4scans", "apss", "rimls", "pcl-mls-plane", "pcl-mls-random",
+  // apss and rimls fit once per input point (their default); the -refit rows refit at every
+  // output point.
+  std::vector<std::string> methods = {"qsr",           "qsr-4scans",     "apss",          "apss-refit",
+                                      "rimls",         "rimls-refit",    "pcl-mls-plane", "pcl-mls-random",
                                       "pcl-mls-voxel", "simden+mls"};
   std::ofstream csv(out_dir + "/superres.csv");
   csv << "dataset,dense,input,noise,method,ok,seconds,peak_mb,output,rmse\n";
@@ -245,8 +249,8 @@ int runBenchSuperres(int argc, char** argv) {
         csv << ds.name << "," << n_dense << "," << scans[0].size() << "," << noise << "," << m << ",1," << w.seconds
             << "," << w.peak_mb << "," << w.output.size() << "," << e << "\n";
         if (m == "qsr") e_qsr = e;
-        if (m == "apss" || m == "rimls" || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
-        if (noise == noises.front()) outputs[m] = w.output;
+        if (m.rfind("apss", 0) == 0 || m.rfind("rimls", 0) == 0 || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
+        if (noise == noises.front() && m.find("-refit") == std::string::npos) outputs[m] = w.output;
       }
       double best = INFINITY;
       std::string best_name;
@@ -294,7 +298,8 @@ int runBenchSuperres(int argc, char** argv) {
     synthetic::addGaussianNoise(in, 0.0001f, 22);
     const SpatialIndex index(in);
     const float r = radiusForMeanNeighbourCount(in, index, 30);
-    for (const std::string m : {"qsr", "apss", "rimls", "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel"}) {
+    for (const std::string m : {"qsr", "apss", "apss-refit", "rimls", "rimls-refit", "pcl-mls-plane", "pcl-mls-random",
+                                "pcl-mls-voxel"}) {
       const SrResult w = runChild(out_dir, m, {in}, {{"count", 4.0 * n_speed}, {"radius", r}});
       if (!w.ok) { std::printf("%-15s failed: %s\n", m.c_str(), w.message.c_str()); continue; }
       std::printf("%-15s %9zu points in %7.2f s, peak %5.0f MB\n", m.c_str(), w.output.size(), w.seconds, w.peak_mb);

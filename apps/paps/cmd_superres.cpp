@@ -31,14 +31,16 @@ const char* kSuperresUsage =
     "  --grid-lr N, --grid-sr N  QSR bins per side (default: from the data)\n"
     "  --patches K            QSR similar patches kept per patch (default 16)\n"
     "  --kernel F             QSR aggregation kernel scale (default 0.7)\n"
+    "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
+    "                         point (slower, slightly more accurate)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
 }  // namespace
 
 int runSuperres(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
-               "patches", "kernel", "quiet", "timings"});
+               "patches", "kernel", "quiet", "timings", "refit"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   const std::string method = a.text("method", "qsr");
@@ -84,6 +86,7 @@ int runSuperres(int argc, char** argv) {
     p.output_count = static_cast<std::size_t>(count);
     p.radius = static_cast<float>(a.number("radius", 0));
     p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    p.fit_per_input_point = !a.has("refit");
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
     std::printf("%s: radius %g m%s\n", method.c_str(), r.radius, p.radius > 0 ? "" : " (chosen)");

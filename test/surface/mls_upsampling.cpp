@@ -1,10 +1,14 @@
 // APSS and RIMLS upsampling: points projected on a sphere land on it; output count; bad input.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+
+#include <omp.h>
 
 #include <pcl/point_types.h>
 
+#include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
 #include <paps/surface/mls_upsampling.h>
 
@@ -61,4 +65,85 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
   EXPECT_THROW(apss.setRadius(NAN), InvalidParameter);
   EXPECT_THROW(upsampleMls({}, MlsSurface::Rimls, {}), InvalidInput);
   EXPECT_THROW(upsampleMls(Positions(10, Eigen::Vector3f::Constant(NAN)), MlsSurface::Apss, {}), InvalidInput);
+}
+
+namespace {
+// Nearest-neighbour distances within a point set (brute force: small sets only).
+std::vector<float> nearestDistances(const Positions& p) {
+  std::vector<float> d(p.size(), INFINITY);
+  for (std::size_t i = 0; i < p.size(); ++i)
+    for (std::size_t j = 0; j < p.size(); ++j)
+      if (i != j) d[i] = std::min(d[i], (p[i] - p[j]).norm());
+  return d;
+}
+}  // namespace
+
+TEST(MlsUpsampling, SeedsArePoissonDiskAndIndependentOfTheGraph) {
+  // A 40 x 40 grid of spacing 1 on z = 0, seeds 4x denser.
+  Positions pts;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) pts.emplace_back(i, j, 0.f);
+  pts.emplace_back(NAN, 0.f, 0.f);  // ignored
+  const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
+  const float disc = 0.6f;
+  std::vector<int> origin;
+  const Positions seeds = upsamplingSeeds(pts, normals, 6400, disc, 5, &origin);
+  ASSERT_EQ(seeds.size(), 6400u);
+  ASSERT_EQ(origin.size(), 6400u);
+  for (std::size_t s = 0; s < seeds.size(); ++s) {
+    ASSERT_GE(origin[s], 0);
+    ASSERT_LT(origin[s], 1600);
+    EXPECT_LE((seeds[s] - pts[origin[s]]).norm(), disc * 1.0001f);
+    EXPECT_NEAR(seeds[s].z(), 0.f, 1e-6f);
+  }
+  // Poisson-disk: the closest pair is not much closer than the typical spacing (a random
+  // subset of the candidates would have pairs a hundred times closer).
+  std::vector<float> nn = nearestDistances(seeds);
+  std::sort(nn.begin(), nn.end());
+  EXPECT_GT(nn.front(), 0.6f * nn[nn.size() / 2]);
+  // The same seeds when the caller passes its neighbour lists (the conflicts are then found
+  // through them instead of lists built inside).
+  const SpatialIndex index(pts);
+  const NeighbourGraph g = NeighbourGraph::byRadius(pts, index, 3.f);
+  std::vector<int> origin2;
+  const Positions seeds2 = upsamplingSeeds(pts, normals, 6400, disc, 5, &origin2, &g, 3.f);
+  ASSERT_EQ(seeds2.size(), seeds.size());
+  for (std::size_t s = 0; s < seeds.size(); ++s) {
+    EXPECT_EQ(seeds2[s], seeds[s]);
+    EXPECT_EQ(origin2[s], origin[s]);
+  }
+  EXPECT_THROW(upsamplingSeeds(pts, Normals(3, Eigen::Vector3f::UnitZ()), 100, disc, 5), InvalidParameter);
+}
+
+TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
+  const Positions in = spherePoints(2000, 1.f, 4);
+  const int threads = omp_get_max_threads();
+  auto run = [&](MlsSurface s, bool per_point, int t) {
+    MlsUpsamplingParameters p;
+    p.factor = 3;
+    p.fit_per_input_point = per_point;
+    omp_set_num_threads(t);
+    Positions out = upsampleMls(in, s, p);
+    omp_set_num_threads(threads);
+    return out;
+  };
+  for (const bool per_point : {false, true}) {
+    const Positions a = run(MlsSurface::Apss, per_point, 1);
+    ASSERT_EQ(a.size(), 6000u);
+    EXPECT_EQ(a, run(MlsSurface::Apss, per_point, 3));
+    EXPECT_LT(maxRadiusError(a, 1.f), 2e-3);
+  }
+  EXPECT_EQ(run(MlsSurface::Rimls, false, 1), run(MlsSurface::Rimls, false, 3));
+}
+
+TEST(MlsUpsampling, NeighbourGraphFromRows) {
+  // The compressed rows that the upsampling builds with its grid search.
+  const NeighbourGraph g = NeighbourGraph::fromRows({0, 2, 3, 3}, {0, 1, 1});
+  ASSERT_EQ(g.size(), 3u);
+  EXPECT_EQ(g.count(0), 2);
+  EXPECT_EQ(g.begin(0)[1], 1);
+  EXPECT_EQ(g.count(2), 0);
+  EXPECT_THROW(NeighbourGraph::fromRows({0, 2, 1}, {0, 1}), InvalidParameter);  // decreasing
+  EXPECT_THROW(NeighbourGraph::fromRows({0, 2}, {0, 1, 2}), InvalidParameter);   // count mismatch
+  EXPECT_THROW(NeighbourGraph::fromRows({}, {}), InvalidParameter);
 }

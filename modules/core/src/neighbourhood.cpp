@@ -119,6 +119,18 @@ NeighbourGraph NeighbourGraph::byCount(const Positions& points, const SpatialInd
       });
 }
 
+NeighbourGraph NeighbourGraph::fromRows(std::vector<std::int64_t> offsets, std::vector<int> indices) {
+  bool ok = !offsets.empty() && offsets.front() == 0 &&
+            offsets.back() == static_cast<std::int64_t>(indices.size());
+  for (std::size_t i = 1; ok && i < offsets.size(); ++i) ok = offsets[i] >= offsets[i - 1];
+  if (!ok) throw InvalidParameter("offsets", std::to_string(offsets.size()) + " row offsets",
+                                  "0 first, non-decreasing, the index count last");
+  NeighbourGraph g;
+  g.offsets_ = std::move(offsets);
+  g.indices_ = std::move(indices);
+  return g;
+}
+
 double NeighbourGraph::meanCount() const {
   std::size_t pts = 0, total = 0;
   for (std::size_t i = 0; i < size(); ++i)

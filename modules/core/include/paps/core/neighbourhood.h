@@ -46,6 +46,11 @@ class NeighbourGraph {
   static NeighbourGraph byCount(const Positions& points, const SpatialIndex& index, int k,
                                 const ProgressCallback& progress = {});
 
+  /// Lists given as compressed rows: list i is indices[offsets[i] .. offsets[i + 1]). offsets
+  /// starts at 0, never decreases and ends at indices.size() (else InvalidParameter); the
+  /// caller keeps the conventions above (self first, indices in range).
+  static NeighbourGraph fromRows(std::vector<std::int64_t> offsets, std::vector<int> indices);
+
   std::size_t size() const { return offsets_.empty() ? 0 : offsets_.size() - 1; }
   /// Number of neighbours of point i (self included).
   int count(std::size_t i) const { return offsets_[i + 1] - offsets_[i]; }

@@ -9,6 +9,7 @@
 
 #include <pcl/surface/processing.h>
 
+#include <paps/core/neighbourhood.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -26,13 +27,19 @@ struct MlsUpsamplingParameters {
   float factor = 4.f;
   /// Exact output count (0: from factor).
   std::size_t output_count = 0;
-  /// Projection iterations per output point (1 to 50).
-  int iterations = 4;
-  /// APSS: fit one sphere per input point and project each seed on the sphere of the input
-  /// point it was generated from (as PCL MLS does with its polynomial) instead of refitting at
-  /// every output point. About 3x faster, but less accurate (engraved plane, 70K -> 700K,
-  /// 0.01% noise: 2.06e-4 vs 1.56e-4 m to the true surface), so off by default.
-  bool fit_per_input_point = false;
+  /// Projection steps per output point when fitting at every output point (1 to 50). One
+  /// step is as accurate as four here (the seeds start on tangent discs, close to the surface).
+  int iterations = 1;
+  /// Fit once per input point and project each seed (generated on the tangent disc of an input
+  /// point) with that fit, as PCL MLS does with its polynomial: APSS projects the seed on the
+  /// sphere of its input point; RIMLS takes the robust weights converged at its input point and
+  /// makes one projection step with them. Otherwise (false) every seed is refitted on its own.
+  /// The per-input-point mode costs about one fit per input point instead of one (APSS) or
+  /// `inner_iterations` (RIMLS) per output point; on the bench (70K -> 700K) its error is within
+  /// about 2% of the other mode (see docs/superresolution.md).
+  bool fit_per_input_point = true;
+  /// RIMLS: reweighting iterations per projection (1 to 50).
+  int inner_iterations = 3;
   /// RIMLS: residual scale in units of the radius, and normal scale (Oztireli et al.: 0.5-1.5).
   float sigma_r = 0.2f, sigma_n = 0.8f;
   /// Seed of the seed points.
@@ -56,6 +63,12 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
 /// `origin` (optional) receives, per seed, the index of the input point it was generated from.
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin = nullptr);
+/// Same, given the complete neighbour lists of `points` within `graph_radius` (no truncation),
+/// which spares building them. They are used when graph_radius >= d + 2 disc_radius (d the
+/// Poisson-disk radius), as is the case for the kernel neighbourhoods of APSS and RIMLS.
+Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
+                          float disc_radius, std::uint64_t seed, std::vector<int>* origin,
+                          const NeighbourGraph* graph, float graph_radius);
 
 /// The pcl::CloudSurfaceProcessing stages. Indices are honoured (only those points are used).
 template <typename PointIn, typename PointOut, MlsSurface S>

@@ -61,10 +61,13 @@ std::vector<Method> sweep(float r, bool quick) {
   m.push_back({"ours", "centre, radius x2, refilter x3", {{"radius", 2 * r}, {"centre", 1}, {"passes", 3}, {"guided", 0}},
                false});
   m.push_back({"ours", "radius x1.5 guide 0", {{"radius", 1.5 * r}, {"guide", 0}}, false});
+  m.push_back({"ours", "radius x1.5 own 1", {{"radius", 1.5 * r}, {"own", 1}}, false});
+  m.push_back({"ours", "radius x1.5 guide 0 own 1", {{"radius", 1.5 * r}, {"guide", 0}, {"own", 1}}, false});
   m.push_back({"ours", "radius x2 passes 2", {{"radius", 2 * r}, {"passes", 2}}, false});
   m.push_back({"ours", "radius x2 refilter x2", {{"radius", 2 * r}, {"passes", 2}, {"guided", 0}}, false});
   if (!quick) {
     m.push_back({"ours", "radius x1.5 passes 2", {{"radius", 1.5 * r}, {"passes", 2}}, false});
+    m.push_back({"ours", "radius x2 own 1", {{"radius", 2 * r}, {"own", 1}}, false});
     m.push_back({"ours", "radius x2 passes 3", {{"radius", 2 * r}, {"passes", 3}}, false});
     m.push_back({"ours", "radius x2.5 refilter x2", {{"radius", 2.5 * r}, {"passes", 2}, {"guided", 0}}, false});
   }

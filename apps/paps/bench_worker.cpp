@@ -109,6 +109,7 @@ int runBenchWorker(int argc, char** argv) {
       q.passes = static_cast<int>(get("passes", q.passes));
       q.descriptor_smoothing = static_cast<int>(get("guide", q.descriptor_smoothing));
       q.guided_passes = get("guided", 1) != 0;
+      q.own_weight = static_cast<float>(get("own", q.own_weight));
       if (get("centre", 0) != 0) q.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
       output = denoiseBySimilarity(input, q);
     } else if (method == "bilateral") {

@@ -27,6 +27,8 @@ const char* kDenoiseUsage =
     "                         input again, guided by the previous output)\n"
     "  --aggregate A          patch (default: fit over the union of the similar patches) or\n"
     "                         centre (manuscript: average of the similar points' residuals)\n"
+    "  --own-weight W         weight of the point's own patch, times the similar patches' total\n"
+    "                         (default 0: the largest of their weights)\n"
     "  --patches K            similar patches averaged (default 32)\n"
     "  --checks N             descriptors compared per similarity query (default 64, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
@@ -38,7 +40,7 @@ int runDenoise(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
-               "refilter", "aggregate"});
+               "refilter", "aggregate", "own-weight"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
@@ -65,6 +67,7 @@ int runDenoise(int argc, char** argv) {
     p.descriptor_smoothing = static_cast<int>(a.number("guide", p.descriptor_smoothing));
     p.passes = static_cast<int>(a.number("passes", p.passes));
     p.guided_passes = !a.has("refilter");
+    p.own_weight = static_cast<float>(a.number("own-weight", p.own_weight));
     const std::string aggregate = a.text("aggregate", "patch");
     if (aggregate == "centre") p.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
     else if (aggregate != "patch") throw InvalidParameter("aggregate", aggregate, "patch or centre");

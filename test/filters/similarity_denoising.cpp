@@ -440,6 +440,8 @@ TEST(SimilarityDenoising, BadParametersAreNamed) {
   expectInvalidParameter([&] { with([](auto& p) { p.sigma_scale = -1.f; }); }, "sigma_scale");
   expectInvalidParameter([&] { with([](auto& p) { p.search_checks = -1; }); }, "search_checks");
   expectInvalidParameter([&] { with([](auto& p) { p.passes = 0; }); }, "passes");
+  expectInvalidParameter([&] { with([](auto& p) { p.own_weight = -1.f; }); }, "own_weight");
+  expectInvalidParameter([&] { with([&](auto& p) { p.own_weight = nan; }); }, "own_weight");
   expectInvalidParameter([&] { with([](auto& p) { p.descriptor_smoothing = -1; }); }, "descriptor_smoothing");
   expectInvalidParameter([&] { with([](auto& p) { p.grid_size = 17; }); }, "grid_size");
   expectInvalidParameter([&] {

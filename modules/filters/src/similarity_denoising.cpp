@@ -29,6 +29,8 @@ void SimilarityDenoisingParameters::validate() const {
   requireInRange("descriptor_smoothing", descriptor_smoothing, 0, 1000);
   requireInRange("passes", passes, 1, 100);
   requireInRange("similar_patches", similar_patches, 1, 1000);
+  if (!(own_weight >= 0) || !std::isfinite(own_weight))
+    throw InvalidParameter("own_weight", detail::toString(own_weight), "0 (automatic) or a finite value > 0");
   requireInRange("search_checks", search_checks, 0, 1000000);
   if (use_viewpoint && !isFinite(viewpoint))
     throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
@@ -364,7 +366,7 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
     for (std::int64_t i = 0; i < sn; ++i) {
       if (!isMoving(i)) continue;
       PatchMoments<double> acc;
-      double w_max = 0;
+      double w_max = 0, w_sum = 0;
       for (int m = 0; m < k; ++m) {
         const int row = match[i * k + m];
         if (row < 0) break;
@@ -373,8 +375,10 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
         const double w = std::exp(-static_cast<double>(match_d2[i * k + m]) / sigma2);
         acc.add(moments[q], w, turned);
         w_max = std::max(w_max, w);
+        w_sum += w;
       }
-      acc.add(moments[i], w_max > 0 ? w_max : 1.0, false);
+      const double w_own = params.own_weight > 0 ? params.own_weight * w_sum : w_max;
+      acc.add(moments[i], w_own > 0 ? w_own : 1.0, false);
       const double h = acc.heightAtCentre() * nb.radius;
       if (std::isfinite(h)) {
         out[i] = base[i] + static_cast<float>(h) * frames[i].n;

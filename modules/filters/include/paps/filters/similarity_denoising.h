@@ -55,6 +55,11 @@ struct SimilarityDenoisingParameters {
   ///    the same detail. Measured default, see docs/denoising.md.
   enum class Aggregation { Centre, Patch };
   Aggregation aggregation = Aggregation::Patch;
+  /// Patch aggregation: weight of the point's own patch, as a multiple of the summed weights
+  /// of its similar patches (1: half the fit comes from the point's own neighbourhood), or 0:
+  /// the largest weight of the others, as in non-local means. The own patch is the only one
+  /// whose base point is the point's own; more weight trades noise for offset accuracy.
+  float own_weight = 0.f;
   /// Index both frame orientations of every patch (manuscript 2.1.2).
   bool both_orientations = true;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.

@@ -168,15 +168,23 @@ void plot(const std::vector<Result>& rs, const std::function<double(const Result
               png.c_str(), x0, x1, log_y ? "log10 " : "", what.c_str(), y0, y1);
 }
 
-// bpp a codec needs to reach distortion <= `target`: log-log interpolation between its points
-// sorted by distortion, or the rate of any point at or below the target when that is lower;
-// NaN when no point reaches the target.
+// bpp a codec needs to reach distortion <= `target`: log-log interpolation between the points
+// of its Pareto front sorted by distortion, or the rate of any point at or below the target
+// when that is lower; NaN when no point reaches the target.
 double bppAt(const std::vector<Result>& rs, const std::string& codec, const std::function<double(const Result&)>& y,
              double target) {
   std::vector<std::pair<double, double>> c;
   for (const auto& r : rs)
     if (r.codec == codec && y(r) > 0 && std::isfinite(y(r))) c.push_back({y(r), r.bpp});
   std::sort(c.begin(), c.end());
+  // Pareto front: drop every point that another beats on both rate and error, so that a
+  // dominated setting cannot bend the interpolation.
+  {
+    std::vector<std::pair<double, double>> front;
+    for (const auto& p : c)
+      if (front.empty() || p.second < front.back().second) front.push_back(p);
+    c.swap(front);
+  }
   double best = NAN;
   for (std::size_t i = 1; i < c.size(); ++i) {
     const double a = c[i - 1].first, b = c[i].first;

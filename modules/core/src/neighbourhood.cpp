@@ -6,6 +6,7 @@
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 
+#include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 
 namespace paps {
@@ -55,6 +56,21 @@ int SpatialIndex::nearestK(const Eigen::Vector3f& q, int k, std::vector<int>& in
   return n;
 }
 
+namespace {
+
+// Self first, even among exact duplicates or when a capped search left it out.
+void putSelfFirst(std::vector<int>& idx, int self_index) {
+  auto self = std::find(idx.begin(), idx.end(), self_index);
+  if (self != idx.end()) {
+    std::rotate(idx.begin(), self, self + 1);
+  } else {
+    if (!idx.empty()) idx.pop_back();
+    idx.insert(idx.begin(), self_index);
+  }
+}
+
+}  // namespace
+
 // Builds the compressed rows in parallel: each thread fills per-point lists, then one pass
 // concatenates them in point order, so the result does not depend on the thread count.
 class NeighbourGraphBuilder {
@@ -74,14 +90,7 @@ class NeighbourGraphBuilder {
         if (report.cancelled()) continue;
         if (isFinite(points[i])) {
           query(points[i], idx, d2);
-          // Self first, even among exact duplicates or when a capped search left it out.
-          auto self = std::find(idx.begin(), idx.end(), static_cast<int>(i));
-          if (self != idx.end()) {
-            std::rotate(idx.begin(), self, self + 1);
-          } else {
-            if (!idx.empty()) idx.pop_back();
-            idx.insert(idx.begin(), static_cast<int>(i));
-          }
+          putSelfFirst(idx, static_cast<int>(i));
           lists[i] = idx;
         }
         report.advance();
@@ -104,6 +113,17 @@ class NeighbourGraphBuilder {
 NeighbourGraph NeighbourGraph::byRadius(const Positions& points, const SpatialIndex& index,
                                         float radius, int max_count, const ProgressCallback& progress) {
   requirePositive("radius", radius);
+  // The core cell grid gives the same lists faster (queries in cell order): open ball and
+  // (distance, index) order like the kd-tree. A ball over the cap goes to the kd-tree, whose
+  // choice among ties at the cap the grid cannot reproduce.
+  CellGrid grid;
+  if (index.size() > 0 && grid.build(points, radius))
+    return grid.radiusGraph(points.size(), radius, /*open_ball=*/true, progress, max_count,
+                            [&](int i, std::vector<int>& list) {
+                              std::vector<float> d2;
+                              index.radiusSearch(points[i], radius, list, d2, max_count);
+                              putSelfFirst(list, i);
+                            });
   return NeighbourGraphBuilder::build(points, progress, "neighbours",
       [&](const Eigen::Vector3f& q, std::vector<int>& idx, std::vector<float>& d2) {
         index.radiusSearch(q, radius, idx, d2, max_count);

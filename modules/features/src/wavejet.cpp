@@ -8,6 +8,7 @@
 #include <Eigen/Geometry>
 #include <Eigen/QR>
 
+#include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
 
@@ -398,94 +399,6 @@ Eigen::Vector3d anyTangent(const Eigen::Vector3d& n) {
   return (a - n * n.dot(a)).normalized();
 }
 
-// Fixed-radius neighbour search on a uniform grid of cells of side R_phi: the finite points
-// are sorted once by cell (x fastest), so a query scans the 3 x 3 rows of 3 consecutive
-// cells around its own. The points are also copied in cell order, so that the points fitted
-// one after the other and their neighbours are close in memory. Neighbours come in cell
-// order then index order: a fixed order, whatever the thread count.
-class CellGrid {
- public:
-  // False when the extent is too large for 21-bit cell coordinates (then use the kd-tree).
-  bool build(const Positions& points, float radius) {
-    Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
-    for (const auto& p : points)
-      if (isFinite(p)) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
-    if (!(lo.x() <= hi.x())) return false;
-    cell_ = radius;
-    inv_ = 1.0 / double(radius);
-    // Two cells of margin: every cell index is >= 1 even after rounding, so index - 1 is valid.
-    origin_ = lo.cast<double>() - Eigen::Vector3d::Constant(2 * cell_);
-    if (((hi.cast<double>() - origin_) * inv_).maxCoeff() > double((1 << 21) - 4)) return false;
-    std::vector<std::pair<std::uint64_t, int>> keyed;
-    keyed.reserve(points.size());
-    for (std::size_t i = 0; i < points.size(); ++i)
-      if (isFinite(points[i])) keyed.emplace_back(keyOf(points[i]), static_cast<int>(i));
-    std::sort(keyed.begin(), keyed.end());
-    original_.resize(keyed.size());
-    sorted_.resize(keyed.size());
-    keys_.clear();
-    start_.clear();
-    for (std::size_t s = 0; s < keyed.size(); ++s) {
-      original_[s] = keyed[s].second;
-      sorted_[s] = points[keyed[s].second];
-      if (s == 0 || keyed[s].first != keyed[s - 1].first) {
-        keys_.push_back(keyed[s].first);
-        start_.push_back(static_cast<int>(s));
-      }
-    }
-    start_.push_back(static_cast<int>(keyed.size()));
-    return true;
-  }
-  // Finite points in cell order, and their indices in the input.
-  const Positions& sorted() const { return sorted_; }
-  const std::vector<int>& original() const { return original_; }
-  // The 3 x 3 rows of 3 cells around a cell: each row is one contiguous range of sorted()
-  // (consecutive keys are adjacent). Kept between queries from the same cell.
-  struct Ranges {
-    std::uint64_t key = ~std::uint64_t(0);
-    int count = 0;
-    int begin[9], end[9];
-  };
-  // Indices (into sorted()) of the points within `radius` (<= the cell side) of q.
-  int query(const Eigen::Vector3f& q, float radius, std::vector<int>& out, Ranges& ranges) const {
-    out.clear();
-    const float r2 = radius * radius;
-    const std::uint64_t key = keyOf(q);
-    if (key != ranges.key) {
-      ranges.key = key;
-      ranges.count = 0;
-      const std::uint64_t mask = (std::uint64_t(1) << 21) - 1;
-      const std::uint64_t ix = key & mask, iy = (key >> 21) & mask, iz = key >> 42;
-      for (std::uint64_t z = iz - 1; z <= iz + 1; ++z)
-        for (std::uint64_t y = iy - 1; y <= iy + 1; ++y) {
-          const std::uint64_t first = pack(ix - 1, y, z), last = pack(ix + 1, y, z);
-          auto lo = std::lower_bound(keys_.begin(), keys_.end(), first);
-          auto hi = std::upper_bound(lo, keys_.end() - lo > 3 ? lo + 3 : keys_.end(), last);
-          if (lo == hi) continue;
-          ranges.begin[ranges.count] = start_[static_cast<std::size_t>(lo - keys_.begin())];
-          ranges.end[ranges.count] = start_[static_cast<std::size_t>(hi - keys_.begin())];
-          ++ranges.count;
-        }
-    }
-    for (int r = 0; r < ranges.count; ++r)
-      for (int s = ranges.begin[r]; s < ranges.end[r]; ++s)
-        if ((sorted_[s] - q).squaredNorm() <= r2) out.push_back(s);
-    return static_cast<int>(out.size());
-  }
-
- private:
-  static std::uint64_t pack(std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | (y << 21) | (z << 42); }
-  std::uint64_t keyOf(const Eigen::Vector3f& p) const {
-    const Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
-    return pack(std::uint64_t(c.x()), std::uint64_t(c.y()), std::uint64_t(c.z()));
-  }
-  double cell_ = 0, inv_ = 0;
-  Eigen::Vector3d origin_;
-  std::vector<std::uint64_t> keys_;
-  std::vector<int> start_, original_;
-  Positions sorted_;
-};
-
 }  // namespace
 
 WavejetResult fitWavejet(const Positions& points, const int* neighbours, int count,
@@ -632,9 +545,13 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   ProgressReporter reporter(progress, "wavejets", points.size());
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
+  // Uniform grid of cells of side R_phi (the shared core one); falls back to the kd-tree when
+  // the extent is too large for it.
   CellGrid grid;
   if (grid.build(points, radius)) {
-    // Points visited in cell order (memory locality); results stored at their input index.
+    // Points visited in cell order and fitted on the copy in that order (memory locality);
+    // neighbours come in cell order then index order, whatever the thread count. Results
+    // are stored at their input index.
     const Positions& sorted = grid.sorted();
     const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
 #pragma omp parallel
@@ -642,12 +559,12 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       WavejetWorkspacePtr ws = makeWavejetWorkspace();
       std::vector<int> idx;
       idx.reserve(256);
-      CellGrid::Ranges ranges;
+      CellGrid::Cursor cursor;
 #pragma omp for schedule(dynamic, 256)
       for (std::int64_t s = 0; s < finite; ++s) {
         if (reporter.cancelled()) continue;
         const int i = grid.original()[s];
-        const int found = grid.query(sorted[s], radius, idx, ranges);
+        const int found = grid.query(sorted[s], radius, idx, cursor);
         neighbour_count[i] = found;
         out[i] = fitWavejet(sorted, idx.data(), found, sorted[s], radius, params, *ws,
                             initial_normals ? (*initial_normals)[i] : nan3,

@@ -7,6 +7,7 @@
 
 #include <pcl/point_types.h>
 
+#include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
@@ -308,133 +309,17 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 
 namespace {
 
-// Neighbour lists of every finite point within `radius`, sorted by distance (self first), found
-// through a uniform grid of cells of side `radius` (a hash of the occupied cells). On scanned
-// surfaces this is several times faster than kd-tree radius searches, which dominated the cost
-// of the whole upsampling. Rows of non-finite points are empty.
-struct Rows {
-  std::vector<std::int64_t> offsets;
-  std::vector<int> indices;
-};
-
-Rows gridNeighbours(const Positions& pts, float radius) {
-  const std::size_t n = pts.size();
-  std::vector<int> fin;
-  fin.reserve(n);
-  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
-  for (std::size_t i = 0; i < n; ++i)
-    if (isFinite(pts[i])) { fin.push_back(static_cast<int>(i)); lo = lo.cwiseMin(pts[i]); hi = hi.cwiseMax(pts[i]); }
-  Rows rows;
-  rows.offsets.assign(n + 1, 0);
-  if (fin.empty()) return rows;
-  for (int a = 0; a < 3; ++a)
-    if (!((double(hi[a]) - lo[a]) / radius + 3 < 2097152.0))
-      throw InvalidParameter("radius", detail::toString(radius), "at least extent / 2^21 of the points");
-  auto cellOf = [&](const Eigen::Vector3f& p, int a) {
-    return static_cast<std::int64_t>(std::floor((p[a] - lo[a]) / radius)) + 1;
-  };
-  auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
-    return (static_cast<std::uint64_t>(x) << 42) | (static_cast<std::uint64_t>(y) << 21) | static_cast<std::uint64_t>(z);
-  };
-  std::vector<std::pair<std::uint64_t, int>> keyed(fin.size());
-  for (std::size_t k = 0; k < fin.size(); ++k) {
-    const Eigen::Vector3f& p = pts[fin[k]];
-    keyed[k] = {key(cellOf(p, 0), cellOf(p, 1), cellOf(p, 2)), fin[k]};
-  }
-  std::sort(keyed.begin(), keyed.end());
-  const std::size_t m = keyed.size();
-  Positions spos(m);
-  std::vector<int> sidx(m), cstart;
-  std::vector<std::uint64_t> ckey;
-  for (std::size_t k = 0; k < m; ++k) {
-    spos[k] = pts[keyed[k].second];
-    sidx[k] = keyed[k].second;
-    if (k == 0 || keyed[k].first != keyed[k - 1].first) { ckey.push_back(keyed[k].first); cstart.push_back(static_cast<int>(k)); }
-  }
-  cstart.push_back(static_cast<int>(m));
-  std::size_t cap = 16;
-  int bits = 4;
-  while (cap < 2 * ckey.size()) { cap <<= 1; ++bits; }
-  const std::uint64_t empty = ~std::uint64_t(0);
-  std::vector<std::uint64_t> hkey(cap, empty);
-  std::vector<int> hid(cap, -1);
-  // Fibonacci hashing: the top bits of the product depend on every bit of the key.
-  auto slot = [&](std::uint64_t k) { return static_cast<std::size_t>((k * 0x9E3779B97F4A7C15ULL) >> (64 - bits)); };
-  for (std::size_t c = 0; c < ckey.size(); ++c) {
-    std::size_t h = slot(ckey[c]);
-    while (hkey[h] != empty) h = (h + 1) & (cap - 1);
-    hkey[h] = ckey[c];
-    hid[h] = static_cast<int>(c);
-  }
-  auto find = [&](std::uint64_t k) {
-    for (std::size_t h = slot(k); hkey[h] != empty; h = (h + 1) & (cap - 1))
-      if (hkey[h] == k) return hid[h];
-    return -1;
-  };
-  // Queries in cell order (memory locality), by chunks whose lists are then put in place.
+// The lists restricted to `radius`.
+NeighbourGraph restrictedGraph(const Positions& pts, const NeighbourGraph& graph, float radius) {
   const float r2 = radius * radius;
-  const std::int64_t chunk = 256, chunks = (static_cast<std::int64_t>(m) + chunk - 1) / chunk;
-  std::vector<std::vector<int>> found(chunks);
-  std::vector<int> cnt(n, 0);
-#pragma omp parallel
-  {
-    std::vector<std::uint64_t> buf;
-#pragma omp for schedule(dynamic, 1)
-    for (std::int64_t c = 0; c < chunks; ++c) {
-      const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
-      for (std::int64_t t = c * chunk; t < end; ++t) {
-        const Eigen::Vector3f& p = spos[t];
-        const int self = sidx[t];
-        const std::int64_t cx = cellOf(p, 0), cy = cellOf(p, 1), cz = cellOf(p, 2);
-        buf.clear();
-        for (std::int64_t z = cz - 1; z <= cz + 1; ++z)
-          for (std::int64_t y = cy - 1; y <= cy + 1; ++y)
-            for (std::int64_t x = cx - 1; x <= cx + 1; ++x) {
-              const int id = find(key(x, y, z));
-              if (id < 0) continue;
-              for (int u = cstart[id]; u < cstart[id + 1]; ++u) {
-                const float d2 = (spos[u] - p).squaredNorm();
-                if (d2 > r2) continue;
-                // Sort key: the bits of d2 (ordered as integers for d2 >= 0), then the index;
-                // self first even among duplicates.
-                std::uint32_t bits;
-                std::memcpy(&bits, &d2, sizeof bits);
-                const std::uint64_t hi = u == t ? 0 : static_cast<std::uint64_t>(bits) + 1;
-                buf.push_back((hi << 32) | static_cast<std::uint32_t>(sidx[u]));
-              }
-            }
-        std::sort(buf.begin(), buf.end());
-        cnt[self] = static_cast<int>(buf.size());
-        for (const std::uint64_t e : buf) found[c].push_back(static_cast<int>(e & 0xFFFFFFFFu));
-      }
-    }
-  }
-  for (std::size_t i = 0; i < n; ++i) rows.offsets[i + 1] = rows.offsets[i] + cnt[i];
-  rows.indices.resize(rows.offsets.back());
-#pragma omp parallel for schedule(dynamic, 1)
-  for (std::int64_t c = 0; c < chunks; ++c) {
-    std::size_t pos = 0;
-    const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
-    for (std::int64_t t = c * chunk; t < end; ++t) {
-      const int i = sidx[t];
-      std::copy(found[c].begin() + pos, found[c].begin() + pos + cnt[i], rows.indices.begin() + rows.offsets[i]);
-      pos += cnt[i];
-    }
-  }
-  return rows;
-}
-
-// The rows restricted to `radius`.
-NeighbourGraph restrictedGraph(const Positions& pts, const Rows& rows, float radius) {
-  const float r2 = radius * radius;
-  std::vector<std::int64_t> off(rows.offsets.size(), 0);
+  std::vector<std::int64_t> off(graph.size() + 1, 0);
+  std::size_t total = 0;
+  for (std::size_t i = 0; i < graph.size(); ++i) total += graph.count(i);
   std::vector<int> idx;
-  idx.reserve(rows.indices.size());
-  for (std::size_t i = 0; i + 1 < rows.offsets.size(); ++i) {
-    for (std::int64_t k = rows.offsets[i]; k < rows.offsets[i + 1]; ++k) {
-      const int j = rows.indices[k];
-      if ((pts[j] - pts[i]).squaredNorm() <= r2) idx.push_back(j);
-    }
+  idx.reserve(total);
+  for (std::size_t i = 0; i < graph.size(); ++i) {
+    for (const int* j = graph.begin(i); j != graph.end(i); ++j)
+      if ((pts[*j] - pts[i]).squaredNorm() <= r2) idx.push_back(*j);
     off[i + 1] = static_cast<std::int64_t>(idx.size());
   }
   return NeighbourGraph::fromRows(std::move(off), std::move(idx));
@@ -627,15 +512,16 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
     h = radiusForMeanNeighbourCount(points, index, params.target_neighbours);
   }
   float reach = h * (1.1f + 1.5f / std::sqrt(static_cast<float>(params.target_neighbours)));
-  Rows rows = gridNeighbours(points, reach);
-  NeighbourGraph graph_h = restrictedGraph(points, rows, h);
+  // Grid neighbour lists (core CellGrid): on scanned surfaces several times faster than
+  // kd-tree radius searches, which dominated the cost of the whole upsampling.
+  NeighbourGraph graph_ext = gridRadiusGraph(points, reach);
+  NeighbourGraph graph_h = restrictedGraph(points, graph_ext, h);
   const double mean_count = std::max(1.0, graph_h.meanCount());
   const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f;
   if (reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
     reach = 1.05f * h + disc;
-    rows = gridNeighbours(points, reach);
+    graph_ext = gridRadiusGraph(points, reach);
   }
-  const NeighbourGraph graph_ext = NeighbourGraph::fromRows(std::move(rows.offsets), std::move(rows.indices));
   Normals normals = estimateNormals(points, graph_h);
   orientNormalsByPropagation(points, normals, graph_h);
   const std::size_t count = params.output_count ? params.output_count

@@ -1,0 +1,100 @@
+#pragma once
+// CellGrid: the shared fixed-radius neighbour search on a uniform grid of cubic cells.
+//
+// The finite points of a Positions array are sorted once by cell (x fastest, then y, then z)
+// and copied in that order, so that a row of cells is one contiguous range of sorted() and
+// points visited one after the other are close in memory. NaN/Inf points are ignored.
+//
+// Ball convention: "within r" means a squared distance <= r * r (closed ball), computed in
+// float as (p - q).squaredNorm(), so results equal a brute-force loop with that test.
+// Queries are const and thread-safe (each thread keeps its own Cursor).
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include <paps/core/neighbourhood.h>
+#include <paps/core/positions.h>
+#include <paps/core/progress.h>
+
+namespace paps {
+
+class CellGrid {
+ public:
+  CellGrid() = default;
+
+  /// Grids the finite points of `points` in cells of side `cell`. Throws InvalidParameter
+  /// when `cell` is not finite and > 0. Returns false (grid left empty) when the extent
+  /// would need more than 2^21 - 4 cells along an axis; an empty cloud is a valid grid.
+  bool build(const Positions& points, float cell);
+
+  float cell() const { return static_cast<float>(cell_); }
+  /// Number of finite points.
+  std::size_t size() const { return sorted_.size(); }
+  /// Finite points in cell order ("slots"), and the input index of each slot.
+  const Positions& sorted() const { return sorted_; }
+  const std::vector<int>& original() const { return original_; }
+
+  /// Per-thread cache of the slot ranges scanned by the last query; consecutive queries in
+  /// the same cell (the case when iterating sorted()) reuse them.
+  struct Cursor {
+    std::int64_t box[6] = {-1, -1, -1, -1, -1, -1};
+    std::vector<std::pair<int, int>> ranges;
+  };
+
+  /// Calls f(slot, squared distance) for every point p with (p - q)^2 <= max_d2, searching
+  /// the cells within `reach` of q (reach >= sqrt(max_d2)). Order: cell order, then slot.
+  template <typename F>
+  void forEachWithin(const Eigen::Vector3f& q, float reach, float max_d2, Cursor& cursor, F&& f) const {
+    if (sorted_.empty() || !isFinite(q)) return;
+    prepare(q, reach, cursor);
+    for (const auto& r : cursor.ranges)
+      for (int s = r.first; s < r.second; ++s) {
+        const float d2 = (sorted_[s] - q).squaredNorm();
+        if (d2 <= max_d2) f(s, d2);
+      }
+  }
+
+  /// Slots of the points within `radius` of q, in cell order then slot order. Throws
+  /// InvalidParameter unless radius is finite and > 0.
+  int query(const Eigen::Vector3f& q, float radius, std::vector<int>& slots, Cursor& cursor) const;
+
+  /// Input indices of the points within `radius` of q, sorted by squared distance then by
+  /// index; `sq_distances` (optional) gets the matching squared distances.
+  int radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<int>& indices,
+                   std::vector<float>* sq_distances = nullptr) const;
+
+  /// Fills the list of input point `index` (self first) when its ball is over the cap.
+  using Overflow = std::function<void(int index, std::vector<int>& list)>;
+
+  /// Neighbour lists of every input point (NeighbourGraph conventions: self first, then by
+  /// squared distance, ties by index; empty for non-finite points). open_ball keeps only
+  /// squared distances < radius^2, the kd-tree (FLANN) convention. A ball of more than
+  /// max_count (> 0) points keeps its first max_count, or is filled by `overflow` when set.
+  /// Queries run in cell order; the result does not depend on the thread count. `total` is
+  /// the size of the input array the grid was built on.
+  NeighbourGraph radiusGraph(std::size_t total, float radius, bool open_ball = false,
+                             const ProgressCallback& progress = {}, int max_count = 0,
+                             const Overflow& overflow = {}) const;
+
+ private:
+  static std::uint64_t pack(std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | (y << 21) | (z << 42); }
+  std::uint64_t keyOf(const Eigen::Vector3f& p) const;
+  void prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) const;
+
+  double cell_ = 0, inv_ = 0;
+  Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
+  std::int64_t top_[3] = {0, 0, 0};  // largest occupied cell coordinate per axis
+  std::vector<std::uint64_t> keys_;   // occupied cells, ascending
+  std::vector<int> start_;            // first slot of each occupied cell, then size()
+  std::vector<int> original_;
+  Positions sorted_;
+};
+
+/// Neighbour lists within `radius` (closed ball) of every point through a CellGrid of side
+/// `radius`: self first, then by squared distance, ties by index. Throws InvalidParameter on
+/// a radius that is not finite and > 0, or smaller than extent / 2^21 of the points.
+NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const ProgressCallback& progress = {});
+
+}  // namespace paps

@@ -1,0 +1,194 @@
+#include <paps/core/cell_grid.h>
+
+#include <cstring>
+
+#include <paps/core/error.h>
+
+namespace paps {
+
+namespace {
+
+// Sort key of a neighbour: the bits of d2 (ordered as integers for d2 >= 0), then the index.
+std::uint64_t distanceIndexKey(float d2, int index) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &d2, sizeof bits);
+  return (static_cast<std::uint64_t>(bits) << 32) | static_cast<std::uint32_t>(index);
+}
+
+}  // namespace
+
+bool CellGrid::build(const Positions& points, float cell) {
+  requirePositive("cell", cell);
+  *this = CellGrid();
+  cell_ = cell;
+  inv_ = 1.0 / double(cell);
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
+  for (const auto& p : points)
+    if (isFinite(p)) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
+  if (!(lo.x() <= hi.x())) return true;  // no finite point: an empty grid
+  // Two cells of margin: every occupied coordinate is >= 1 even after rounding.
+  origin_ = lo.cast<double>() - Eigen::Vector3d::Constant(2 * cell_);
+  const Eigen::Vector3d top = (hi.cast<double>() - origin_) * inv_;
+  if (top.maxCoeff() > double((1 << 21) - 4)) return false;
+  for (int a = 0; a < 3; ++a) top_[a] = static_cast<std::int64_t>(top[a]);
+  std::vector<std::pair<std::uint64_t, int>> keyed;
+  keyed.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (isFinite(points[i])) keyed.emplace_back(keyOf(points[i]), static_cast<int>(i));
+  std::sort(keyed.begin(), keyed.end());
+  original_.resize(keyed.size());
+  sorted_.resize(keyed.size());
+  for (std::size_t s = 0; s < keyed.size(); ++s) {
+    original_[s] = keyed[s].second;
+    sorted_[s] = points[keyed[s].second];
+    if (s == 0 || keyed[s].first != keyed[s - 1].first) {
+      keys_.push_back(keyed[s].first);
+      start_.push_back(static_cast<int>(s));
+    }
+  }
+  start_.push_back(static_cast<int>(keyed.size()));
+  return true;
+}
+
+std::uint64_t CellGrid::keyOf(const Eigen::Vector3f& p) const {
+  const Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+  return pack(std::uint64_t(c.x()), std::uint64_t(c.y()), std::uint64_t(c.z()));
+}
+
+void CellGrid::prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) const {
+  // The box of cells within reach; the slack covers float rounding of the distance test, so
+  // every point that passes it lies inside the box.
+  const double slack = double(reach) * (1 + 1e-5);
+  std::int64_t box[6];
+  for (int a = 0; a < 3; ++a) {
+    const double lo = std::floor((double(q[a]) - slack - origin_[a]) * inv_);
+    const double hi = std::floor((double(q[a]) + slack - origin_[a]) * inv_);
+    box[2 * a] = static_cast<std::int64_t>(std::clamp(lo, -1.0, double(top_[a]) + 1));
+    box[2 * a + 1] = static_cast<std::int64_t>(std::clamp(hi, -1.0, double(top_[a]) + 1));
+    box[2 * a] = std::max<std::int64_t>(box[2 * a], 0);
+    box[2 * a + 1] = std::min<std::int64_t>(box[2 * a + 1], top_[a]);
+  }
+  if (std::equal(box, box + 6, cursor.box)) return;
+  std::copy(box, box + 6, cursor.box);
+  cursor.ranges.clear();
+  if (box[0] > box[1] || box[2] > box[3] || box[4] > box[5]) return;
+  const std::int64_t width = box[1] - box[0] + 1;
+  // A row of cells (fixed y, z) is one run of consecutive keys; rows come in ascending key
+  // order, so each search starts where the previous one ended.
+  auto from = keys_.begin();
+  for (std::int64_t z = box[4]; z <= box[5]; ++z)
+    for (std::int64_t y = box[2]; y <= box[3]; ++y) {
+      const std::uint64_t first = pack(box[0], y, z), last = pack(box[1], y, z);
+      const auto lo = std::lower_bound(from, keys_.end(), first);
+      const auto cap = keys_.end() - lo > width ? lo + width : keys_.end();
+      const auto hi = std::upper_bound(lo, cap, last);
+      from = hi;
+      if (lo == hi) continue;
+      cursor.ranges.emplace_back(start_[static_cast<std::size_t>(lo - keys_.begin())],
+                                 start_[static_cast<std::size_t>(hi - keys_.begin())]);
+    }
+}
+
+int CellGrid::query(const Eigen::Vector3f& q, float radius, std::vector<int>& slots, Cursor& cursor) const {
+  requirePositive("radius", radius);
+  slots.clear();
+  forEachWithin(q, radius, radius * radius, cursor, [&](int s, float) { slots.push_back(s); });
+  return static_cast<int>(slots.size());
+}
+
+int CellGrid::radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<int>& indices,
+                           std::vector<float>* sq_distances) const {
+  requirePositive("radius", radius);
+  thread_local Cursor cursor;
+  thread_local std::vector<std::uint64_t> keyed;
+  keyed.clear();
+  forEachWithin(q, radius, radius * radius, cursor,
+                [&](int s, float d2) { keyed.push_back(distanceIndexKey(d2, original_[s])); });
+  std::sort(keyed.begin(), keyed.end());
+  indices.resize(keyed.size());
+  if (sq_distances) sq_distances->resize(keyed.size());
+  for (std::size_t k = 0; k < keyed.size(); ++k) {
+    indices[k] = static_cast<int>(keyed[k] & 0xFFFFFFFFu);
+    if (sq_distances) {
+      const std::uint32_t bits = static_cast<std::uint32_t>(keyed[k] >> 32);
+      std::memcpy(&(*sq_distances)[k], &bits, sizeof bits);
+    }
+  }
+  return static_cast<int>(indices.size());
+}
+
+NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_ball,
+                                     const ProgressCallback& progress, int max_count,
+                                     const Overflow& overflow) const {
+  requirePositive("radius", radius);
+  // Largest float below r^2 for the open ball; never below 0, so a point always finds itself.
+  float max_d2 = radius * radius;
+  if (open_ball) max_d2 = std::max(0.f, std::nextafter(max_d2, -1.f));
+  const std::int64_t m = static_cast<std::int64_t>(sorted_.size());
+  // Queries in cell order (memory locality), by chunks whose lists are then put in place.
+  const std::int64_t chunk = 256, chunks = (m + chunk - 1) / chunk;
+  std::vector<std::vector<int>> found(static_cast<std::size_t>(chunks));
+  std::vector<int> cnt(total, 0);
+  ProgressReporter report(progress, "neighbours", total);
+#pragma omp parallel
+  {
+    Cursor cursor;
+    std::vector<std::uint64_t> buf;
+    std::vector<int> list;
+#pragma omp for schedule(dynamic, 1)
+    for (std::int64_t c = 0; c < chunks; ++c) {
+      if (report.cancelled()) continue;
+      const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
+      for (std::int64_t t = c * chunk; t < end; ++t) {
+        buf.clear();
+        forEachWithin(sorted_[t], radius, max_d2, cursor, [&](int s, float d2) {
+          // Self first, even among exact duplicates.
+          buf.push_back(s == t ? static_cast<std::uint32_t>(original_[s])
+                               : distanceIndexKey(d2, original_[s]) + (std::uint64_t(1) << 32));
+        });
+        std::sort(buf.begin(), buf.end());
+        if (max_count > 0 && buf.size() > static_cast<std::size_t>(max_count)) {
+          if (overflow) {
+            list.clear();
+            overflow(original_[t], list);
+            cnt[original_[t]] = static_cast<int>(list.size());
+            found[c].insert(found[c].end(), list.begin(), list.end());
+            continue;
+          }
+          buf.resize(static_cast<std::size_t>(max_count));
+        }
+        cnt[original_[t]] = static_cast<int>(buf.size());
+        for (const std::uint64_t e : buf) found[c].push_back(static_cast<int>(e & 0xFFFFFFFFu));
+      }
+      report.advance(static_cast<std::size_t>(end - c * chunk));
+    }
+  }
+  report.throwIfCancelled();
+  std::vector<std::int64_t> offsets(total + 1, 0);
+  for (std::size_t i = 0; i < total; ++i) offsets[i + 1] = offsets[i] + cnt[i];
+  std::vector<int> indices(static_cast<std::size_t>(offsets.back()));
+#pragma omp parallel for schedule(dynamic, 1)
+  for (std::int64_t c = 0; c < chunks; ++c) {
+    std::size_t pos = 0;
+    const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
+    for (std::int64_t t = c * chunk; t < end; ++t) {
+      const int i = original_[t];
+      std::copy(found[c].begin() + pos, found[c].begin() + pos + cnt[i], indices.begin() + offsets[i]);
+      pos += cnt[i];
+    }
+    std::vector<int>().swap(found[c]);
+  }
+  report.advance(total - sorted_.size());
+  report.finish();
+  return NeighbourGraph::fromRows(std::move(offsets), std::move(indices));
+}
+
+NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const ProgressCallback& progress) {
+  requirePositive("radius", radius);
+  CellGrid grid;
+  if (!grid.build(points, radius))
+    throw InvalidParameter("radius", detail::toString(radius), "at least extent / 2^21 of the points");
+  return grid.radiusGraph(points.size(), radius, false, progress);
+}
+
+}  // namespace paps

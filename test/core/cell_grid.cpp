@@ -1,0 +1,231 @@
+// Tests of paps/core/cell_grid.h: exact balls against brute force (NaNs, duplicates, empty
+// cloud, tiny and huge radii), the orders documented, errors, determinism across threads.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <vector>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+
+#include <paps/core/cell_grid.h>
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/random.h>
+
+namespace {
+
+using paps::CellGrid;
+using paps::NeighbourGraph;
+using paps::Positions;
+
+constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
+
+// Uniform points in a box, with NaNs and exact duplicates mixed in.
+Positions randomCloud(int count, std::uint64_t seed, float extent = 1.f) {
+  paps::Random rng(seed);
+  Positions p;
+  for (int i = 0; i < count; ++i) {
+    if (i % 17 == 5) {
+      p.emplace_back(kNaN, 0.f, 0.f);
+    } else if (i % 13 == 7 && !p.empty() && paps::isFinite(p.back())) {
+      p.push_back(p.back());  // duplicate
+    } else {
+      p.emplace_back(static_cast<float>(rng.uniform(0, extent)), static_cast<float>(rng.uniform(0, extent)),
+                     static_cast<float>(rng.uniform(0, extent)));
+    }
+  }
+  return p;
+}
+
+// Brute force: indices j with (p[j] - q)^2 <= r^2, sorted by squared distance then index.
+std::vector<int> bruteBall(const Positions& p, const Eigen::Vector3f& q, float r) {
+  std::vector<std::pair<float, int>> v;
+  for (std::size_t j = 0; j < p.size(); ++j) {
+    if (!paps::isFinite(p[j])) continue;
+    const float d2 = (p[j] - q).squaredNorm();
+    if (d2 <= r * r) v.emplace_back(d2, static_cast<int>(j));
+  }
+  std::sort(v.begin(), v.end());
+  std::vector<int> out;
+  for (const auto& e : v) out.push_back(e.second);
+  return out;
+}
+
+TEST(CellGrid, RadiusSearchEqualsBruteForce) {
+  const Positions p = randomCloud(1500, 1);
+  for (const float cell : {0.05f, 0.1f, 0.37f}) {
+    CellGrid grid;
+    ASSERT_TRUE(grid.build(p, cell));
+    EXPECT_EQ(grid.size(), paps::countFinite(p));
+    // Radii below, at and above the cell side (several cells per axis).
+    for (const float r : {0.5f * cell, cell, 2.5f * cell}) {
+      std::vector<int> idx;
+      std::vector<float> d2;
+      for (std::size_t i = 0; i < p.size(); i += 7) {
+        const Eigen::Vector3f q = paps::isFinite(p[i]) ? p[i] : Eigen::Vector3f(0.5f, 0.5f, 0.5f);
+        grid.radiusSearch(q, r, idx, &d2);
+        ASSERT_EQ(idx, bruteBall(p, q, r)) << "cell " << cell << " r " << r << " i " << i;
+        for (std::size_t k = 0; k < idx.size(); ++k) EXPECT_EQ(d2[k], (p[idx[k]] - q).squaredNorm());
+      }
+    }
+  }
+}
+
+TEST(CellGrid, QueryGivesTheBallInCellOrder) {
+  const Positions p = randomCloud(2000, 2);
+  const float r = 0.08f;
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  const Positions& sorted = grid.sorted();
+  for (std::size_t s = 0; s < sorted.size(); ++s)  // cell order keeps input order inside a cell
+    EXPECT_EQ(sorted[s], p[grid.original()[s]]);
+  CellGrid::Cursor cursor;
+  std::vector<int> slots;
+  for (std::size_t s = 0; s < sorted.size(); ++s) {
+    grid.query(sorted[s], r, slots, cursor);
+    ASSERT_TRUE(std::is_sorted(slots.begin(), slots.end()));
+    std::vector<int> got;
+    for (const int t : slots) got.push_back(grid.original()[t]);
+    std::sort(got.begin(), got.end());
+    std::vector<int> want = bruteBall(p, sorted[s], r);
+    std::sort(want.begin(), want.end());
+    ASSERT_EQ(got, want) << "slot " << s;
+  }
+  // Queries away from the cloud, from a fresh cursor each time and from a shared one.
+  for (const Eigen::Vector3f q : {Eigen::Vector3f(5, 5, 5), Eigen::Vector3f(-0.05f, 0.5f, 0.5f),
+                                  Eigen::Vector3f(1.07f, 1.07f, -0.07f)}) {
+    CellGrid::Cursor fresh;
+    grid.query(q, r, slots, fresh);
+    std::vector<int> got;
+    for (const int t : slots) got.push_back(grid.original()[t]);
+    std::sort(got.begin(), got.end());
+    std::vector<int> want = bruteBall(p, q, r);
+    std::sort(want.begin(), want.end());
+    EXPECT_EQ(got, want);
+  }
+  EXPECT_EQ(grid.query(Eigen::Vector3f(kNaN, 0, 0), r, slots, cursor), 0);
+}
+
+TEST(CellGrid, HugeAndTinyRadius) {
+  const Positions p = randomCloud(400, 3);
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, 0.05f));
+  std::vector<int> idx;
+  grid.radiusSearch(Eigen::Vector3f(0.2f, 0.3f, 0.4f), 1e6f, idx);
+  EXPECT_EQ(idx.size(), paps::countFinite(p));
+  EXPECT_EQ(idx, bruteBall(p, Eigen::Vector3f(0.2f, 0.3f, 0.4f), 1e6f));
+  // A tiny radius finds a point and its exact duplicates only.
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) continue;
+    grid.radiusSearch(p[i], 1e-7f, idx);
+    EXPECT_EQ(idx, bruteBall(p, p[i], 1e-7f));
+  }
+  // A cell far too small for the extent: build refuses, the graph helper throws.
+  Positions wide = {Eigen::Vector3f(0, 0, 0), Eigen::Vector3f(1e6f, 0, 0)};
+  EXPECT_FALSE(grid.build(wide, 1e-3f));
+  EXPECT_THROW(paps::gridRadiusGraph(wide, 1e-3f), paps::InvalidParameter);
+}
+
+TEST(CellGrid, EmptyAndAllNaN) {
+  CellGrid grid;
+  std::vector<int> idx;
+  for (const Positions& p : {Positions(), Positions(5, Eigen::Vector3f(kNaN, kNaN, kNaN))}) {
+    ASSERT_TRUE(grid.build(p, 0.1f));
+    EXPECT_EQ(grid.size(), 0u);
+    EXPECT_EQ(grid.radiusSearch(Eigen::Vector3f::Zero(), 1.f, idx), 0);
+    const NeighbourGraph g = paps::gridRadiusGraph(p, 0.1f);
+    EXPECT_EQ(g.size(), p.size());
+    for (std::size_t i = 0; i < g.size(); ++i) EXPECT_EQ(g.count(i), 0);
+  }
+}
+
+TEST(CellGrid, InvalidRadiusThrows) {
+  const Positions p = randomCloud(50, 4);
+  CellGrid grid;
+  std::vector<int> idx;
+  CellGrid::Cursor cursor;
+  for (const float bad : {0.f, -1.f, kNaN, std::numeric_limits<float>::infinity()}) {
+    EXPECT_THROW(grid.build(p, bad), paps::InvalidParameter);
+    EXPECT_THROW(paps::gridRadiusGraph(p, bad), paps::InvalidParameter);
+  }
+  ASSERT_TRUE(grid.build(p, 0.1f));
+  for (const float bad : {0.f, -1.f, kNaN, std::numeric_limits<float>::infinity()}) {
+    EXPECT_THROW(grid.radiusSearch(p[0], bad, idx), paps::InvalidParameter);
+    EXPECT_THROW(grid.query(p[0], bad, idx, cursor), paps::InvalidParameter);
+  }
+}
+
+TEST(CellGrid, GraphMatchesBruteForceAndKdTree) {
+  const Positions p = randomCloud(1200, 5);
+  const float r = 0.11f;
+  const NeighbourGraph g = paps::gridRadiusGraph(p, r);
+  ASSERT_EQ(g.size(), p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    std::vector<int> got(g.begin(i), g.end(i));
+    if (!paps::isFinite(p[i])) { EXPECT_TRUE(got.empty()); continue; }
+    std::vector<int> want = bruteBall(p, p[i], r);
+    std::rotate(want.begin(), std::find(want.begin(), want.end(), int(i)), std::find(want.begin(), want.end(), int(i)) + 1);
+    ASSERT_EQ(got, want) << "point " << i;
+  }
+  // The open-ball graph gives the kd-tree lists (self moved first), list for list, and so
+  // does NeighbourGraph::byRadius, with and without a cap.
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  const NeighbourGraph open = grid.radiusGraph(p.size(), r, /*open_ball=*/true);
+  const paps::SpatialIndex index(p);
+  const NeighbourGraph by_radius = NeighbourGraph::byRadius(p, index, r);
+  const NeighbourGraph capped = NeighbourGraph::byRadius(p, index, r, 6);
+  std::vector<int> kd;
+  std::vector<float> d2;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) continue;
+    index.radiusSearch(p[i], r, kd, d2);
+    std::rotate(kd.begin(), std::find(kd.begin(), kd.end(), int(i)), std::find(kd.begin(), kd.end(), int(i)) + 1);
+    ASSERT_EQ(std::vector<int>(open.begin(i), open.end(i)), kd) << i;
+    ASSERT_EQ(std::vector<int>(by_radius.begin(i), by_radius.end(i)), kd) << i;
+    index.radiusSearch(p[i], r, kd, d2, 6);
+    auto self = std::find(kd.begin(), kd.end(), int(i));
+    if (self != kd.end()) {
+      std::rotate(kd.begin(), self, self + 1);
+    } else {
+      kd.pop_back();
+      kd.insert(kd.begin(), int(i));
+    }
+    ASSERT_EQ(std::vector<int>(capped.begin(i), capped.end(i)), kd) << i;
+  }
+}
+
+TEST(CellGrid, OpenBallExcludesTheBoundary) {
+  // Points exactly at distance 1 on a lattice: the closed ball has them, the open one not.
+  Positions p;
+  for (int x = 0; x < 4; ++x)
+    for (int y = 0; y < 4; ++y) p.emplace_back(float(x), float(y), 0.f);
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, 1.f));
+  const NeighbourGraph closed = grid.radiusGraph(p.size(), 1.f);
+  const NeighbourGraph open = grid.radiusGraph(p.size(), 1.f, true);
+  EXPECT_EQ(closed.count(5), 5);  // (1, 1) and its 4 lattice neighbours
+  EXPECT_EQ(open.count(5), 1);
+}
+
+TEST(CellGrid, DeterministicAcrossThreadCounts) {
+  const Positions p = randomCloud(5000, 6);
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const NeighbourGraph one = paps::gridRadiusGraph(p, 0.06f);
+  omp_set_num_threads(4);
+  const NeighbourGraph four = paps::gridRadiusGraph(p, 0.06f);
+  omp_set_num_threads(saved);
+  ASSERT_EQ(one.size(), four.size());
+  for (std::size_t i = 0; i < one.size(); ++i)
+    ASSERT_EQ(std::vector<int>(one.begin(i), one.end(i)), std::vector<int>(four.begin(i), four.end(i)));
+  // Rebuilding gives the same cell order.
+  CellGrid a, b;
+  ASSERT_TRUE(a.build(p, 0.06f));
+  ASSERT_TRUE(b.build(p, 0.06f));
+  EXPECT_EQ(a.original(), b.original());
+}
+
+}  // namespace

@@ -121,10 +121,22 @@ struct PatchMoments {
   }
   template <typename Other>
   void add(const PatchMoments<Other>& o, double w, bool turned) {
-    int e = 0;
-    for (int a = 0; a < kTerms; ++a)
-      for (int b = a; b < kTerms; ++b, ++e) m[e] += (turned && (odd(a) != odd(b)) ? -w : w) * o.m[e];
-    for (int a = 0; a < kTerms; ++a, ++e) m[e] += (turned && odd(a) ? -w : w) * o.m[e];
+    const std::array<double, 27>& sign = turned ? halfTurnSigns() : kOnes;
+    for (int e = 0; e < 27; ++e) m[e] += sign[e] * w * o.m[e];  // branch-free: vectorises
+  }
+  static constexpr std::array<double, 27> kOnes = {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1,
+                                                   1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1};
+  // Signs of the 27 sums under a half turn: products of one odd (linear) monomial flip.
+  static const std::array<double, 27>& halfTurnSigns() {
+    static const std::array<double, 27> signs = [] {
+      std::array<double, 27> s{};
+      int e = 0;
+      for (int a = 0; a < kTerms; ++a)
+        for (int b = a; b < kTerms; ++b) s[e++] = odd(a) != odd(b) ? -1 : 1;
+      for (int a = 0; a < kTerms; ++a) s[e++] = odd(a) ? -1 : 1;
+      return s;
+    }();
+    return signs;
   }
   // c0 of the fit; the quadratic terms are dropped (then the linear ones) when the samples do
   // not determine them, and NaN when there is nothing at all.
@@ -135,14 +147,20 @@ struct PatchMoments {
     for (int a = 0; a < kTerms; ++a)
       for (int c = a; c < kTerms; ++c, ++e) A(a, c) = A(c, a) = m[e];
     for (int a = 0; a < kTerms; ++a, ++e) b(a) = m[e];
-    for (int terms : {6, 3}) {
-      Eigen::LDLT<Eigen::MatrixXd> ldlt(A.topLeftCorner(terms, terms));
-      if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) continue;
-      const Eigen::VectorXd d = ldlt.vectorD();
-      if (d.minCoeff() <= 1e-9 * std::max(d.maxCoeff(), 1e-300)) continue;
-      return ldlt.solve(b.head(terms))(0);
-    }
+    // Fixed sizes: no allocation per point (dynamic LDLT was half the aggregation time).
+    double c0;
+    if (solveFirst<kTerms>(A, b, c0) || solveFirst<3>(A, b, c0)) return c0;
     return A(0, 0) > 0 ? b(0) / A(0, 0) : std::numeric_limits<double>::quiet_NaN();
+  }
+  template <int N>
+  static bool solveFirst(const Eigen::Matrix<double, kTerms, kTerms>& A, const Eigen::Matrix<double, kTerms, 1>& b,
+                         double& c0) {
+    const Eigen::LDLT<Eigen::Matrix<double, N, N>> ldlt(A.template topLeftCorner<N, N>());
+    if (ldlt.info() != Eigen::Success || !ldlt.isPositive()) return false;
+    const Eigen::Matrix<double, N, 1> d = ldlt.vectorD();
+    if (d.minCoeff() <= 1e-9 * std::max(d.maxCoeff(), 1e-300)) return false;
+    c0 = ldlt.solve(b.template head<N>())(0);
+    return true;
   }
 };
 
@@ -362,9 +380,15 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
     //     once; a point's fit sums those of its similar patches, so the union of about
     //     k x neighbours samples costs k small additions.
     const std::vector<PatchMoments<float>> moments = patchMoments(points, base, frames, graph, usable, nb.radius);
-#pragma omp parallel for schedule(static) reduction(+ : moved)
-    for (std::int64_t i = 0; i < sn; ++i) {
-      if (!isMoving(i)) continue;
+    // Points in the descriptor tree's order: consecutive points share most of their similar
+    // patches, so the patch sums they read stay in cache (random order was memory-bound).
+    const std::vector<int>& tree_order = index.storageOrder();
+    const std::int64_t srows = static_cast<std::int64_t>(rows);
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved)
+    for (std::int64_t t = 0; t < srows; ++t) {
+      const int row = tree_order[t];
+      const std::int64_t i = point_of_row[row];
+      if (rows_of_point[i] != row || !isMoving(i)) continue;
       PatchMoments<double> acc;
       double w_max = 0, w_sum = 0;
       for (int m = 0; m < k; ++m) {

@@ -22,16 +22,19 @@ DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_
   // Build on a copy indexed through order_, then lay the rows out in leaf order so that a
   // leaf scan reads contiguous memory.
   data_.assign(data, data + rows * dims);
-  if (rows > 0) build(0, static_cast<int>(rows));
+  if (rows > 0) build(0, static_cast<int>(rows), nodes_, 0);
   std::vector<float> laid(rows * dims);
   for (std::size_t r = 0; r < rows; ++r)
     std::copy_n(data + static_cast<std::size_t>(order_[r]) * dims, dims, laid.begin() + r * dims);
   data_.swap(laid);
 }
 
-int DescriptorIndex::build(int begin, int end) {
-  const int id = static_cast<int>(nodes_.size());
-  nodes_.push_back({-1, 0.f, begin, end});
+// Nodes are numbered in depth-first pre-order. The two subtrees of the root are built at the
+// same time into their own lists and appended with their ids shifted, which gives the very
+// same numbering as a sequential build.
+int DescriptorIndex::build(int begin, int end, std::vector<Node>& nodes, int depth) {
+  const int id = static_cast<int>(nodes.size());
+  nodes.push_back({-1, 0.f, begin, end});
   if (end - begin <= kLeafSize) return id;
   // Split the dimension of largest spread at the median (ties by index: deterministic).
   int best = 0;
@@ -56,9 +59,26 @@ int DescriptorIndex::build(int begin, int end) {
   std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
                    [&](int a, int b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
   const float split = key(order_[mid]);
-  const int left = build(begin, mid);
-  const int right = build(mid, end);
-  nodes_[id] = {best, split, left, right};
+  if (depth > 0 || end - begin < 65536) {
+    const int left = build(begin, mid, nodes, depth + 1);
+    const int right = build(mid, end, nodes, depth + 1);
+    nodes[id] = {best, split, left, right};
+    return id;
+  }
+  std::vector<Node> sub[2];  // the subtrees touch disjoint ranges of order_
+#pragma omp parallel for schedule(static, 1) num_threads(2)
+  for (int side = 0; side < 2; ++side)
+    build(side == 0 ? begin : mid, side == 0 ? mid : end, sub[side], depth + 1);
+  const int left = static_cast<int>(nodes.size());
+  const int right = left + static_cast<int>(sub[0].size());
+  for (int side = 0; side < 2; ++side) {
+    const int shift = side == 0 ? left : right;
+    for (Node nd : sub[side]) {
+      if (nd.split_dim >= 0) { nd.left += shift; nd.right += shift; }
+      nodes.push_back(nd);
+    }
+  }
+  nodes[id] = {best, split, left, right};
   return id;
 }
 

@@ -32,7 +32,7 @@ class DescriptorIndex {
     float split_val;  // left: value <= split_val
     int left, right;  // child nodes, or [begin, end) of the leaf in order_
   };
-  int build(int begin, int end);
+  int build(int begin, int end, std::vector<Node>& nodes, int depth);
 
   std::size_t rows_, dims_;
   int max_checks_;

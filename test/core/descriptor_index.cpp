@@ -1,0 +1,87 @@
+// Tests of paps/core/descriptor_index.h: exact search equals brute force, the tree (built in
+// parallel above 65536 rows) is the same whatever the thread count, bad parameters are named.
+#include <algorithm>
+#include <utility>
+#include <vector>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+
+#include <paps/core/descriptor_index.h>
+#include <paps/core/error.h>
+#include <paps/core/random.h>
+
+namespace {
+
+std::vector<float> randomRows(std::size_t rows, std::size_t dims, std::uint64_t seed) {
+  paps::Random rng(seed);
+  std::vector<float> v(rows * dims);
+  // Coarse values so that ties occur and the (distance, row) order is exercised.
+  for (float& x : v) x = static_cast<float>(static_cast<int>(rng.uniform(0, 8)));
+  return v;
+}
+
+std::vector<std::pair<float, int>> bruteForce(const std::vector<float>& data, std::size_t dims, const float* q, int k) {
+  std::vector<std::pair<float, int>> all;
+  for (std::size_t r = 0; r * dims < data.size(); ++r) {
+    float d2 = 0;
+    for (std::size_t d = 0; d < dims; ++d) d2 += (data[r * dims + d] - q[d]) * (data[r * dims + d] - q[d]);
+    all.emplace_back(d2, static_cast<int>(r));
+  }
+  std::sort(all.begin(), all.end());
+  all.resize(std::min<std::size_t>(all.size(), k));
+  return all;
+}
+
+TEST(DescriptorIndex, ExactSearchEqualsBruteForce) {
+  const std::size_t dims = 6;
+  for (std::size_t rows : {1u, 31u, 1000u, 70000u}) {  // 70000: the root subtrees built in parallel
+    const std::vector<float> data = randomRows(rows, dims, rows);
+    const paps::DescriptorIndex index(data.data(), rows, dims, 0);
+    std::vector<int> idx;
+    std::vector<float> d2;
+    const std::vector<float> queries = randomRows(20, dims, 99);
+    for (int q = 0; q < 20; ++q) {
+      const auto expected = bruteForce(data, dims, &queries[q * dims], 9);
+      index.nearestK(&queries[q * dims], 9, idx, d2);
+      ASSERT_EQ(idx.size(), expected.size()) << rows;
+      for (std::size_t j = 0; j < idx.size(); ++j) {
+        EXPECT_EQ(d2[j], expected[j].first) << rows << " " << q << " " << j;
+        EXPECT_EQ(idx[j], expected[j].second) << rows << " " << q << " " << j;
+      }
+    }
+  }
+}
+
+TEST(DescriptorIndex, SameTreeWithOneOrTwoThreads) {
+  const std::size_t rows = 150000, dims = 16;
+  const std::vector<float> data = randomRows(rows, dims, 5);
+  auto run = [&](int threads) {
+    omp_set_num_threads(threads);
+    const paps::DescriptorIndex index(data.data(), rows, dims, 64);  // approximate: tree-shape sensitive
+    std::vector<int> all, idx;
+    std::vector<float> d2;
+    for (std::size_t q = 0; q < rows; q += 997) {
+      index.nearestK(&data[q * dims], 8, idx, d2);
+      all.insert(all.end(), idx.begin(), idx.end());
+    }
+    all.insert(all.end(), index.storageOrder().begin(), index.storageOrder().end());
+    return all;
+  };
+  const std::vector<int> one = run(1), two = run(2);
+  omp_set_num_threads(omp_get_num_procs());
+  EXPECT_EQ(one, two);
+}
+
+TEST(DescriptorIndex, BadParametersAreNamed) {
+  const std::vector<float> data(12, 0.f);
+  try {
+    paps::DescriptorIndex index(data.data(), 4, 3, -1);
+    FAIL() << "expected InvalidParameter";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "max_checks");
+  }
+}
+
+}  // namespace

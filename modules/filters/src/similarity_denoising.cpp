@@ -371,71 +371,57 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
   }
   report.sigma = std::sqrt(sigma2);
 
+  // 5. The update, in one of two ways (see Aggregation):
+  //  - Patch, a non-local MLS: the weighted normal equations of every patch (its points'
+  //    heights over its own tangent plane, in units of the radius, Gaussian weights) are
+  //    computed once; a point's fit sums those of its similar patches, so the union of about
+  //    k x neighbours samples costs k small additions.
+  //  - Centre, the three sums of 2.2.2: V of the similar points, read in their own frames
+  //    (turned by half a turn for the second orientation), averaged and re-expressed in p's
+  //    frame.
+  std::vector<PatchMoments<float>> moments;
+  if (patch_mode) moments = patchMoments(points, base, frames, graph, usable, nb.radius);
   Positions out = points;
-  const std::int64_t sn = static_cast<std::int64_t>(n);
   std::size_t moved = 0;
-  if (params.aggregation == SimilarityDenoisingParameters::Aggregation::Patch) {
-    // 5'. Non-local MLS: the weighted normal equations of every patch (its points' heights
-    //     over its own tangent plane, in units of the radius, Gaussian weights) are computed
-    //     once; a point's fit sums those of its similar patches, so the union of about
-    //     k x neighbours samples costs k small additions.
-    const std::vector<PatchMoments<float>> moments = patchMoments(points, base, frames, graph, usable, nb.radius);
-    // Points in the descriptor tree's order: consecutive points share most of their similar
-    // patches, so the patch sums they read stay in cache (random order was memory-bound).
-    const std::vector<int>& tree_order = index.storageOrder();
-    const std::int64_t srows = static_cast<std::int64_t>(rows);
+  // Points in the descriptor tree's order: consecutive points share most of their similar
+  // patches, so the data they read stay in cache (random order was memory-bound).
+  const std::vector<int>& tree_order = index.storageOrder();
+  const std::int64_t srows = static_cast<std::int64_t>(rows);
 #pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved)
-    for (std::int64_t t = 0; t < srows; ++t) {
-      const int row = tree_order[t];
-      const std::int64_t i = point_of_row[row];
-      if (rows_of_point[i] != row || !isMoving(i)) continue;
-      PatchMoments<double> acc;
-      double w_max = 0, w_sum = 0;
-      for (int m = 0; m < k; ++m) {
-        const int row = match[i * k + m];
-        if (row < 0) break;
-        const int q = point_of_row[row];
-        const bool turned = orientations == 2 && (row & 1);
-        const double w = std::exp(-static_cast<double>(match_d2[i * k + m]) / sigma2);
-        acc.add(moments[q], w, turned);
-        w_max = std::max(w_max, w);
-        w_sum += w;
-      }
-      const double w_own = params.own_weight > 0 ? params.own_weight * w_sum : w_max;
-      acc.add(moments[i], w_own > 0 ? w_own : 1.0, false);
-      const double h = acc.heightAtCentre() * nb.radius;
-      if (std::isfinite(h)) {
-        out[i] = base[i] + static_cast<float>(h) * frames[i].n;
-        ++moved;
-      }
-    }
-    report.moved = moved;
-    if (report_out) *report_out = report;
-    return out;
-  }
-
-  // 5. The three sums of 2.2.2: V of the similar points, read in their own frames (turned
-  //    by half a turn for the second orientation), averaged and re-expressed in p's frame.
-#pragma omp parallel for schedule(static) reduction(+ : moved)
-  for (std::int64_t i = 0; i < sn; ++i) {
-    if (!isMoving(i)) continue;
-    Eigen::Vector3d acc = Eigen::Vector3d::Zero();
-    double w_sum = 0, w_max = 0;
+  for (std::int64_t t = 0; t < srows; ++t) {
+    const int own_row = tree_order[t];
+    const std::int64_t i = point_of_row[own_row];
+    if (rows_of_point[i] != own_row || !isMoving(i)) continue;
+    PatchMoments<double> fit;
+    Eigen::Vector3d residual = Eigen::Vector3d::Zero();
+    double w_max = 0, w_sum = 0;
     for (int m = 0; m < k; ++m) {
       const int row = match[i * k + m];
       if (row < 0) break;
       const int q = point_of_row[row];
       const bool turned = orientations == 2 && (row & 1);
-      const LocalFrame fq = turned ? frames[q].rotatedHalfTurn() : frames[q];
       const double w = std::exp(-static_cast<double>(match_d2[i * k + m]) / sigma2);
-      acc += w * fq.toLocal(points[q] - smooth[q]).cast<double>();
-      w_sum += w;
+      if (patch_mode) {
+        fit.add(moments[q], w, turned);
+      } else {
+        const LocalFrame fq = turned ? frames[q].rotatedHalfTurn() : frames[q];
+        residual += w * fq.toLocal(points[q] - smooth[q]).cast<double>();
+      }
       w_max = std::max(w_max, w);
+      w_sum += w;
     }
-    const double w_self = w_sum > 0 ? w_max : 1.0;
-    acc += w_self * frames[i].toLocal(points[i] - smooth[i]).cast<double>();
-    w_sum += w_self;
-    out[i] = smooth[i] + frames[i].toWorld((acc / w_sum).cast<float>());
+    if (patch_mode) {
+      const double w_own = params.own_weight > 0 ? params.own_weight * w_sum : w_max;
+      fit.add(moments[i], w_own > 0 ? w_own : 1.0, false);
+      const double h = fit.heightAtCentre() * nb.radius;
+      if (!std::isfinite(h)) continue;
+      out[i] = base[i] + static_cast<float>(h) * frames[i].n;
+    } else {
+      // The point itself enters with the largest weight of the others, as in non-local means.
+      const double w_self = w_sum > 0 ? w_max : 1.0;
+      residual += w_self * frames[i].toLocal(points[i] - smooth[i]).cast<double>();
+      out[i] = smooth[i] + frames[i].toWorld((residual / (w_sum + w_self)).cast<float>());
+    }
     ++moved;
   }
   report.moved = moved;

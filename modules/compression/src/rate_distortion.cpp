@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
-#include <Eigen/Eigenvalues>
 
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 
 namespace paps::compression {
@@ -16,16 +16,6 @@ Positions finiteOnly(const Positions& p) {
   for (const auto& x : p)
     if (isFinite(x)) out.push_back(x);
   return out;
-}
-Eigen::Vector3f pcaNormal(const Positions& pts, const std::vector<int>& nb, int cnt, Eigen::Vector3f* centroid = nullptr) {
-  Eigen::Vector3f c = Eigen::Vector3f::Zero();
-  for (int j = 0; j < cnt; ++j) c += pts[nb[j]];
-  c /= float(cnt);
-  Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
-  for (int j = 0; j < cnt; ++j) { const Eigen::Vector3f d = pts[nb[j]] - c; cov += d * d.transpose(); }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
-  if (centroid) *centroid = c;
-  return es.eigenvectors().col(0);
 }
 double psnr(double peak, double mse) { return mse > 0 ? 10.0 * std::log10(peak * peak / mse) : 999.0; }
 }  // namespace
@@ -50,7 +40,7 @@ PreparedReference::PreparedReference(const Positions& reference_in, int normal_n
 #pragma omp for schedule(static)
     for (long i = 0; i < nr; ++i) {
       const int c = d_->index->nearestK(ref[i], int(std::min<long>(normal_neighbours, nr)), nb, d2);
-      d_->normals[i] = pcaNormal(ref, nb, c);
+      d_->normals[i] = pcaNormal(ref, nb.data(), c);
     }
   }
 }
@@ -76,11 +66,11 @@ CloudErrors PreparedReference::compare(const Positions& decoded_in, double toler
       const int c = di.nearestK(ref[i], int(std::min<long>(8, nd)), nb, d2);
       const Eigen::Vector3f e = ref[i] - dec[nb[0]];
       a1 += e.squaredNorm();
-      const double p = e.dot(rn[i]);
+      const double p = isFinite(rn[i]) ? e.dot(rn[i]) : e.norm();  // degenerate patch: point-to-point
       a2 += p * p;
       Eigen::Vector3f centroid;
-      const Eigen::Vector3f n = pcaNormal(dec, nb, c, &centroid);
-      const double dist = c >= 3 ? std::abs((ref[i] - centroid).dot(n)) : std::sqrt(d2[0]);
+      const Eigen::Vector3f n = pcaNormal(dec, nb.data(), c, &centroid);
+      const double dist = isFinite(n) ? std::abs((ref[i] - centroid).dot(n)) : std::sqrt(d2[0]);
       above += dist > tolerance;
     }
 #pragma omp for schedule(static) reduction(+ : b1, b2)
@@ -88,7 +78,7 @@ CloudErrors PreparedReference::compare(const Positions& decoded_in, double toler
       ri.nearestK(dec[i], 1, nb, d2);
       const Eigen::Vector3f e = dec[i] - ref[nb[0]];
       b1 += e.squaredNorm();
-      const double p = e.dot(rn[nb[0]]);
+      const double p = isFinite(rn[nb[0]]) ? e.dot(rn[nb[0]]) : e.norm();
       b2 += p * p;
     }
   }

@@ -530,14 +530,8 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
     LocalFrame f0 = pred[i];
     int qa = quantizeAngle(0, L), qb = qa, qg = qa;
     if (cnt >= 3) {
-      Eigen::Vector3f c = Eigen::Vector3f::Zero();
-      for (int j = 0; j < cnt; ++j) c += pts[nb[j]];
-      c /= float(cnt);
-      Eigen::Matrix3f cov = Eigen::Matrix3f::Zero();
-      for (int j = 0; j < cnt; ++j) { const Eigen::Vector3f d = pts[nb[j]] - c; cov += d * d.transpose(); }
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3f> es(cov);
-      Eigen::Vector3f nt = es.eigenvectors().col(0);
-      if (isFinite(nt) && nt.squaredNorm() > 0.5f) {
+      Eigen::Vector3f nt = pcaNormal(pts, nb.data(), cnt);
+      if (isFinite(nt)) {
         if (nt.dot(f0.n) < 0) nt = -nt;
         const Eigen::Vector3f l = f0.toLocal(nt);
         qa = quantizeAngle(std::atan2(l.x(), l.z()), L);

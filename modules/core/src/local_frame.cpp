@@ -21,30 +21,34 @@ Eigen::Vector3f anyTangent(const Eigen::Vector3f& n) {
 }
 }  // namespace
 
+Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid) {
+  if (centroid) *centroid = kNaN3;
+  if (count < 1) return kNaN3;
+  // Double precision and centring keep PCA accurate for scans far from the origin.
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int j = 0; j < count; ++j) mean += points[idx[j]].cast<double>();
+  mean /= count;
+  if (centroid) *centroid = mean.cast<float>();
+  if (count < 3) return kNaN3;
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (int j = 0; j < count; ++j) {
+    const Eigen::Vector3d d = points[idx[j]].cast<double>() - mean;
+    cov.noalias() += d * d.transpose();
+  }
+  // Closed-form 3x3 solver: several times faster than the iterative one, and exact enough
+  // in double precision on centred data.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+  eig.computeDirect(cov);
+  const Eigen::Vector3d ev = eig.eigenvalues();
+  if (!(ev(1) > 1e-12 * std::max(1.0, ev(2)))) return kNaN3;  // collinear or coincident
+  return eig.eigenvectors().col(0).cast<float>().normalized();
+}
+
 Normals estimateNormals(const Positions& points, const NeighbourGraph& graph) {
   Normals normals(points.size(), kNaN3);
   const std::int64_t n = static_cast<std::int64_t>(points.size());
 #pragma omp parallel for schedule(dynamic, 512)
-  for (std::int64_t i = 0; i < n; ++i) {
-    const int count = graph.count(i);
-    if (count < 3) continue;
-    // Double precision and centring keep PCA accurate for scans far from the origin.
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (const int* j = graph.begin(i); j != graph.end(i); ++j) mean += points[*j].cast<double>();
-    mean /= count;
-    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
-      const Eigen::Vector3d d = points[*j].cast<double>() - mean;
-      cov.noalias() += d * d.transpose();
-    }
-    // Closed-form 3x3 solver: several times faster than the iterative one, and exact enough
-    // in double precision on centred data.
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
-    eig.computeDirect(cov);
-    const Eigen::Vector3d ev = eig.eigenvalues();
-    if (!(ev(1) > 1e-12 * std::max(1.0, ev(2)))) continue;  // collinear or coincident
-    normals[i] = eig.eigenvectors().col(0).cast<float>().normalized();
-  }
+  for (std::int64_t i = 0; i < n; ++i) normals[i] = pcaNormal(points, graph.begin(i), graph.count(i));
   return normals;
 }
 

@@ -23,8 +23,13 @@ struct LocalFrame {
 };
 using LocalFrames = std::vector<LocalFrame>;
 
-/// Unit normals by PCA of each neighbour list; NaN where a point has fewer than 3 neighbours
-/// or they are collinear. Orientation is arbitrary until one of the orient* calls.
+/// Unit normal by PCA of points[idx[0]] .. points[idx[count - 1]] (centred, in double); NaN
+/// when count < 3 or the points are collinear or coincident. Sign arbitrary. `centroid`, when
+/// given, receives their mean.
+Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid = nullptr);
+
+/// Unit normals by PCA of each neighbour list (pcaNormal); NaN where a point has fewer than 3
+/// neighbours or they are collinear. Orientation is arbitrary until one of the orient* calls.
 Normals estimateNormals(const Positions& points, const NeighbourGraph& graph);
 
 /// Flips each normal to face `viewpoint` (e.g. the cloud's sensor origin). Returns flips.

@@ -8,6 +8,7 @@
 #include <ctime>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <functional>
 #include <string>
 #include <vector>
@@ -18,7 +19,6 @@
 #include <pcl/features/normal_3d.h>
 #include <pcl/features/normal_3d_omp.h>
 #include <pcl/features/principal_curvatures.h>
-#include <pcl/io/png_io.h>
 #include <pcl/point_types.h>
 
 #ifdef PAPS_HAVE_CGAL
@@ -34,6 +34,7 @@
 #include <paps/filters/wavejet_enhancement.h>
 
 #include "cli_common.h"
+#include "render.h"
 #include "commands.h"
 
 namespace paps::cli {
@@ -262,6 +263,39 @@ std::vector<Estimate> runCgal(const Positions& p, float radius, int order, doubl
 }
 #endif
 
+// Every method of the table on one input, scored against the same truth: ours (order K),
+// ours with order selection at R and at 2R, PCL raw / calibrated / geometric, PCL at R/2
+// calibrated, and CGAL jet fitting of degree K (when built with CGAL).
+struct Comparison {
+  Errors ours, sel, sel2, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal;
+  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_pcl = 0, t_half = 0, t_cgal = NAN;
+};
+Comparison compareMethods(const Positions& p, float radius, int order, const Normals& tn,
+                          const std::vector<Truth>& truth, const std::vector<int>& eval) {
+  Comparison c;
+  auto ours = runWavejets(p, radius, order, tn, c.t_ours);
+  auto sel = runWavejets(p, radius, order, tn, c.t_sel, nullptr, true);
+  auto sel2 = runWavejets(p, 2 * radius, order, tn, c.t_sel2, nullptr, true);
+  const auto pcl_est = runPcl(p, radius, c.t_pcl, true);
+  const auto pcl_half = runPcl(p, radius / 2, c.t_half, true);
+  orientLike(ours, tn);
+  orientLike(sel, tn);
+  orientLike(sel2, tn);
+  c.ours = score(ours, truth, eval, false);
+  c.sel = score(sel, truth, eval, false);
+  c.sel2 = score(sel2, truth, eval, false);
+  c.pcl_raw = score(pcl_est, truth, eval, true);
+  c.pcl_cal = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
+  c.pcl_geom = score(geometricPcl(pcl_est, radius), truth, eval, true);
+  c.pcl_half = score(calibratePcl(pcl_half, truth, eval), truth, eval, true);
+#ifdef PAPS_HAVE_CGAL
+  auto cg = runCgal(p, radius, order, c.t_cgal);
+  orientLike(cg, tn);
+  c.cgal = score(cg, truth, eval, false);
+#endif
+  return c;
+}
+
 // ---- reference curvature of a scan mesh (per-face second fundamental form from the vertex
 // normals, after Rusinkiewicz 2004, accumulated on vertices, then averaged over a ball) ----
 
@@ -300,62 +334,6 @@ std::vector<Eigen::Matrix3d> vertexShapeTensors(const TriangleMesh& mesh, const 
 
 // ---- small renderer: orthographic splats, z-buffer, Lambert shading by the given normals ----
 
-void renderPanels(const std::vector<std::pair<Positions, Normals>>& panels, int width, const std::string& png) {
-  // View: along the mean normal of the first panel, fitted to its bounding box.
-  const Positions& p0 = panels[0].first;
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  std::size_t c = 0;
-  for (const auto& x : p0) if (isFinite(x)) { mean += x.cast<double>(); ++c; }
-  mean /= double(c);
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (const auto& x : p0) if (isFinite(x)) { const Eigen::Vector3d d = x.cast<double>() - mean; cov += d * d.transpose(); }
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(cov);
-  Eigen::Vector3d ax = eig.eigenvectors().col(2), ay = eig.eigenvectors().col(1), az = ax.cross(ay);
-  // Look from the side the normals face.
-  double facing = 0;
-  for (std::size_t i = 0; i < p0.size(); i += 16) if (isFinite(panels[0].second[i])) facing += panels[0].second[i].cast<double>().dot(az);
-  if (facing < 0) { az = -az; ay = -ay; }
-  double lo[2] = {1e30, 1e30}, hi[2] = {-1e30, -1e30};
-  for (const auto& x : p0) if (isFinite(x)) {
-    const Eigen::Vector3d d = x.cast<double>() - mean;
-    lo[0] = std::min(lo[0], d.dot(ax)); hi[0] = std::max(hi[0], d.dot(ax));
-    lo[1] = std::min(lo[1], d.dot(ay)); hi[1] = std::max(hi[1], d.dot(ay));
-  }
-  const int w = width, h = std::max(16, int(width * (hi[1] - lo[1]) / (hi[0] - lo[0])));
-  const double scale = (w - 1) / (hi[0] - lo[0]);
-  const int splat = std::max(1, int(std::ceil(1.6 * scale * std::sqrt((hi[0] - lo[0]) * (hi[1] - lo[1]) / double(c)))));
-  const Eigen::Vector3d light = (az + 0.5 * ay - 0.4 * ax).normalized();
-  const int total_w = w * int(panels.size());
-  std::vector<unsigned char> rgb(std::size_t(total_w) * h * 3, 255);
-  for (std::size_t k = 0; k < panels.size(); ++k) {
-    std::vector<float> zbuf(std::size_t(w) * h, -1e30f);
-    const Positions& p = panels[k].first;
-    const Normals& n = panels[k].second;
-    for (std::size_t i = 0; i < p.size(); ++i) {
-      if (!isFinite(p[i]) || !isFinite(n[i])) continue;
-      const Eigen::Vector3d d = p[i].cast<double>() - mean;
-      const int px = int((d.dot(ax) - lo[0]) * scale), py = int((hi[1] - d.dot(ay)) * scale);
-      const float z = float(d.dot(az));
-      Eigen::Vector3d nn = n[i].cast<double>().normalized();
-      if (nn.dot(az) < 0) nn = -nn;
-      const double shade = 0.15 + 0.85 * std::max(0.0, nn.dot(light));
-      for (int dy = -splat; dy <= splat; ++dy)
-        for (int dx = -splat; dx <= splat; ++dx) {
-          if (dx * dx + dy * dy > splat * splat) continue;
-          const int x = px + dx, y = py + dy;
-          if (x < 0 || y < 0 || x >= w || y >= h) continue;
-          float& zb = zbuf[std::size_t(y) * w + x];
-          if (z <= zb) continue;
-          zb = z;
-          const unsigned char v = static_cast<unsigned char>(255 * shade);
-          unsigned char* o = &rgb[(std::size_t(y) * total_w + k * w + x) * 3];
-          o[0] = o[1] = o[2] = v;
-        }
-    }
-  }
-  pcl::io::saveRgbPNGFile(png, rgb.data(), total_w, h);
-}
-
 const char* kBenchCurvatureUsage =
     "usage: paps bench curvature [options]\n"
     "  --points N         samples per analytic surface (default 20000)\n"
@@ -378,6 +356,7 @@ int runBenchCurvature(int argc, char** argv) {
   const int order = static_cast<int>(a.number("order", 4));
   const std::size_t speed_points = static_cast<std::size_t>(a.number("speed-points", 1000000));
   const std::string out_dir = a.text("out", ".");
+  std::filesystem::create_directories(out_dir);
   const std::string scan = a.text("scan", samplesDir() + "/rs1_normals.ply");
   const int scan_step = static_cast<int>(a.number("scan-step", 4));
   requireInRange("points", static_cast<double>(npts), 1000.0, 1e7);
@@ -423,30 +402,10 @@ int runBenchCurvature(int argc, char** argv) {
       Random rng(seed * 7919 + std::uint64_t(noise * 1e6));
       for (auto& x : p)
         x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
-      double t_ours = 0, t_pcl = 0, t_cgal = NAN;
-      double t_sel = 0;
-      auto ours = runWavejets(p, radius, order, tn, t_ours);
-      auto sel = runWavejets(p, radius, order, tn, t_sel, nullptr, true);
-      double t_sel2 = 0, t_half = 0;
-      auto sel2 = runWavejets(p, 2 * radius, order, tn, t_sel2, nullptr, true);
-      auto pcl_est = runPcl(p, radius, t_pcl, true);
-      auto pcl_half = runPcl(p, radius / 2, t_half, true);
-      orientLike(ours, tn);
-      orientLike(sel, tn);
-      orientLike(sel2, tn);
-      const Errors eo = score(ours, truth, eval, false);
-      const Errors es = score(sel, truth, eval, false);
-      const Errors es2 = score(sel2, truth, eval, false);
-      const Errors ep = score(pcl_est, truth, eval, true);
-      const Errors epc = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
-      const Errors epg = score(geometricPcl(pcl_est, radius), truth, eval, true);
-      const Errors eph = score(calibratePcl(pcl_half, truth, eval), truth, eval, true);
-      Errors ec;
-#ifdef PAPS_HAVE_CGAL
-      auto cg = runCgal(p, radius, order, t_cgal);
-      orientLike(cg, tn);
-      ec = score(cg, truth, eval, false);
-#endif
+      const Comparison c = compareMethods(p, radius, order, tn, truth, eval);
+      const Errors &eo = c.ours, &es = c.sel, &es2 = c.sel2, &ep = c.pcl_raw, &epc = c.pcl_cal, &epg = c.pcl_geom,
+                   &eph = c.pcl_half, &ec = c.cgal;
+      const double t_ours = c.t_ours, t_sel2 = c.t_sel2, t_cgal = c.t_cgal, t_pcl = c.t_pcl;
       worst_ratio_pcl = std::max(worst_ratio_pcl, eo.curv_rel / epc.curv_rel);
       worst_sel_pcl = std::max(worst_sel_pcl, es.curv_rel / epc.curv_rel);
       worst_raw_pcl = std::max(worst_raw_pcl, eo.curv_rel / ep.curv_rel);
@@ -571,29 +530,10 @@ int runBenchCurvature(int argc, char** argv) {
         }
         eval.swap(keep);
       }
-      double t_ours = 0, t_pcl = 0, t_cgal = NAN;
-      auto ours = runWavejets(p, radius, order, tn, t_ours);
-      orientLike(ours, tn);
-      double t_sel = 0;
-      auto sel = runWavejets(p, radius, order, tn, t_sel, nullptr, true);
-      orientLike(sel, tn);
-      const Errors es = score(sel, truth, eval, false);
-      double t_sel2 = 0, t_half = 0;
-      auto sel2 = runWavejets(p, 2 * radius, order, tn, t_sel2, nullptr, true);
-      orientLike(sel2, tn);
-      const Errors es2 = score(sel2, truth, eval, false);
-      auto pcl_est = runPcl(p, radius, t_pcl, true);
-      auto pcl_half = runPcl(p, radius / 2, t_half, true);
-      const Errors eo = score(ours, truth, eval, false), ep = score(pcl_est, truth, eval, true);
-      const Errors epc = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
-      const Errors epg = score(geometricPcl(pcl_est, radius), truth, eval, true);
-      const Errors eph = score(calibratePcl(pcl_half, truth, eval), truth, eval, true);
-      Errors ec;
-#ifdef PAPS_HAVE_CGAL
-      auto cg = runCgal(p, radius, order, t_cgal);
-      orientLike(cg, tn);
-      ec = score(cg, truth, eval, false);
-#endif
+      const Comparison c = compareMethods(p, radius, order, tn, truth, eval);
+      const Errors &eo = c.ours, &es = c.sel, &es2 = c.sel2, &ep = c.pcl_raw, &epc = c.pcl_cal, &epg = c.pcl_geom,
+                   &eph = c.pcl_half, &ec = c.cgal;
+      const double t_ours = c.t_ours, t_sel2 = c.t_sel2, t_cgal = c.t_cgal, t_pcl = c.t_pcl;
       std::printf("\n## Scan %s: %zu of %zu vertices (every %d-th), %zu evaluated (border left out); reference: dense\n"
                   "## mesh, per-face second fundamental form from vertex normals, averaged over R_phi/2\n",
                   scan.c_str(), p.size(), mesh.vertices.size(), scan_step, eval.size());
@@ -628,7 +568,8 @@ int runBenchCurvature(int argc, char** argv) {
       ep2.alpha1 = {1.f, 3.f};
       const Normals n3i = enhanceNormals(dense, ep2, nullptr, {}, &hints);
       const std::string png = out_dir + "/wavejets_enhanced_scan.png";
-      renderPanels({{dense, corrected}, {enh, enh_normals}, {dense, n3}, {dense, n3i}}, 480, png);
+      renderShadedPanels({{dense, corrected}, {enh, enh_normals}, {dense, n3}, {dense, n3i}}, View::fit(dense), 480,
+                         png);
       std::printf("\nrender: %s (original with Wavejet normals | positions alpha0 = 2.5 | normals alpha1 = 3 | "
                   "normals alpha1 = 1+3i), order 6, R_phi %.3f, clamped %zu of %zu\n",
                   png.c_str(), r2.radius, r2.clamped, dense.size());

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <limits>
 
 #include <Eigen/Eigenvalues>
@@ -46,12 +47,23 @@ View View::fit(const Positions& points, float tilt_degrees) {
 
 namespace {
 
-// Splats every point as a square block with a z-buffer, colour from `colour(i)`.
-template <typename ColourFn>
-void splat(const Positions& points, const View& view, int width, const std::string& png, ColourFn colour) {
+struct Canvas {
+  int width = 0, height = 0;
+  std::vector<unsigned char> rgb;
+  Canvas(int w, int h) : width(w), height(h), rgb(static_cast<std::size_t>(w) * h * 3, 255) {}
+};
+
+int heightFor(const View& view, int width) {
   const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
-  const int height = std::max(1, static_cast<int>(width * ext.y() / ext.x()));
-  std::vector<unsigned char> rgb(static_cast<std::size_t>(width) * height * 3, 255);
+  return std::max(1, static_cast<int>(width * ext.y() / ext.x()));
+}
+
+// Splats every point as a square block with a z-buffer into the panel of `panel_width`
+// columns starting at column `offset`; colour from `colour(i)`.
+template <typename ColourFn>
+void splat(const Positions& points, const View& view, int panel_width, int offset, Canvas& canvas, ColourFn colour) {
+  const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
+  const int width = panel_width, height = canvas.height;
   std::vector<float> depth(static_cast<std::size_t>(width) * height, -std::numeric_limits<float>::max());
   // Splats as wide as the mean spacing on screen, so that the surface shows without holes.
   const std::size_t shown = std::max<std::size_t>(1, countFinite(points));
@@ -69,11 +81,26 @@ void splat(const Positions& points, const View& view, int width, const std::stri
         const std::size_t k = static_cast<std::size_t>(y + dy) * width + (x + dx);
         if (x + dx >= width || y + dy >= height || s.z() <= depth[k]) continue;
         depth[k] = s.z();
+        const std::size_t o = (static_cast<std::size_t>(y + dy) * canvas.width + offset + x + dx) * 3;
         for (int ch = 0; ch < 3; ++ch)
-          rgb[3 * k + ch] = static_cast<unsigned char>(std::clamp(c[ch], 0.f, 1.f) * 255.f);
+          canvas.rgb[o + ch] = static_cast<unsigned char>(std::clamp(c[ch], 0.f, 1.f) * 255.f);
       }
   }
-  pcl::io::saveRgbPNGFile(png, rgb.data(), width, height);
+}
+
+// PCL's PNG writer reports nothing when it fails (e.g. a missing folder): check the file.
+void save(const Canvas& canvas, const std::string& png) {
+  std::remove(png.c_str());
+  pcl::io::saveRgbPNGFile(png, canvas.rgb.data(), canvas.width, canvas.height);
+  std::FILE* f = std::fopen(png.c_str(), "rb");
+  if (!f) throw IoError("cannot write " + png);
+  std::fclose(f);
+}
+
+// Two-sided Lambert shade of a unit normal (NaN: mid grey).
+Eigen::Vector3f shade(const Eigen::Vector3f& n, const Eigen::Vector3f& light) {
+  const float l = isFinite(n) ? std::abs(n.dot(light)) : 0.5f;
+  return Eigen::Vector3f::Constant(0.15f + 0.85f * l);
 }
 
 }  // namespace
@@ -81,23 +108,32 @@ void splat(const Positions& points, const View& view, int width, const std::stri
 void renderShaded(const Positions& points, const View& view, int width, const std::string& png) {
   SpatialIndex index(points);
   const NeighbourGraph g = NeighbourGraph::byCount(points, index, 12);
-  const Normals normals = estimateNormals(points, g);
+  renderShadedPanels({{points, estimateNormals(points, g)}}, view, width, png);
+}
+
+void renderShadedPanels(const std::vector<std::pair<Positions, Normals>>& panels, const View& view, int width,
+                        const std::string& png) {
   const Eigen::Vector3f light = view.axes.transpose() * Eigen::Vector3f(-0.4f, 0.5f, 0.77f).normalized();
-  splat(points, view, width, png, [&](std::size_t i) {
-    const float l = isFinite(normals[i]) ? std::abs(normals[i].dot(light)) : 0.5f;
-    return Eigen::Vector3f::Constant(0.15f + 0.85f * l);
-  });
+  Canvas canvas(width * static_cast<int>(panels.size()), heightFor(view, width));
+  for (std::size_t k = 0; k < panels.size(); ++k) {
+    const Normals& normals = panels[k].second;
+    splat(panels[k].first, view, width, static_cast<int>(k) * width, canvas,
+          [&](std::size_t i) { return shade(normals[i], light); });
+  }
+  save(canvas, png);
 }
 
 void renderValues(const Positions& points, const std::vector<double>& values, double vmax,
                   const View& view, int width, const std::string& png) {
-  splat(points, view, width, png, [&](std::size_t i) {
+  Canvas canvas(width, heightFor(view, width));
+  splat(points, view, width, 0, canvas, [&](std::size_t i) {
     if (!std::isfinite(values[i])) return Eigen::Vector3f(0.6f, 0.6f, 0.6f);
     const float t = static_cast<float>(std::clamp(values[i] / vmax, 0.0, 1.0));
     // Blue -> cyan -> green -> yellow -> red (no grey in between).
     auto ramp = [](float x) { return std::clamp(1.5f - std::abs(x), 0.f, 1.f); };
     return Eigen::Vector3f(ramp(4.f * t - 3.f), ramp(4.f * t - 2.f), ramp(4.f * t - 1.f));
   });
+  save(canvas, png);
 }
 
 }  // namespace paps::cli

@@ -2,6 +2,7 @@
 // Point renders for the bench and demo pictures: orthographic splats with a z-buffer,
 // Lambert-shaded by PCA normals (noise shows as speckle) or coloured by a per-point value.
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <paps/core/positions.h>
@@ -19,6 +20,11 @@ struct View {
 
 /// Shaded render (grey, light from the viewer's upper left). Writes a PNG; throws IoError.
 void renderShaded(const Positions& points, const View& view, int width, const std::string& png);
+
+/// Side-by-side panels in one view, each shaded by its own normals (e.g. normals a filter
+/// changed). Writes a PNG; throws IoError.
+void renderShadedPanels(const std::vector<std::pair<Positions, Normals>>& panels, const View& view, int width,
+                        const std::string& png);
 
 /// Render coloured by `values` mapped on a blue-to-red scale over [0, vmax] (NaN: grey).
 void renderValues(const Positions& points, const std::vector<double>& values, double vmax,

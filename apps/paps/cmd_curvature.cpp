@@ -175,8 +175,8 @@ int runCurvature(int argc, char** argv) {
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("wavejets: order %d, R_phi %g m%s (mean %.1f neighbours), %.2f s\n", params.order, r.radius,
               radius > 0 ? "" : " (chosen)", r.mean_neighbours, secs);
-  std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu\n", r.fitted,
-              r.lowered, r.not_converged);
+  std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
+              "noise (plane kept) at %zu\n", r.fitted, r.lowered, r.not_converged, r.tilt_within_noise);
   if (r.too_few_neighbours)
     std::fprintf(stderr, "warning: %zu points have too few neighbours for order 2: NaN outputs\n", r.too_few_neighbours);
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);

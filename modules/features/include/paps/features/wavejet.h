@@ -52,7 +52,9 @@ struct WavejetParameters {
   /// Corollaries 1 and 2 are applied without refitting. Range of refit_angle: [0, 90].
   /// Measured default 10 degrees: without refit, the corrected normal stays within 0.11
   /// degrees of the truth up to 20 degrees of tilt on the bench surfaces (docs/wavejets.md),
-  /// because the tangent is taken exactly from the fitted height field.
+  /// because the tangent is taken exactly from the fitted height field. No refit either when
+  /// the tilt is not distinguishable from zero given the fit's residuals (a tilt made by the
+  /// noise; WavejetResult::tilt_within_noise).
   int max_refits = 4;
   float refit_angle = 10.f;
   /// Normals are oriented towards `viewpoint` (metres; PCL's convention, default the
@@ -107,6 +109,10 @@ struct WavejetResult {
   int order = -1;                         ///< order used (lowered when few neighbours)
   int fits = 0;                           ///< least-squares fits done (1 + refits)
   bool converged = false;                 ///< the tilt fell below refit_angle
+  /// The tilt stayed above refit_angle but is not distinguishable from zero given the fit's
+  /// own residuals (F test at level 3e-4, 4 standard errors with many neighbours): a tilt
+  /// the noise made, so the plane was kept instead of refitting.
+  bool tilt_within_noise = false;
   bool valid() const { return order >= 0; }
 };
 
@@ -137,6 +143,7 @@ struct WavejetReport {
   std::size_t lowered = 0;           ///< fitted at an order below the requested one
   std::size_t too_few_neighbours = 0;///< NaN outputs: not enough neighbours for order 2
   std::size_t not_converged = 0;     ///< tilt still above refit_angle after max_refits
+  std::size_t tilt_within_noise = 0; ///< tilt above refit_angle but within the noise: no refit
   std::size_t non_finite = 0;        ///< NaN/Inf input points (NaN outputs)
 };
 

@@ -81,7 +81,8 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
     ++report_.fitted;
     sum += neighbour_count[i];
     report_.lowered += results[i].order < params_.order;
-    report_.not_converged += !results[i].converged;
+    report_.not_converged += !results[i].converged && !results[i].tilt_within_noise;
+    report_.tilt_within_noise += results[i].tilt_within_noise;
   }
   report_.mean_neighbours = report_.fitted ? sum / report_.fitted : 0.0;
   output.is_dense = dense;

@@ -45,7 +45,20 @@ const char* kUsage =
     "  --samples DIR    sample data (default $PAPS_SAMPLES or ~/.cache/paps/samples)\n"
     "  --points N       dense points per shape (default 700000; the input is 10% of it)\n"
     "  --speed N        input points of the speed test, super-resolved x4 (default 100000, 0: skip)\n"
-    "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n";
+    "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n"
+    "  --shapes LIST    comma-separated subset of engraved-plane,rs1 (default both)\n"
+    "  --noises LIST    comma-separated noise fractions of the diagonal (default 0.0001,0.001,0.005)\n"
+    "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-4scans, apss,\n"
+    "                   apss-refit, rimls, rimls-refit, pcl-mls-plane, pcl-mls-random, pcl-mls-voxel,\n"
+    "                   simden+mls (also filters the speed test)\n";
+
+std::vector<std::string> splitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ',')) if (!item.empty()) out.push_back(item);
+  return out;
+}
 
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
 using SrResult = WorkerResult;
@@ -183,7 +196,7 @@ int runSuperresWorker(int argc, char** argv) {
 int runBenchSuperres(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "samples", "points", "speed", "quick"});
+  a.allowOnly({"out", "samples", "points", "speed", "quick", "shapes", "noises", "methods"});
   const bool quick = a.has("quick");
   const std::string out_dir = a.text("out", "bench_out");
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
@@ -191,21 +204,39 @@ int runBenchSuperres(int argc, char** argv) {
   const std::size_t n_speed = static_cast<std::size_t>(a.number("speed", quick ? 30000 : 100000));
   if (n_dense < 1000) throw InvalidParameter("points", std::to_string(n_dense), "at least 1000");
   std::filesystem::create_directories(out_dir);
+  const std::vector<std::string> all_methods = {"qsr",           "qsr-4scans",     "apss",          "apss-refit",
+                                                "rimls",         "rimls-refit",    "pcl-mls-plane", "pcl-mls-random",
+                                                "pcl-mls-voxel", "simden+mls"};
+  const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", "")) : all_methods;
+  for (const auto& m : methods)
+    if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
+      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-4scans, apss, apss-refit, rimls, "
+                                           "rimls-refit, pcl-mls-plane, pcl-mls-random, pcl-mls-voxel, simden+mls");
+  const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1"));
+  for (const auto& sh : shapes)
+    if (sh != "engraved-plane" && sh != "rs1") throw InvalidParameter("shapes", sh, "engraved-plane and/or rs1");
+  auto wanted = [&](const std::string& sh) { return std::find(shapes.begin(), shapes.end(), sh) != shapes.end(); };
+  std::vector<double> noises;
+  for (const auto& t : splitList(a.text("noises", "0.0001,0.001,0.005"))) {
+    char* end = nullptr;
+    const double v = std::strtod(t.c_str(), &end);
+    if (end == t.c_str() || *end || !(v >= 0 && v < 0.5)) throw InvalidParameter("noises", t, "fractions in [0, 0.5)");
+    noises.push_back(v);
+  }
+  if (noises.empty()) throw InvalidParameter("noises", a.text("noises", ""), "at least one noise fraction");
 
   struct Dataset { std::string name; TriangleMesh mesh; bool multi; };
   std::vector<Dataset> datasets;
   // Repeated relief: 2 mm bumps of wavelength 4 cm on a 1 m square (about 10 input points per
   // wavelength at 70K input points).
-  datasets.push_back({"engraved-plane", synthetic::engravedPlane(1.f, 0.04f, 0.002f, 800), true});
-  if (std::filesystem::exists(rs1)) datasets.push_back({"rs1", loadTriangleMesh(rs1), false});
+  if (wanted("engraved-plane"))
+    datasets.push_back({"engraved-plane", synthetic::engravedPlane(1.f, 0.04f, 0.002f, 800), true});
+  if (!wanted("rs1")) {
+  } else if (std::filesystem::exists(rs1)) datasets.push_back({"rs1", loadTriangleMesh(rs1), false});
   else std::fprintf(stderr, "warning: %s missing (scripts/fetch_samples.sh): rs1 rows skipped\n", rs1.c_str());
 
-  const std::vector<double> noises = {0.0001, 0.001, 0.005};
   // apss and rimls fit once per input point (their default); the -refit rows refit at every
   // output point.
-  std::vector<std::string> methods = {"qsr",           "qsr-4scans",     "apss",          "apss-refit",
-                                      "rimls",         "rimls-refit",    "pcl-mls-plane", "pcl-mls-random",
-                                      "pcl-mls-voxel", "simden+mls"};
   std::ofstream csv(out_dir + "/superres.csv");
   csv << "dataset,dense,input,noise,method,ok,seconds,peak_mb,output,rmse\n";
   std::printf("bench superres: dense %zu points per shape, input 10%%, noise sigma as a fraction of the diagonal\n", n_dense);
@@ -250,13 +281,13 @@ int runBenchSuperres(int argc, char** argv) {
             << "," << w.peak_mb << "," << w.output.size() << "," << e << "\n";
         if (m == "qsr") e_qsr = e;
         if (m.rfind("apss", 0) == 0 || m.rfind("rimls", 0) == 0 || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
-        if (noise == noises.front() && m.find("-refit") == std::string::npos) outputs[m] = w.output;
+        if (noise == 0.0001 && m.find("-refit") == std::string::npos) outputs[m] = w.output;
       }
       double best = INFINITY;
       std::string best_name;
       for (const auto& [k, v] : best_peer) if (v < best) { best = v; best_name = k; }
       std::printf("  -> QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f\n", best_name.c_str(), e_qsr / best);
-      if (noise == noises.front() && n_dense >= 50000) {  // render.cpp needs enough points per view
+      if (noise == 0.0001 && n_dense >= 50000) {  // render.cpp needs enough points per view
         // Close-ups: a square of 6% of the extent around the centre of the dense cloud.
         Eigen::Vector3f c = Eigen::Vector3f::Zero();
         for (const auto& p : dense) c += p;
@@ -292,14 +323,17 @@ int runBenchSuperres(int argc, char** argv) {
       }
     }
   }
-  if (n_speed > 0 && datasets.size() > 1) {
+  const Dataset* rs1_set = nullptr;
+  for (const auto& ds : datasets) if (ds.name == "rs1") rs1_set = &ds;
+  if (n_speed > 0 && rs1_set) {
     std::printf("\nspeed: %zu input points of rs1 (0.01%% noise) super-resolved x4, same count for all\n", n_speed);
-    Positions in = synthetic::sampleMesh(datasets[1].mesh, n_speed, 21);
+    Positions in = synthetic::sampleMesh(rs1_set->mesh, n_speed, 21);
     synthetic::addGaussianNoise(in, 0.0001f, 22);
     const SpatialIndex index(in);
     const float r = radiusForMeanNeighbourCount(in, index, 30);
     for (const std::string m : {"qsr", "apss", "apss-refit", "rimls", "rimls-refit", "pcl-mls-plane", "pcl-mls-random",
                                 "pcl-mls-voxel"}) {
+      if (std::find(methods.begin(), methods.end(), m) == methods.end()) continue;
       const SrResult w = runChild(out_dir, m, {in}, {{"count", 4.0 * n_speed}, {"radius", r}});
       if (!w.ok) { std::printf("%-15s failed: %s\n", m.c_str(), w.message.c_str()); continue; }
       std::printf("%-15s %9zu points in %7.2f s, peak %5.0f MB\n", m.c_str(), w.output.size(), w.seconds, w.peak_mb);

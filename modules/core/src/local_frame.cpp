@@ -5,6 +5,7 @@
 #include <numeric>
 #include <limits>
 #include <queue>
+#include <utility>
 #include <tuple>
 
 #include <Eigen/Eigenvalues>
@@ -62,44 +63,211 @@ std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
   return flips;
 }
 
+namespace {
+
+// The nearest few neighbours suffice to connect the graph and cost far less heap traffic than
+// all of them.
+constexpr int kPropagationNeighbours = 10;
+// Points per block of the parallel orientation: inputs up to this size are one block, i.e. the
+// plain sequential propagation.
+constexpr std::size_t kOrientBlock = 4096;
+
+// Hoppe-style propagation inside one block: the points `members` (sorted highest first, ties
+// by index), edges to points of the same block only. Each component inside the block is
+// seeded at its highest point with the normal up; comp[i] receives the component's number
+// (first_comp, first_comp + 1, ...). Returns the number of components.
+int propagateInBlock(Normals& normals, const NeighbourGraph& graph,
+                     const std::vector<int>& members, const std::vector<int>& block_of, int block,
+                     int first_comp, std::vector<int>& comp, std::vector<std::uint8_t>& flipped,
+                     std::vector<std::pair<float, int>>& offer) {
+  using Item = std::tuple<float, int, int>;  // (1 - |ni.nj|, target, source): most parallel first
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  // offer[j]: the best (cost, source) pushed for j so far. An offer that would pop after it
+  // can never be the one that reaches j, so it is not pushed: the same result as pushing all,
+  // with far less heap traffic.
+  auto pushNeighbours = [&](int i) {
+    const int* last = graph.begin(i) + std::min(graph.count(i), kPropagationNeighbours);
+    for (const int* j = graph.begin(i); j != last; ++j)
+      if (block_of[*j] == block && comp[*j] < 0) {
+        const std::pair<float, int> o(1.f - std::abs(normals[i].dot(normals[*j])), i);
+        if (!(o < offer[*j])) continue;
+        offer[*j] = o;
+        heap.emplace(o.first, *j, i);
+      }
+  };
+  int comps = 0;
+  for (const int seed : members) {
+    if (comp[seed] >= 0) continue;
+    const int c = first_comp + comps++;
+    if (normals[seed].z() < 0) { normals[seed] = -normals[seed]; flipped[seed] ^= 1; }
+    comp[seed] = c;
+    pushNeighbours(seed);
+    while (!heap.empty()) {
+      const auto [cost, j, from] = heap.top();
+      heap.pop();
+      if (comp[j] >= 0) continue;
+      comp[j] = c;
+      if (normals[j].dot(normals[from]) < 0) { normals[j] = -normals[j]; flipped[j] ^= 1; }
+      pushNeighbours(j);
+    }
+  }
+  return comps;
+}
+
+}  // namespace
+
 std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
                                        const NeighbourGraph& graph) {
   const std::size_t n = points.size();
   std::vector<int> order;
   order.reserve(n);
   for (std::size_t i = 0; i < n; ++i)
-    if (isFinite(normals[i])) order.push_back(static_cast<int>(i));
-  // Highest point first; ties broken by index for determinism.
-  std::sort(order.begin(), order.end(), [&](int a, int b) {
-    return points[a].z() != points[b].z() ? points[a].z() > points[b].z() : a < b;
-  });
-  std::vector<std::uint8_t> done(n, 0);
-  // Priority: least parallel last. (cost, target, source), cost = 1 - |ni.nj|.
-  using Item = std::tuple<float, int, int>;
-  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
-  std::size_t flips = 0;
-  // The nearest few neighbours suffice to connect the graph and cost far less heap traffic
-  // than all of them.
-  constexpr int kPropagationNeighbours = 10;
-  auto pushNeighbours = [&](int i) {
-    const int* last = graph.begin(i) + std::min(graph.count(i), kPropagationNeighbours);
-    for (const int* j = graph.begin(i); j != last; ++j)
-      if (!done[*j] && isFinite(normals[*j]))
-        heap.emplace(1.f - std::abs(normals[i].dot(normals[*j])), *j, i);
+    if (isFinite(normals[i]) && isFinite(points[i])) order.push_back(static_cast<int>(i));
+  if (order.empty()) return 0;
+  // Fixed blocks of space: the points in Morton order (10 bits per axis over the bounding box,
+  // ties by index), cut into runs of kOrientBlock. They depend on the points only, never on
+  // the thread count.
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
+  for (const int i : order) { lo = lo.cwiseMin(points[i]); hi = hi.cwiseMax(points[i]); }
+  const float extent = std::max((hi - lo).maxCoeff(), 1e-30f);
+  auto spread = [](std::uint64_t v) {  // 10 bits -> every third bit
+    v = (v | (v << 16)) & 0x030000FFull;
+    v = (v | (v << 8)) & 0x0300F00Full;
+    v = (v | (v << 4)) & 0x030C30C3ull;
+    v = (v | (v << 2)) & 0x09249249ull;
+    return v;
   };
-  for (int seed : order) {
-    if (done[seed]) continue;
-    if (normals[seed].z() < 0) { normals[seed] = -normals[seed]; ++flips; }
-    done[seed] = 1;
-    pushNeighbours(seed);
-    while (!heap.empty()) {
-      const auto [cost, j, from] = heap.top();
-      heap.pop();
-      if (done[j]) continue;
-      done[j] = 1;
-      if (normals[j].dot(normals[from]) < 0) { normals[j] = -normals[j]; ++flips; }
-      pushNeighbours(j);
+  std::vector<std::pair<std::uint64_t, int>> keyed(order.size());
+  for (std::size_t k = 0; k < order.size(); ++k) {
+    const Eigen::Vector3f q = (points[order[k]] - lo) / extent * 1023.f;
+    std::uint64_t key = 0;
+    for (int a = 0; a < 3; ++a)
+      key |= spread(static_cast<std::uint64_t>(std::clamp(q[a], 0.f, 1023.f))) << a;
+    keyed[k] = {key, order[k]};
+  }
+  std::sort(keyed.begin(), keyed.end());
+  const int blocks = static_cast<int>((keyed.size() + kOrientBlock - 1) / kOrientBlock);
+  std::vector<int> block_of(n, -1);
+  std::vector<std::vector<int>> members(blocks);
+  for (std::size_t k = 0; k < keyed.size(); ++k) {
+    block_of[keyed[k].second] = static_cast<int>(k / kOrientBlock);
+    members[k / kOrientBlock].push_back(keyed[k].second);
+  }
+  auto higher = [&](int a, int b) {  // highest first; ties broken by index
+    return points[a].z() != points[b].z() ? points[a].z() > points[b].z() : a < b;
+  };
+  // 1. Propagation inside each block, in parallel. Component numbers are made global after.
+  std::vector<int> comp(n, -1), block_comps(blocks, 0);
+  std::vector<std::uint8_t> flipped(n, 0);
+  std::vector<std::pair<float, int>> offer(n, {INFINITY, -1});
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int b = 0; b < blocks; ++b) {
+    std::sort(members[b].begin(), members[b].end(), higher);
+    block_comps[b] = propagateInBlock(normals, graph, members[b], block_of, b, 0, comp, flipped, offer);
+  }
+  std::vector<int> comp_base(blocks + 1, 0);
+  for (int b = 0; b < blocks; ++b) comp_base[b + 1] = comp_base[b] + block_comps[b];
+  const int ncomp = comp_base[blocks];
+#pragma omp parallel for schedule(static)
+  for (int b = 0; b < blocks; ++b)
+    for (const int i : members[b]) comp[i] += comp_base[b];
+  std::vector<int> comp_seed(ncomp);  // each component's highest point (the first of its block)
+  for (int b = 0; b < blocks; ++b)
+    for (auto it = members[b].rbegin(); it != members[b].rend(); ++it) comp_seed[comp[*it]] = *it;
+  if (ncomp == 1) {
+    std::size_t flips = 0;
+    for (const int i : order) flips += flipped[i];
+    return flips;
+  }
+  // 2. Agreement between components over the edges that cross them: the sum of ni.nj (with
+  // the signs of step 1). Positive: the two components are oriented alike.
+  std::vector<std::vector<std::tuple<int, int, float>>> crossing(blocks);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int b = 0; b < blocks; ++b) {
+    auto& out = crossing[b];
+    for (const int i : members[b]) {
+      const int* last = graph.begin(i) + std::min(graph.count(i), kPropagationNeighbours);
+      for (const int* j = graph.begin(i); j != last; ++j) {
+        const int cj = comp[*j];
+        if (cj < 0 || cj == comp[i]) continue;
+        out.emplace_back(std::min(comp[i], cj), std::max(comp[i], cj), normals[i].dot(normals[*j]));
+      }
     }
+    std::stable_sort(out.begin(), out.end(), [](const auto& x, const auto& y) {
+      return std::get<0>(x) != std::get<0>(y) ? std::get<0>(x) < std::get<0>(y) : std::get<1>(x) < std::get<1>(y);
+    });
+  }
+  // Sums per pair, in block order then pair order: a fixed order of additions.
+  std::vector<std::tuple<int, int, double>> pairs;
+  for (int b = 0; b < blocks; ++b) {
+    const auto& v = crossing[b];
+    for (std::size_t k = 0; k < v.size();) {
+      std::size_t e = k;
+      double sum = 0;
+      for (; e < v.size() && std::get<0>(v[e]) == std::get<0>(v[k]) && std::get<1>(v[e]) == std::get<1>(v[k]); ++e)
+        sum += std::get<2>(v[e]);
+      pairs.emplace_back(std::get<0>(v[k]), std::get<1>(v[k]), sum);
+      k = e;
+    }
+    std::vector<std::tuple<int, int, float>>().swap(crossing[b]);
+  }
+  std::stable_sort(pairs.begin(), pairs.end(), [](const auto& x, const auto& y) {
+    return std::get<0>(x) != std::get<0>(y) ? std::get<0>(x) < std::get<0>(y) : std::get<1>(x) < std::get<1>(y);
+  });
+  std::vector<std::int64_t> off(ncomp + 1, 0);
+  std::vector<std::pair<int, double>> adj;
+  {
+    std::vector<std::tuple<int, int, double>> merged;
+    for (std::size_t k = 0; k < pairs.size();) {
+      std::size_t e = k;
+      double sum = 0;
+      for (; e < pairs.size() && std::get<0>(pairs[e]) == std::get<0>(pairs[k]) && std::get<1>(pairs[e]) == std::get<1>(pairs[k]); ++e)
+        sum += std::get<2>(pairs[e]);
+      if (sum != 0) merged.emplace_back(std::get<0>(pairs[k]), std::get<1>(pairs[k]), sum);
+      k = e;
+    }
+    for (const auto& [a, c, s] : merged) { ++off[a + 1]; ++off[c + 1]; }
+    for (int c = 0; c < ncomp; ++c) off[c + 1] += off[c];
+    adj.resize(off[ncomp]);
+    std::vector<std::int64_t> cur(off.begin(), off.end() - 1);
+    for (const auto& [a, c, s] : merged) { adj[cur[a]++] = {c, s}; adj[cur[c]++] = {a, s}; }
+  }
+  // 3. Components oriented relative to each other by propagation over the component graph,
+  // strongest agreement first, from the component of the highest point not yet reached, whose
+  // sign is kept (its seed points up, as in the sequential propagation).
+  std::vector<int> comp_order(ncomp);
+  std::iota(comp_order.begin(), comp_order.end(), 0);
+  std::sort(comp_order.begin(), comp_order.end(), [&](int a, int b) { return higher(comp_seed[a], comp_seed[b]); });
+  std::vector<std::int8_t> sign(ncomp, 0);
+  using Item = std::tuple<double, int, int>;  // (-|agreement|, target, source)
+  std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
+  auto push = [&](int c) {
+    for (std::int64_t k = off[c]; k < off[c + 1]; ++k)
+      if (!sign[adj[k].first]) heap.emplace(-std::abs(adj[k].second), adj[k].first, c);
+  };
+  auto agreement = [&](int a, int c) {
+    for (std::int64_t k = off[a]; k < off[a + 1]; ++k)
+      if (adj[k].first == c) return adj[k].second;
+    return 0.0;
+  };
+  for (const int root : comp_order) {
+    if (sign[root]) continue;
+    sign[root] = 1;
+    push(root);
+    while (!heap.empty()) {
+      const auto [cost, c, from] = heap.top();
+      heap.pop();
+      if (sign[c]) continue;
+      sign[c] = static_cast<std::int8_t>(agreement(from, c) >= 0 ? sign[from] : -sign[from]);
+      push(c);
+    }
+  }
+  std::size_t flips = 0;
+#pragma omp parallel for schedule(static) reduction(+ : flips)
+  for (std::int64_t k = 0; k < static_cast<std::int64_t>(order.size()); ++k) {
+    const int i = order[k];
+    if (sign[comp[i]] < 0) { normals[i] = -normals[i]; flipped[i] ^= 1; }
+    flips += flipped[i];
   }
   return flips;
 }

@@ -60,33 +60,44 @@ class SeedThinner {
     side_ = side;
   }
 
-  // The kept candidates among the first `limit` (0: all), at radius d. With a limit, or
-  // without blocks, the candidates are visited in index order.
-  std::vector<int> run(float d, std::size_t limit = 0) {
+  // The kept candidates at radius d: all of them, or (pilot) those of the first `blocks_limit`
+  // blocks only (0: all). Without blocks, or with blocks too small for d, the candidates are
+  // visited in index order, sequentially.
+  std::vector<int> run(float d, std::size_t blocks_limit = 0) {
     const float reach = d + 2.f * disc_;
     nearLists(reach);
     reach1_sq_ = (d + disc_) * (d + disc_) * 1.0001f;
-    std::fill(count_.begin(), count_.end(), 0);
     const float d2 = d * d;
     std::vector<int> kept;
-    const std::size_t end = limit ? std::min(limit, cand_.size()) : cand_.size();
-    if (limit || block_start_.empty() || !(side_ >= reach)) {
+    const std::int64_t blocks = static_cast<std::int64_t>(block_parity_.size());
+    const std::int64_t nb = blocks_limit ? std::min<std::int64_t>(blocks, blocks_limit) : blocks;
+    const std::size_t end = block_start_.empty() ? cand_.size() : block_start_[nb];
+    if (block_start_.empty() || !(side_ >= reach)) {
+      std::fill(count_.begin(), count_.end(), 0);
       for (std::size_t c = 0; c < end; ++c)
         if (tryKeep(c, d2)) kept.push_back(static_cast<int>(c));
       return kept;
     }
-    std::vector<std::uint8_t> keep(cand_.size(), 0);
-    const std::int64_t blocks = static_cast<std::int64_t>(block_parity_.size());
+    std::vector<std::uint8_t> keep(end, 0);
+    std::fill(count_.begin(), count_.end(), 0);
     for (int parity = 0; parity < 8; ++parity) {
-#pragma omp parallel for schedule(dynamic, 4)
-      for (std::int64_t b = 0; b < blocks; ++b) {
+#pragma omp parallel for schedule(dynamic, 2)
+      for (std::int64_t b = 0; b < nb; ++b) {
         if (block_parity_[b] != parity) continue;
         for (std::size_t c = block_start_[b]; c < block_start_[b + 1]; ++c) keep[c] = tryKeep(c, d2);
       }
     }
-    for (std::size_t c = 0; c < cand_.size(); ++c)
+    kept.reserve(end / 2);
+    for (std::size_t c = 0; c < end; ++c)
       if (keep[c]) kept.push_back(static_cast<int>(c));
     return kept;
+  }
+
+  // The number of blocks whose candidates make up at least `n` candidates.
+  std::size_t blocksCovering(std::size_t n) const {
+    std::size_t b = 0;
+    while (b < block_parity_.size() && block_start_[b + 1] < n) ++b;
+    return std::min(b + 1, block_parity_.size());
   }
 
  private:
@@ -107,24 +118,40 @@ class SeedThinner {
 
   // near_ lists, per ranked input point, the ranks of the ranked points within `reach`
   // (itself first).
+  // Lists made for a larger reach serve as they are (tryKeep tests exact distances), so they
+  // are only rebuilt when the reach grows past the one they were made for.
   void nearLists(float reach) {
+    if (near_reach_ >= reach) return;
     if (!graph_ || graph_radius_ < reach) {
-      own_index_ = std::make_unique<SpatialIndex>(points_);
       graph_radius_ = 1.25f * reach;
-      own_graph_ = NeighbourGraph::byRadius(points_, *own_index_, graph_radius_);
+      own_graph_ = gridRadiusGraph(points_, graph_radius_);
       graph_ = &own_graph_;
     }
+    reach = std::min(1.15f * reach, graph_radius_);
+    near_reach_ = reach;
     const float reach2 = reach * reach;
-    near_off_.assign(ranked_.size() + 1, 0);
-    near_.clear();
-    for (std::size_t k = 0; k < ranked_.size(); ++k) {
+    const std::int64_t n = static_cast<std::int64_t>(ranked_.size());
+    near_off_.assign(n + 1, 0);
+    auto visit = [&](std::int64_t k, auto&& emit) {
       const int i = ranked_[k];
-      near_.push_back(static_cast<int>(k));
+      emit(static_cast<int>(k));
       for (const int* j = graph_->begin(i); j != graph_->end(i); ++j) {
         const int r = rank_of_[*j];
-        if (r >= 0 && *j != i && (points_[*j] - points_[i]).squaredNorm() <= reach2) near_.push_back(r);
+        if (r >= 0 && *j != i && (points_[*j] - points_[i]).squaredNorm() <= reach2) emit(r);
       }
-      near_off_[k + 1] = static_cast<std::int64_t>(near_.size());
+    };
+#pragma omp parallel for schedule(dynamic, 512)
+    for (std::int64_t k = 0; k < n; ++k) {
+      std::int64_t c = 0;
+      visit(k, [&](int) { ++c; });
+      near_off_[k + 1] = c;
+    }
+    for (std::int64_t k = 0; k < n; ++k) near_off_[k + 1] += near_off_[k];
+    near_.resize(static_cast<std::size_t>(near_off_[n]));
+#pragma omp parallel for schedule(dynamic, 512)
+    for (std::int64_t k = 0; k < n; ++k) {
+      std::int64_t pos = near_off_[k];
+      visit(k, [&](int r) { near_[pos++] = r; });
     }
   }
 
@@ -136,7 +163,6 @@ class SeedThinner {
   const float disc_;
   const NeighbourGraph* graph_;
   float graph_radius_;
-  std::unique_ptr<SpatialIndex> own_index_;
   NeighbourGraph own_graph_;
   std::vector<int> rank_of_, near_;
   std::vector<std::int64_t> near_off_;
@@ -147,6 +173,7 @@ class SeedThinner {
   float side_ = 0.f;
   Positions opos_;  // the ranked input points
   float reach1_sq_ = 0.f;
+  float near_reach_ = 0.f;
 };
 
 }  // namespace
@@ -181,7 +208,6 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // shapes; the pilot passes below correct it).
   const double area = static_cast<double>(usable) * 3.14159265 * disc_radius * disc_radius * 0.6;
   double d = std::sqrt(area / (2.9 * count));
-  Random rng(seed);
   // Dart throwing visits the candidates in index order. Input points are grouped in blocks of
   // space visited one after the other, and the candidates of a block are shuffled among
   // themselves: as random locally as a global shuffle, with memory traffic that stays local.
@@ -201,36 +227,53 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   std::sort(keyed.begin(), keyed.end());
   std::vector<int> ranked(usable);
   for (std::size_t k = 0; k < usable; ++k) ranked[k] = keyed[k].second;
-  Positions cand;
-  std::vector<int> cand_rank;
-  cand.reserve(usable * per_point);
-  cand_rank.reserve(usable * per_point);
-  std::size_t group_start = 0;
-  std::vector<std::size_t> block_start;
+  // Blocks: runs of input points with the same block key. Candidates k * per_point ..
+  // (k + 1) * per_point - 1 come from the k-th ranked point, so a block's candidates are a
+  // contiguous range known in advance; each block draws them (and shuffles them) with its own
+  // random stream, in parallel: the result does not depend on the thread count.
+  std::vector<std::size_t> block_first;  // first rank of each block
   std::vector<std::uint8_t> block_parity;
-  for (std::size_t k = 0; k < usable; ++k) {
-    const int i = ranked[k];
-    const Eigen::Vector3f& n = normals[i];
-    const Eigen::Vector3f a = std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY();
-    const Eigen::Vector3f t1 = (a - a.dot(n) * n).normalized(), t2 = n.cross(t1);
-    for (int j = 0; j < per_point; ++j) {
-      const float r = disc_radius * std::sqrt(static_cast<float>(rng.uniform()));
-      const float phi = static_cast<float>(6.283185307179586 * rng.uniform());
-      cand.push_back(points[i] + r * std::cos(phi) * t1 + r * std::sin(phi) * t2);
-      cand_rank.push_back(static_cast<int>(k));
-    }
-    if (k + 1 == usable || keyed[k + 1].first != keyed[k].first) {  // shuffle the block
-      for (std::size_t m = cand.size(); m > group_start + 1; --m) {
-        const std::size_t j = group_start + rng.below(m - group_start);
-        std::swap(cand[m - 1], cand[j]);
-        std::swap(cand_rank[m - 1], cand_rank[j]);
-      }
+  for (std::size_t k = 0; k < usable; ++k)
+    if (k == 0 || keyed[k].first != keyed[k - 1].first) {
       const std::uint64_t key = keyed[k].first;
-      block_start.push_back(group_start);
+      block_first.push_back(k);
       block_parity.push_back(static_cast<std::uint8_t>(((key >> 42) & 1) | (((key >> 21) & 1) << 1) | ((key & 1) << 2)));
-      group_start = cand.size();
+    }
+  block_first.push_back(usable);
+  const std::int64_t nblocks = static_cast<std::int64_t>(block_parity.size());
+  const std::size_t ncand = usable * static_cast<std::size_t>(per_point);
+  Positions cand(ncand);
+  std::vector<int> cand_rank(ncand);
+#pragma omp parallel for schedule(dynamic, 4)
+  for (std::int64_t b = 0; b < nblocks; ++b) {
+    Random brng(seed * 0x9E3779B97F4A7C15ULL + static_cast<std::uint64_t>(b) * 0xD1B54A32D192ED03ULL + 1);
+    const std::size_t c0 = block_first[b] * per_point, c1 = block_first[b + 1] * per_point;
+    for (std::size_t k = block_first[b]; k < block_first[b + 1]; ++k) {
+      const int i = ranked[k];
+      const Eigen::Vector3f& n = normals[i];
+      const Eigen::Vector3f a = std::abs(n.x()) < 0.9f ? Eigen::Vector3f::UnitX() : Eigen::Vector3f::UnitY();
+      const Eigen::Vector3f t1 = (a - a.dot(n) * n).normalized(), t2 = n.cross(t1);
+      for (int j = 0; j < per_point; ++j) {
+        float u, v;  // uniform in the unit disc, by rejection from the square
+        do {
+          const std::uint64_t bits = brng.next();
+          u = static_cast<float>(bits >> 40) * (2.f / 16777216.f) - 1.f;
+          v = static_cast<float>((bits >> 16) & 0xFFFFFFu) * (2.f / 16777216.f) - 1.f;
+        } while (u * u + v * v > 1.f);
+        const std::size_t c = k * per_point + j;
+        cand[c] = points[i] + disc_radius * (u * t1 + v * t2);
+        cand_rank[c] = static_cast<int>(k);
+      }
+    }
+    for (std::size_t m = c1; m > c0 + 1; --m) {  // shuffle the block
+      const std::size_t j = c0 + brng.below(m - c0);
+      std::swap(cand[m - 1], cand[j]);
+      std::swap(cand_rank[m - 1], cand_rank[j]);
     }
   }
+  std::vector<std::size_t> block_start(nblocks + 1);
+  for (std::int64_t b = 0; b <= nblocks; ++b) block_start[b] = block_first[b] * per_point;
+  Random rng(seed);
   if (cand.size() <= count) {
     if (origin) {
       origin->resize(cand.size());
@@ -242,9 +285,8 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // gives at most 3% more. The count falls with d about as a power law whose exponent (-2 for
   // a sparse set, less as the set nears the candidates' own spacing) is measured from the last
   // two passes.
-  block_start.push_back(cand.size());
   SeedThinner thinner(points, ranked, cand, cand_rank, per_point, disc_radius, graph, graph_radius);
-  thinner.setBlocks(std::move(block_start), std::move(block_parity), static_cast<float>(block));
+  thinner.setBlocks(block_start, std::move(block_parity), static_cast<float>(block));
   std::vector<int> best;
   double lo_fail = 0, hi_ok = 0;  // smallest radius giving too few, largest giving enough
   double prev_d = 0, prev_n = 0;
@@ -252,13 +294,14 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // Two pilot passes on the first candidates (a compact part of the surface, thinned exactly
   // as the full pass would) set the radius and the exponent, so that the full pass is usually
   // right the first time.
-  const std::size_t pilot = std::max<std::size_t>(cand.size() / 6, 30000);
+  const std::size_t pilot_blocks = thinner.blocksCovering(std::max<std::size_t>(cand.size() / 12, 30000));
+  const std::size_t pilot = block_start[pilot_blocks];
   double slope_hint = -1.5;
   if (pilot < cand.size() / 2) {
     const double scale = static_cast<double>(cand.size()) / pilot;
     double& slope = slope_hint;
     for (int it = 0; it < 2; ++it) {
-      const double found = scale * static_cast<double>(thinner.run(static_cast<float>(d), pilot).size());
+      const double found = scale * static_cast<double>(thinner.run(static_cast<float>(d), pilot_blocks).size());
       if (!(found > 0)) break;
       if (prev_d > 0 && std::abs(std::log(d / prev_d)) > 1e-6 && prev_n > 0)
         slope = std::clamp(std::log(found / prev_n) / std::log(d / prev_d), -4.0, -0.3);
@@ -293,16 +336,22 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
     best.resize(cand.size());
     for (std::size_t i = 0; i < best.size(); ++i) best[i] = static_cast<int>(i);
   }
-  // Drop the surplus at random.
-  for (std::size_t i = best.size(); i > 1; --i) std::swap(best[i - 1], best[rng.below(i)]);
-  best.resize(count);
-  std::sort(best.begin(), best.end());
-  Positions out;
-  out.reserve(count);
-  if (origin) origin->clear();
-  for (int i : best) {
-    out.push_back(cand[i]);
-    if (origin) origin->push_back(ranked[cand_rank[i]]);
+  // Drop the surplus at random (a few percent: marked one by one, the kept ones stay in
+  // increasing order).
+  std::vector<std::uint8_t> drop(best.size(), 0);
+  for (std::size_t dropped = 0; dropped + count < best.size();) {
+    const std::size_t k = rng.below(best.size());
+    if (!drop[k]) { drop[k] = 1; ++dropped; }
+  }
+  Positions out(count);
+  if (origin) origin->resize(count);
+  std::vector<std::size_t> at(best.size());
+  for (std::size_t k = 0, m = 0; k < best.size(); ++k) { at[k] = m; m += !drop[k]; }
+#pragma omp parallel for schedule(static)
+  for (std::int64_t k = 0; k < static_cast<std::int64_t>(best.size()); ++k) {
+    if (drop[k]) continue;
+    out[at[k]] = cand[best[k]];
+    if (origin) (*origin)[at[k]] = ranked[cand_rank[best[k]]];
   }
   return out;
 }
@@ -511,23 +560,38 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
     const SpatialIndex index(points);
     h = radiusForMeanNeighbourCount(points, index, params.target_neighbours);
   }
+  const bool per_point = params.fit_per_input_point;
+  const bool apss = surface == MlsSurface::Apss;
+  // Fitted once per input point, APSS and RIMLS read the neighbours within h of that point
+  // only (for RIMLS this drops points within h of a seed but farther than h from its input
+  // point: their Wendland weight is below 0.03 of the largest, and the bench errors move by
+  // less than 0.1%): the lists at h serve for everything. Refitted at every seed, the
+  // projections read past h by the seed disc.
+  const bool only_h = per_point;
   float reach = h * (1.1f + 1.5f / std::sqrt(static_cast<float>(params.target_neighbours)));
   // Grid neighbour lists (core CellGrid): on scanned surfaces several times faster than
   // kd-tree radius searches, which dominated the cost of the whole upsampling.
-  NeighbourGraph graph_ext = gridRadiusGraph(points, reach);
-  NeighbourGraph graph_h = restrictedGraph(points, graph_ext, h);
+  NeighbourGraph graph_ext, graph_h;
+  if (only_h) {
+    graph_h = gridRadiusGraph(points, h);
+  } else {
+    graph_ext = gridRadiusGraph(points, reach);
+    graph_h = restrictedGraph(points, graph_ext, h);
+  }
   const double mean_count = std::max(1.0, graph_h.meanCount());
   const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f;
-  if (reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
+  if (!only_h && reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
     reach = 1.05f * h + disc;
     graph_ext = gridRadiusGraph(points, reach);
   }
+  const NeighbourGraph& lists = only_h ? graph_h : graph_ext;
+  const float lists_radius = only_h ? h : reach;
   Normals normals = estimateNormals(points, graph_h);
   orientNormalsByPropagation(points, normals, graph_h);
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite));
   std::vector<int> origin;
-  Positions out = upsamplingSeeds(points, normals, count, disc, params.seed, &origin, &graph_ext, reach);
+  Positions out = upsamplingSeeds(points, normals, count, disc, params.seed, &origin, &lists, lists_radius);
   // Seeds grouped by the input point they were generated from.
   const std::size_t np = points.size();
   std::vector<std::int64_t> soff(np + 1, 0);
@@ -540,12 +604,10 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
   }
   std::size_t unprojected = 0;
   const float inv_h = 1.f / h;
-  const bool per_point = params.fit_per_input_point;
-  const bool apss = surface == MlsSurface::Apss;
   // What the projections read, in units of h: the sphere at the input point reads its
   // neighbours within h; a projection at a seed (within disc of its input point) those within
   // h of the seed; refitted projections may move a little further.
-  const float gather_within = per_point && apss ? 1.f : per_point ? 1.f + disc / h : reach / h;
+  const float gather_within = only_h ? 1.f : per_point ? 1.f + disc / h : reach / h;
   ProgressReporter rep(progress, surface == MlsSurface::Apss ? "APSS projection" : "RIMLS projection", out.size());
 #pragma omp parallel reduction(+ : unprojected)
   {
@@ -555,7 +617,7 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
       const std::int64_t s0 = soff[o], s1 = soff[o + 1];
       if (s0 == s1 || rep.cancelled()) continue;
       const Eigen::Vector3f& po = points[o];
-      b.gather(points, normals, graph_ext.begin(o), graph_ext.count(o), po, inv_h, gather_within);
+      b.gather(points, normals, lists.begin(o), lists.count(o), po, inv_h, gather_within);
       Sphere sphere;
       bool origin_ok = true;
       if (per_point && apss) sphere = fitSphere(b, Eigen::Vector3f::Zero()), origin_ok = sphere.ok;

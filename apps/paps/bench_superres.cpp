@@ -49,8 +49,9 @@ const char* kUsage =
     "  --shapes LIST    comma-separated subset of engraved-plane,rs1 (default both)\n"
     "  --noises LIST    comma-separated noise fractions of the diagonal (default 0.0001,0.001,0.005)\n"
     "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-4scans, apss,\n"
-    "                   apss-refit, rimls, rimls-refit, pcl-mls-plane, pcl-mls-random, pcl-mls-voxel,\n"
-    "                   simden+mls (also filters the speed test)\n";
+    "                   apss-refit, apss-wide, rimls, rimls-refit, rimls-wide, pcl-mls-plane,\n"
+    "                   pcl-mls-random, pcl-mls-voxel, simden+mls (also filters the speed test)\n"
+    "                   (-refit: fit at every seed; -wide: seed discs as wide as QSR's)\n";
 
 std::vector<std::string> splitList(const std::string& s) {
   std::vector<std::string> out;
@@ -168,10 +169,13 @@ int runSuperresWorker(int argc, char** argv) {
       out = superResolveQuadric(scans, q, &r);
       lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"
          << r.grid_sr << " K-1 " << r.mean_similar_weight << " fallbacks " << r.plane_fallbacks << "\n";
-    } else if (method == "apss" || method == "rimls" || method == "apss-refit" || method == "rimls-refit") {
+    } else if (method == "apss" || method == "rimls" || method == "apss-refit" || method == "rimls-refit" ||
+               method == "apss-wide" || method == "rimls-wide") {
       MlsUpsamplingParameters q;
       q.output_count = target;
       q.fit_per_input_point = method.find("-refit") == std::string::npos;
+      // -wide: seeds spread over discs as wide as QSR's (1.2 mean spacings).
+      if (method.find("-wide") != std::string::npos) q.disc_scale = 1.7724539f;
       out = upsampleMls(scans[0], method.rfind("apss", 0) == 0 ? MlsSurface::Apss : MlsSurface::Rimls, q);
     } else if (method.rfind("pcl-mls-", 0) == 0) {
       out = pclMlsUpsample(scans[0], method.substr(8), get("radius", 0), target);
@@ -181,7 +185,7 @@ int runSuperresWorker(int argc, char** argv) {
       const Positions den = denoiseBySimilarity(scans[0], q);
       out = pclMlsUpsample(den, "plane", get("radius", 0), target);
     } else {
-      throw InvalidParameter("method", method, "qsr, apss[-refit], rimls[-refit], pcl-mls-{plane,random,voxel}, simden+mls");
+      throw InvalidParameter("method", method, "qsr, apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     writeRaw(dir + "/sr_out.bin", out);
@@ -204,14 +208,15 @@ int runBenchSuperres(int argc, char** argv) {
   const std::size_t n_speed = static_cast<std::size_t>(a.number("speed", quick ? 30000 : 100000));
   if (n_dense < 1000) throw InvalidParameter("points", std::to_string(n_dense), "at least 1000");
   std::filesystem::create_directories(out_dir);
-  const std::vector<std::string> all_methods = {"qsr",           "qsr-4scans",     "apss",          "apss-refit",
-                                                "rimls",         "rimls-refit",    "pcl-mls-plane", "pcl-mls-random",
-                                                "pcl-mls-voxel", "simden+mls"};
+  const std::vector<std::string> all_methods = {"qsr",           "qsr-4scans",     "apss",           "apss-refit",
+                                                "apss-wide",     "rimls",          "rimls-refit",    "rimls-wide",
+                                                "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls"};
   const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", "")) : all_methods;
   for (const auto& m : methods)
     if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
-      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-4scans, apss, apss-refit, rimls, "
-                                           "rimls-refit, pcl-mls-plane, pcl-mls-random, pcl-mls-voxel, simden+mls");
+      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-4scans, apss, apss-refit, apss-wide, "
+                                           "rimls, rimls-refit, rimls-wide, pcl-mls-plane, pcl-mls-random, "
+                                           "pcl-mls-voxel, simden+mls");
   const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1"));
   for (const auto& sh : shapes)
     if (sh != "engraved-plane" && sh != "rs1") throw InvalidParameter("shapes", sh, "engraved-plane and/or rs1");
@@ -281,7 +286,8 @@ int runBenchSuperres(int argc, char** argv) {
             << "," << w.peak_mb << "," << w.output.size() << "," << e << "\n";
         if (m == "qsr") e_qsr = e;
         if (m.rfind("apss", 0) == 0 || m.rfind("rimls", 0) == 0 || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
-        if (noise == 0.0001 && m.find("-refit") == std::string::npos) outputs[m] = w.output;
+        if (noise == 0.0001 && m.find("-refit") == std::string::npos && m.find("-wide") == std::string::npos)
+          outputs[m] = w.output;
       }
       double best = INFINITY;
       std::string best_name;
@@ -331,8 +337,8 @@ int runBenchSuperres(int argc, char** argv) {
     synthetic::addGaussianNoise(in, 0.0001f, 22);
     const SpatialIndex index(in);
     const float r = radiusForMeanNeighbourCount(in, index, 30);
-    for (const std::string m : {"qsr", "apss", "apss-refit", "rimls", "rimls-refit", "pcl-mls-plane", "pcl-mls-random",
-                                "pcl-mls-voxel"}) {
+    for (const std::string m : {"qsr", "apss", "apss-refit", "apss-wide", "rimls", "rimls-refit", "rimls-wide",
+                                "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel"}) {
       if (std::find(methods.begin(), methods.end(), m) == methods.end()) continue;
       const SrResult w = runChild(out_dir, m, {in}, {{"count", 4.0 * n_speed}, {"radius", r}});
       if (!w.ok) { std::printf("%-15s failed: %s\n", m.c_str(), w.message.c_str()); continue; }

@@ -24,6 +24,7 @@ void MlsUpsamplingParameters::validate() const {
   requireInRange("inner_iterations", inner_iterations, 1, 50);
   requirePositive("sigma_r", sigma_r);
   requirePositive("sigma_n", sigma_n);
+  requireInRange("disc_scale", disc_scale, 0.1f, 10.f);
 }
 
 namespace {
@@ -579,7 +580,7 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
     graph_h = restrictedGraph(points, graph_ext, h);
   }
   const double mean_count = std::max(1.0, graph_h.meanCount());
-  const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f;
+  const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f * params.disc_scale;
   if (!only_h && reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
     reach = 1.05f * h + disc;
     graph_ext = gridRadiusGraph(points, reach);

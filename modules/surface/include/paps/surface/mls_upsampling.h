@@ -42,6 +42,13 @@ struct MlsUpsamplingParameters {
   int inner_iterations = 3;
   /// RIMLS: residual scale in units of the radius, and normal scale (Oztireli et al.: 0.5-1.5).
   float sigma_r = 0.2f, sigma_n = 0.8f;
+  /// Radius of the tangent discs the seeds are spread over, as a multiple of 1.2 h / sqrt(mean
+  /// neighbour count at h) (0.1 to 10). The default keeps the seeds close to their input
+  /// points (cheap thinning, accurate per-point fits). sqrt(pi) = 1.7725 gives QSR's disc (1.2
+  /// mean spacings): on the bench the output then covers the surface more evenly, and the
+  /// error (dense points to their nearest output point) drops by about 25% at low noise, for
+  /// about 1.5x the time (docs/superresolution.md).
+  float disc_scale = 1.f;
   /// Seed of the seed points.
   std::uint64_t seed = 1;
   void validate() const;

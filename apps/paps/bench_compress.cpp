@@ -42,7 +42,9 @@ const char* kBenchCompressUsage =
     "  --noise F          scanner-like Gaussian noise, sigma = F x the sampling spacing (default 0.3)\n"
     "  --out DIR          CSV and PNG plots (default bench_compress)\n"
     "  --draco-bits LIST  Draco position quantization bits (default 8,9,10,11,12,14,16)\n"
-    "  --ours LIST        patch points per patch for our rates (default 64,100,160,256,400,700,1200,2400)\n"
+    "  --ours LIST        our rates: patch points per patch, each optionally xS for a seed spacing of\n"
+    "                     S x R (default 64,100,160,256,400,700,1000,1600,2400)\n"
+    "  --seed-spacing S   seed spacing of the rates without xS, as a fraction of R (default 1.25)\n"
     "  --save-inputs DIR  write the inputs (DIR/rs1-clean.pcd, ...) as binary PCD and stop; for timing\n"
     "                     and measuring the memory of 'paps compress' on the same clouds\n";
 
@@ -218,7 +220,7 @@ void compareAtEqualError(const std::vector<Result>& rs, const std::function<doub
 int runBenchCompress(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
   if (a.has("help")) { std::fputs(kBenchCompressUsage, stdout); return 0; }
-  a.allowOnly({"mesh", "scan", "points", "noise", "out", "draco-bits", "ours", "save-inputs"});
+  a.allowOnly({"mesh", "scan", "points", "noise", "out", "draco-bits", "ours", "seed-spacing", "save-inputs"});
   // Same sample cache as the other benches (scripts/fetch_samples.sh).
   const std::string data = samplesDir();
   const std::string mesh_path = a.text("mesh", data + "/rs1_normals.ply");
@@ -228,7 +230,19 @@ int runBenchCompress(int argc, char** argv) {
   const double noise = a.number("noise", 0.3);
   const std::string out = a.text("out", "bench_compress");
   const std::vector<int> draco_bits = parseList(a.text("draco-bits", "8,9,10,11,12,14,16"));
-  const std::vector<int> ours = parseList(a.text("ours", "64,100,160,256,400,700,1200,2400"));
+  // Our rates: "PP" or "PPxS" (patch points, seed spacing S x R).
+  std::vector<std::pair<int, float>> ours;
+  {
+    const float default_spacing = float(a.number("seed-spacing", 1.25));
+    requireInRange("seed-spacing", default_spacing, 0.25f, 2.f);
+    std::stringstream ss(a.text("ours", "64,100,160,256,400,700,1000,1600,2400"));
+    std::string item;
+    while (std::getline(ss, item, ','))
+      if (!item.empty()) {
+        const auto x = item.find('x');
+        ours.push_back({std::stoi(item.substr(0, x)), x == std::string::npos ? default_spacing : std::stof(item.substr(x + 1))});
+      }
+  }
   std::filesystem::create_directories(out);
   const std::string tmp = out + "/tmp";
   std::filesystem::create_directories(tmp);
@@ -291,18 +305,34 @@ int runBenchCompress(int argc, char** argv) {
     if (t) std::printf("  input to true surface RMSE %.3e\n", pointToMeshError(d.points, truth).rmse);
     std::vector<Result> rs;
     Positions ours_mid;
-    for (const int pp : ours) {
+    for (const auto& [pp, seed_spacing] : ours) {
       Result r;
       r.codec = "ours";
       compression::CompressionParameters p = pp >= 400 ? compression::compressionPreset("compact")
                                             : pp <= 160 ? compression::compressionPreset("fine")
                                                         : compression::compressionPreset("balanced");
       p.patch_points = pp;
+      p.seed_spacing = seed_spacing;
       if (pp < 100) p.bins = 12;  // a pattern finer than the points only costs mask bits
-      // 12-bit seeds everywhere (the presets compact and fine use them; balanced keeps the
-      // manuscript's 16): 10% fewer bytes at patch_points=256 for 1% more D2 error.
-      p.seed_bits = 12;
+      // 12-bit seeds (the presets compact and fine use them; balanced keeps the manuscript's
+      // 16): 10% fewer bytes at patch_points=256 for 1% more D2 error. From 400 points per
+      // patch (R >= 11 spacings), 10-bit seeds and 6-bit frame angles: both sides use the
+      // quantized seeds, so a coarser grid only moves the patch origins (table scan at 700:
+      // 13% fewer bytes, same D2).
+      p.seed_bits = pp >= 400 ? 10 : 12;
+      if (pp >= 400) p.angle_bits = 6;
+      // From 1200 points per patch, 8 atoms: the dictionary is a fixed cost (16 atoms: 3.4 KB,
+      // a third of the stream at 2400 on the scan) and these rows have 1-2 non-zeros a patch.
+      if (pp >= 1200) p.atoms = 8;
+      // Seeds 1.25 R apart (not R, the manuscript's choice): the patches overlap less, for the
+      // same seed count the pattern is finer; on both inputs 30% fewer bytes for 3-7% more D2
+      // (table scan at 256: 69.3 KB, D2 1.115e-3 m against 99.6 KB, 1.077e-3 m).
       r.setting = "patch_points=" + std::to_string(pp);
+      if (seed_spacing != 1.25f) {
+        char buf[32];
+        std::snprintf(buf, sizeof buf, " seeds %.3gR", seed_spacing);
+        r.setting += buf;
+      }
       auto t0 = Clock::now();
       const auto bytes = compression::compressPositions(d.points, p);
       r.enc_s = since(t0);

@@ -134,3 +134,25 @@ TEST(PointCloudCompression, StreamsLikeTheOctreeCoder) {
   std::stringstream junk("not a compressed cloud at all");
   EXPECT_THROW(decoder.decodePointCloud(junk, out), CorruptStream);
 }
+
+// Seeds farther apart than R (the bench's 1.25 R): fewer seeds and bytes, and the patches
+// still cover the surface (accurate, without large holes).
+TEST(SelfSimilarityCodec, WiderSeedSpacingCostsFewerBytesAndStillCovers) {
+  const Sample& s = engraved();
+  CompressionParameters wide;
+  wide.seed_spacing = 1.25f;
+  EncodeReport ew, en;
+  const auto bw = compressPositions(s.points, wide, &ew);
+  compressPositions(s.points, CompressionParameters{}, &en);
+  EXPECT_LT(ew.seeds, en.seeds * 8 / 10);
+  EXPECT_LT(bw.size(), engravedStream().size() * 9 / 10);
+  const Positions out = decompressPositions(bw.data(), bw.size());
+  const double spacing = ew.output_spacing;
+  const ErrorStats e = pointToMeshError(out, PointToMeshDistance(s.mesh));
+  const double d1 = symmetricNearestNeighbourRmse(out, s.points);
+  std::printf("seed spacing 1.25 R: %zu seeds (1 R: %zu), %zu bytes (1 R: %zu), %zu out, to surface %.3g, D1 %.3g\n",
+              ew.seeds, en.seeds, bw.size(), engravedStream().size(), out.size(), e.rmse, d1);
+  EXPECT_LT(e.rmse, 0.2 * spacing);
+  EXPECT_LT(d1, 0.9 * spacing);
+  EXPECT_GT(out.size(), s.points.size() * 6 / 10);
+}

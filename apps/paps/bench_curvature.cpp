@@ -155,14 +155,18 @@ void orientLike(std::vector<Estimate>& est, const std::vector<Eigen::Vector3f>& 
 // ---- the three methods, same radius ----
 
 // select_order: the noise setting of docs/wavejets.md, BIC order selection with beta = 3.
+// initial: first parameterization normals (the bound column: order 2 in the true tangent
+// plane, no refit).
 std::vector<Estimate> runWavejets(const Positions& p, float radius, int order, const Normals& hints, double& secs,
-                                  WavejetReport* report = nullptr, bool select_order = false) {
+                                  WavejetReport* report = nullptr, bool select_order = false,
+                                  const Normals* initial = nullptr) {
   WavejetParameters params;
   params.order = order;
   params.select_order = select_order;
   if (select_order) params.beta = 3.f;
+  if (initial) params.max_refits = 0;
   const auto t0 = Clock::now();
-  const auto res = estimateWavejets(p, radius, params, report, nullptr, nullptr, &hints);
+  const auto res = estimateWavejets(p, radius, params, report, nullptr, initial, &hints);
   secs = since(t0);
   std::vector<Estimate> out(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) out[i] = {res[i].normal, res[i].k1, res[i].k2};
@@ -263,36 +267,57 @@ std::vector<Estimate> runCgal(const Positions& p, float radius, int order, doubl
 }
 #endif
 
-// Every method of the table on one input, scored against the same truth: ours (order K),
-// ours with order selection at R and at 2R, PCL raw / calibrated / geometric, PCL at R/2
-// calibrated, and CGAL jet fitting of degree K (when built with CGAL).
-struct Comparison {
-  Errors ours, sel, sel2, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal;
-  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_pcl = 0, t_half = 0, t_cgal = NAN;
+// Every method of the table on one input: ours (order K), ours with order selection at R and
+// at 2R, the bound (order 2 in the true tangent plane: the least-squares fit of the exact
+// local model, i.e. the best linear unbiased estimate on the ball of R_phi), PCL at R and at
+// R/2, and CGAL jet fitting of degree K (when built with CGAL).
+struct MethodEstimates {
+  std::vector<Estimate> ours, sel, sel2, bound, pcl, pcl_half, cgal;
+  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_bound = 0, t_pcl = 0, t_half = 0, t_cgal = NAN;
 };
-Comparison compareMethods(const Positions& p, float radius, int order, const Normals& tn,
-                          const std::vector<Truth>& truth, const std::vector<int>& eval) {
-  Comparison c;
-  auto ours = runWavejets(p, radius, order, tn, c.t_ours);
-  auto sel = runWavejets(p, radius, order, tn, c.t_sel, nullptr, true);
-  auto sel2 = runWavejets(p, 2 * radius, order, tn, c.t_sel2, nullptr, true);
-  const auto pcl_est = runPcl(p, radius, c.t_pcl, true);
-  const auto pcl_half = runPcl(p, radius / 2, c.t_half, true);
-  orientLike(ours, tn);
-  orientLike(sel, tn);
-  orientLike(sel2, tn);
-  c.ours = score(ours, truth, eval, false);
-  c.sel = score(sel, truth, eval, false);
-  c.sel2 = score(sel2, truth, eval, false);
-  c.pcl_raw = score(pcl_est, truth, eval, true);
-  c.pcl_cal = score(calibratePcl(pcl_est, truth, eval), truth, eval, true);
-  c.pcl_geom = score(geometricPcl(pcl_est, radius), truth, eval, true);
-  c.pcl_half = score(calibratePcl(pcl_half, truth, eval), truth, eval, true);
+MethodEstimates runMethods(const Positions& p, float radius, int order, const Normals& tn, bool with_bound) {
+  MethodEstimates m;
+  m.ours = runWavejets(p, radius, order, tn, m.t_ours);
+  m.sel = runWavejets(p, radius, order, tn, m.t_sel, nullptr, true);
+  m.sel2 = runWavejets(p, 2 * radius, order, tn, m.t_sel2, nullptr, true);
+  if (with_bound) m.bound = runWavejets(p, radius, 2, tn, m.t_bound, nullptr, false, &tn);
+  m.pcl = runPcl(p, radius, m.t_pcl, true);
+  m.pcl_half = runPcl(p, radius / 2, m.t_half, true);
 #ifdef PAPS_HAVE_CGAL
-  auto cg = runCgal(p, radius, order, c.t_cgal);
-  orientLike(cg, tn);
-  c.cgal = score(cg, truth, eval, false);
+  m.cgal = runCgal(p, radius, order, m.t_cgal);
 #endif
+  return m;
+}
+
+// The errors of every method against one truth (normals of the truth orient the estimates).
+struct Comparison {
+  Errors ours, sel, sel2, bound, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal;
+};
+// Scored on the points where every method has an estimate (a method that leaves the hardest
+// points out, e.g. by a larger beta, must not look better for it); `scored` gets their count.
+Comparison scoreMethods(const MethodEstimates& m, float radius, const std::vector<Truth>& truth,
+                        const std::vector<int>& all_eval, std::size_t* scored = nullptr) {
+  std::vector<int> eval;
+  for (const int i : all_eval) {
+    bool ok = true;
+    for (const auto* e : {&m.ours, &m.sel, &m.sel2, &m.bound, &m.pcl, &m.pcl_half, &m.cgal})
+      if (!e->empty()) ok = ok && std::isfinite((*e)[i].k1) && std::isfinite((*e)[i].k2) && isFinite((*e)[i].n);
+    if (ok) eval.push_back(i);
+  }
+  if (scored) *scored = eval.size();
+  std::vector<Eigen::Vector3f> tn(truth.size());
+  for (std::size_t i = 0; i < truth.size(); ++i) tn[i] = truth[i].n;
+  auto oriented = [&](std::vector<Estimate> e) { orientLike(e, tn); return e; };
+  Comparison c;
+  c.ours = score(oriented(m.ours), truth, eval, false);
+  c.sel = score(oriented(m.sel), truth, eval, false);
+  c.sel2 = score(oriented(m.sel2), truth, eval, false);
+  if (!m.bound.empty()) c.bound = score(oriented(m.bound), truth, eval, false);
+  c.pcl_raw = score(m.pcl, truth, eval, true);
+  c.pcl_cal = score(calibratePcl(m.pcl, truth, eval), truth, eval, true);
+  c.pcl_geom = score(geometricPcl(m.pcl, radius), truth, eval, true);
+  c.pcl_half = score(calibratePcl(m.pcl_half, truth, eval), truth, eval, true);
+  if (!m.cgal.empty()) c.cgal = score(oriented(m.cgal), truth, eval, false);
   return c;
 }
 
@@ -332,6 +357,105 @@ std::vector<Eigen::Matrix3d> vertexShapeTensors(const TriangleMesh& mesh, const 
   return t;
 }
 
+// ---- reference curvature from positions only: the normal cycle curvature measure of the
+// dense mesh over a ball (Cohen-Steiner and Morvan 2003) ----
+// Over a region B, T(B) = sum over the edges e in B of beta(e) |e| e e^T / area(B), beta the
+// signed dihedral angle of e, |e| its length, e its direction. Its eigenvalues in the tangent
+// plane are the mean principal curvatures over B (the eigenvectors are swapped: the
+// direction of k1 carries k2, which does not matter here). It uses only the vertex positions
+// and the triangles: no normals (PCL's input) and no fit (ours and CGAL's), so it favours
+// neither family. Edges count when their midpoint is in B, faces when their centroid is.
+// Signs: positive where the surface bends towards the face normals (a sphere with outward
+// normals: -1/r), as the estimates.
+struct NormalCycle {
+  Positions edge_mid, face_mid;
+  std::vector<Eigen::Matrix3d> edge_t;   // beta |e| e e^T
+  std::vector<Eigen::Vector3d> face_n;   // area-weighted normal (norm = area)
+};
+NormalCycle normalCycle(const TriangleMesh& mesh) {
+  NormalCycle nc;
+  const std::size_t nf = mesh.triangles.size();
+  std::vector<Eigen::Vector3d> fn(nf);
+  for (std::size_t f = 0; f < nf; ++f) {
+    const auto& t = mesh.triangles[f];
+    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
+                          c = mesh.vertices[t[2]].cast<double>();
+    fn[f] = 0.5 * (b - a).cross(c - a);
+    nc.face_mid.push_back(((a + b + c) / 3).cast<float>());
+    nc.face_n.push_back(fn[f]);
+  }
+  struct HalfEdge { std::uint64_t key; int face, from, opposite; };
+  std::vector<HalfEdge> he;
+  he.reserve(3 * nf);
+  for (std::size_t f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = mesh.triangles[f][k], b = mesh.triangles[f][(k + 1) % 3], o = mesh.triangles[f][(k + 2) % 3];
+      const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::uint32_t(std::max(a, b));
+      he.push_back({key, int(f), a, o});
+    }
+  std::sort(he.begin(), he.end(), [](const HalfEdge& x, const HalfEdge& y) {
+    return x.key != y.key ? x.key < y.key : x.face < y.face;
+  });
+  for (std::size_t i = 0; i < he.size();) {
+    std::size_t j = i;
+    while (j < he.size() && he[j].key == he[i].key) ++j;
+    if (j - i == 2) {  // manifold interior edge (borders and non-manifold edges left out)
+      const HalfEdge &h1 = he[i], &h2 = he[i + 1];
+      const int a = int(h1.key >> 32), b = int(h1.key & 0xffffffffu);
+      Eigen::Vector3d n1 = fn[h1.face], n2 = fn[h2.face];
+      if (h1.from == h2.from) n2 = -n2;  // inconsistent orientation of the two faces
+      if (n1.norm() > 0 && n2.norm() > 0) {
+        n1.normalize();
+        n2.normalize();
+        const Eigen::Vector3d va = mesh.vertices[a].cast<double>(), vb = mesh.vertices[b].cast<double>();
+        const Eigen::Vector3d e = vb - va;
+        const double len = e.norm();
+        double beta = std::atan2(n1.cross(n2).norm(), n1.dot(n2));
+        // Concave (bending towards the normal): the far vertex of face 2 is above face 1.
+        if ((mesh.vertices[h2.opposite].cast<double>() - va).dot(n1) < 0) beta = -beta;
+        if (len > 0) {
+          const Eigen::Vector3d u = e / len;
+          nc.edge_mid.push_back(((va + vb) / 2).cast<float>());
+          nc.edge_t.push_back(beta * len * u * u.transpose());
+        }
+      }
+    }
+    i = j;
+  }
+  return nc;
+}
+// The reference at each query point over the ball of radius rho (NaN when the ball holds no
+// face).
+std::vector<Truth> normalCycleReference(const NormalCycle& nc, const Positions& q, float rho) {
+  SpatialIndex ei(nc.edge_mid), fi(nc.face_mid);
+  std::vector<Truth> out(q.size(), Truth{Eigen::Vector3f::Constant(NAN), NAN, NAN});
+  const std::int64_t n = static_cast<std::int64_t>(q.size());
+#pragma omp parallel
+  {
+    std::vector<int> id;
+    std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t i = 0; i < n; ++i) {
+      Eigen::Vector3d nn = Eigen::Vector3d::Zero();
+      double area = 0;
+      const int cf = fi.radiusSearch(q[i], rho, id, d2);
+      for (int j = 0; j < cf; ++j) { nn += nc.face_n[id[j]]; area += nc.face_n[id[j]].norm(); }
+      if (!(area > 0) || !(nn.norm() > 0)) continue;
+      nn.normalize();
+      Eigen::Matrix3d T = Eigen::Matrix3d::Zero();
+      const int ce = ei.radiusSearch(q[i], rho, id, d2);
+      for (int j = 0; j < ce; ++j) T += nc.edge_t[id[j]];
+      T /= area;
+      const Eigen::Vector3d u = nn.unitOrthogonal(), v = nn.cross(u);
+      Eigen::Matrix2d S;
+      S << u.dot(T * u), u.dot(T * v), v.dot(T * u), v.dot(T * v);
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> e2(S);
+      out[i] = {nn.cast<float>(), float(e2.eigenvalues()[1]), float(e2.eigenvalues()[0])};
+    }
+  }
+  return out;
+}
+
 // ---- small renderer: orthographic splats, z-buffer, Lambert shading by the given normals ----
 
 const char* kBenchCurvatureUsage =
@@ -343,14 +467,24 @@ const char* kBenchCurvatureUsage =
     "                     samples, skipped when missing)\n"
     "  --scan-step N      evaluate on every N-th scan vertex (default 4)\n"
     "  --speed-points N   size of the speed run (default 1000000, 0: skip)\n"
-    "  --out DIR          where the PNG renders go (default .)\n";
+    "  --out DIR          where the PNG renders go (default .)\n"
+    "  --skip LIST        parts left out, a comma list of analytic, tilt, scan, render, speed\n";
 
 }  // namespace
 
 int runBenchCurvature(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
   if (a.has("help")) { std::fputs(kBenchCurvatureUsage, stdout); return 0; }
-  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "help"});
+  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "skip", "help"});
+  const std::string skip = "," + a.text("skip", "") + ",";
+  for (std::size_t b = 1; b < skip.size();) {
+    const std::size_t e = skip.find(',', b);
+    const std::string item = skip.substr(b, e - b);
+    if (!item.empty() && item != "analytic" && item != "tilt" && item != "scan" && item != "render" && item != "speed")
+      throw InvalidParameter("skip", item, "a comma list of analytic, tilt, scan, render, speed");
+    b = e + 1;
+  }
+  auto skipped = [&](const char* part) { return skip.find("," + std::string(part) + ",") != std::string::npos; };
   const std::size_t npts = static_cast<std::size_t>(a.number("points", 20000));
   const int neighbours = static_cast<int>(a.number("neighbours", 50));
   const int order = static_cast<int>(a.number("order", 4));
@@ -370,6 +504,7 @@ int runBenchCurvature(int argc, char** argv) {
               order, neighbours, npts, threads);
 
   // ---- 1. analytic surfaces x noise ----
+  if (!skipped("analytic")) {
   std::printf("\n## Analytic surfaces (noise sigma in %% of R_phi; evaluated on points farther than 0.8 from the border)\n");
   std::printf("curvature error = RMSE(k1, k2) / RMS(true k1, k2); normal error = mean angle (deg)\n");
   std::printf("PCL raw = pc1, pc2 of PrincipalCurvaturesEstimation against |k|; PCL cal. = s*sqrt(pc) with the oracle best s\n\n");
@@ -379,10 +514,13 @@ int runBenchCurvature(int argc, char** argv) {
   std::printf("PCL geom. = 2 sqrt(pc) / R_phi, the oracle-free reading of pc (uniform disk: pc = k^2 R^2 / 4)\n");
   std::printf("PCL(R/2) cal. = PCL with R_phi / 2 for normals and curvatures (effective support R_phi, as ours\n"
               "and ours sel.), oracle-calibrated\n\n");
-  std::printf("| surface | noise | R_phi | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal | ours s | ours sel. 2R s | CGAL s | PCL s |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+  std::printf("bound = order 2 fitted in the true tangent plane over R_phi (the exact local model, no refit): the\n"
+              "best linear unbiased estimate on the ball of R_phi, what no local fit on that support beats on average\n\n");
+  std::printf("| surface | noise | R_phi | ours curv | ours sel. curv | ours sel. 2R curv | bound curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal | ours s | ours sel. 2R s | CGAL s | PCL s |\n");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
   const double noise_levels[] = {0.0, 0.0025, 0.005, 0.01};
   double worst_ratio_pcl = 0, worst_ratio_cgal = 0, worst_sel_pcl = 0, worst_raw_pcl = 0;
+  double worst_bound_half = 0, min_scored = 1;
   double worst_sel2_pcl = 0, worst_sel2_geom = 0, worst_sel2_raw = 0, worst_sel_half = 0, worst_sel_cgal = 0,
          worst_sel2_cgal = 0;
   std::uint64_t seed = 1;
@@ -402,10 +540,14 @@ int runBenchCurvature(int argc, char** argv) {
       Random rng(seed * 7919 + std::uint64_t(noise * 1e6));
       for (auto& x : p)
         x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
-      const Comparison c = compareMethods(p, radius, order, tn, truth, eval);
+      const MethodEstimates m = runMethods(p, radius, order, tn, true);
+      std::size_t scored = 0;
+      const Comparison c = scoreMethods(m, radius, truth, eval, &scored);
+      min_scored = std::min(min_scored, double(scored) / double(eval.size()));
       const Errors &eo = c.ours, &es = c.sel, &es2 = c.sel2, &ep = c.pcl_raw, &epc = c.pcl_cal, &epg = c.pcl_geom,
-                   &eph = c.pcl_half, &ec = c.cgal;
-      const double t_ours = c.t_ours, t_sel2 = c.t_sel2, t_cgal = c.t_cgal, t_pcl = c.t_pcl;
+                   &eph = c.pcl_half, &ec = c.cgal, &eb = c.bound;
+      const double t_ours = m.t_ours, t_sel2 = m.t_sel2, t_cgal = m.t_cgal, t_pcl = m.t_pcl;
+      worst_bound_half = std::max(worst_bound_half, eb.curv_rel / eph.curv_rel);
       worst_ratio_pcl = std::max(worst_ratio_pcl, eo.curv_rel / epc.curv_rel);
       worst_sel_pcl = std::max(worst_sel_pcl, es.curv_rel / epc.curv_rel);
       worst_raw_pcl = std::max(worst_raw_pcl, eo.curv_rel / ep.curv_rel);
@@ -419,9 +561,9 @@ int runBenchCurvature(int argc, char** argv) {
       worst_sel2_geom = std::max(worst_sel2_geom, es2.curv_rel / epg.curv_rel);
       worst_sel2_raw = std::max(worst_sel2_raw, es2.curv_rel / ep.curv_rel);
       worst_sel_half = std::max(worst_sel_half, es.curv_rel / eph.curv_rel);
-      std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
-                  s.name.c_str(), noise * 100, radius, eo.curv_rel, es.curv_rel, es2.curv_rel, ec.curv_rel, epc.curv_rel,
-                  epg.curv_rel, ep.curv_rel, eph.curv_rel, eo.normal_deg, es.normal_deg, es2.normal_deg, ec.normal_deg,
+      std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
+                  s.name.c_str(), noise * 100, radius, eo.curv_rel, es.curv_rel, es2.curv_rel, eb.curv_rel, ec.curv_rel,
+                  epc.curv_rel, epg.curv_rel, ep.curv_rel, eph.curv_rel, eo.normal_deg, es.normal_deg, es2.normal_deg, ec.normal_deg,
                   ep.normal_deg, t_ours, t_sel2, t_cgal, t_pcl);
       std::fflush(stdout);
     }
@@ -430,14 +572,22 @@ int runBenchCurvature(int argc, char** argv) {
               "%.3f; ours / CGAL %.3f (where CGAL > 1e-3)\n", worst_raw_pcl, worst_ratio_pcl, worst_sel_pcl, worst_ratio_cgal);
   std::printf("same support 2 R_phi: ours sel. 2R / PCL calibrated %.3f, / PCL geom. %.3f, / PCL raw %.3f\n", worst_sel2_pcl,
               worst_sel2_geom, worst_sel2_raw);
-  std::printf("same support R_phi: ours sel. / PCL(R/2) calibrated %.3f\n", worst_sel_half);
+  std::printf("scored on the points where every method has an estimate: at least %.1f%% of the evaluated points\n",
+              100 * min_scored);
+  std::printf("same support R_phi: ours sel. / PCL(R/2) calibrated %.3f; bound / PCL(R/2) calibrated %.3f\n",
+              worst_sel_half, worst_bound_half);
+  std::printf("fixed order %d / CGAL degree %d at the same radius (where CGAL > 1e-3): %.4f\n", order, order,
+              worst_ratio_cgal);
   std::printf("against CGAL (degree %d, where CGAL > 1e-3): ours sel. %.3f, ours sel. 2R %.3f\n", order, worst_sel_cgal,
               worst_sel2_cgal);
 
+  }
+
   // ---- 2. tilted parameterization plane ----
+  if (!skipped("tilt")) {
   std::printf("\n## Tilted parameterization plane (no noise): normal error (deg) after correction, max over evaluated points\n");
   std::printf("| surface | tilt | Cor. 1 once (no refit): mean / max | with refits (default): mean / max |\n|---|---|---|---|\n");
-  seed = 1;
+  std::uint64_t seed = 1;
   for (const Surface& s : analyticSurfaces()) {
     Positions p;
     std::vector<Truth> truth;
@@ -474,9 +624,11 @@ int runBenchCurvature(int argc, char** argv) {
     }
   }
 
+  }
+
   // ---- 3. real scan ----
   bool have_scan = false;
-  try {
+  if (!skipped("scan")) try {
     const TriangleMesh mesh = loadTriangleMesh(scan);
     have_scan = !mesh.triangles.empty();
     if (have_scan) {
@@ -530,21 +682,57 @@ int runBenchCurvature(int argc, char** argv) {
         }
         eval.swap(keep);
       }
-      const Comparison c = compareMethods(p, radius, order, tn, truth, eval);
-      const Errors &eo = c.ours, &es = c.sel, &es2 = c.sel2, &ep = c.pcl_raw, &epc = c.pcl_cal, &epg = c.pcl_geom,
-                   &eph = c.pcl_half, &ec = c.cgal;
-      const double t_ours = c.t_ours, t_sel2 = c.t_sel2, t_cgal = c.t_cgal, t_pcl = c.t_pcl;
-      std::printf("\n## Scan %s: %zu of %zu vertices (every %d-th), %zu evaluated (border left out); reference: dense\n"
-                  "## mesh, per-face second fundamental form from vertex normals, averaged over R_phi/2\n",
-                  scan.c_str(), p.size(), mesh.vertices.size(), scan_step, eval.size());
-      std::printf("| R_phi | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal | ours s | ours sel. 2R s | CGAL s | PCL s |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-      std::printf("| %.3f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
-                  radius, eo.curv_rel, es.curv_rel, es2.curv_rel, ec.curv_rel, epc.curv_rel, epg.curv_rel, ep.curv_rel,
-                  eph.curv_rel, eo.normal_deg, es.normal_deg, es2.normal_deg, ec.normal_deg, ep.normal_deg, t_ours, t_sel2,
-                  t_cgal, t_pcl);
+      // The references, each at the query points of the sparse cloud (see the docs for the
+      // choice): the normal cycle of the dense mesh over balls of R/4, R/2 (the main one) and
+      // R; the earlier normal-based one (favours PCL: built from averaged vertex normals);
+      // an order-2 Wavejet fit on the dense mesh over R/2 (favours fits: ours and CGAL).
+      struct Reference { std::string name; std::vector<Truth> truth; };
+      std::vector<Reference> refs;
+      const NormalCycle nc = normalCycle(mesh);
+      refs.push_back({"normal cycle, ball R/2 (main)", normalCycleReference(nc, p, 0.5f * radius)});
+      refs.push_back({"normal cycle, ball R/4", normalCycleReference(nc, p, 0.25f * radius)});
+      refs.push_back({"normal cycle, ball R", normalCycleReference(nc, p, radius)});
+      refs.push_back({"vertex-normal tensors, ball R/2 (earlier)", truth});
+      {
+        WavejetParameters dp;
+        dp.order = 2;
+        const auto dense_fit = estimateWavejets(mesh.vertices, 0.5f * radius, dp, nullptr, nullptr, nullptr, &vn);
+        std::vector<Truth> t(p.size());
+        for (std::size_t i = 0; i < p.size(); ++i) {
+          const WavejetResult& r = dense_fit[dense_of[i]];
+          t[i] = {r.normal, r.k1, r.k2};
+        }
+        refs.push_back({"order-2 fit of the dense mesh, ball R/2", t});
+      }
+      {  // evaluate where every reference is defined
+        std::vector<int> keep;
+        for (const int i : eval) {
+          bool ok = true;
+          for (const Reference& r : refs) ok = ok && std::isfinite(r.truth[i].k1) && isFinite(r.truth[i].n);
+          if (ok) keep.push_back(i);
+        }
+        eval.swap(keep);
+      }
+      const MethodEstimates me = runMethods(p, radius, order, tn, false);
+      std::printf("\n## Scan %s: %zu of %zu vertices (every %d-th), %zu evaluated (border left out), R_phi %.3f;\n"
+                  "## one row per reference (all from the dense mesh)\n",
+                  scan.c_str(), p.size(), mesh.vertices.size(), scan_step, eval.size(), radius);
+      std::printf("| reference | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      std::size_t scored = 0;
+      for (const Reference& r : refs) {
+        const Comparison c = scoreMethods(me, radius, r.truth, eval, &scored);
+        std::printf("| %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f |\n",
+                    r.name.c_str(), c.ours.curv_rel, c.sel.curv_rel, c.sel2.curv_rel, c.cgal.curv_rel, c.pcl_cal.curv_rel,
+                    c.pcl_geom.curv_rel, c.pcl_raw.curv_rel, c.pcl_half.curv_rel, c.ours.normal_deg, c.sel.normal_deg,
+                    c.sel2.normal_deg, c.cgal.normal_deg, c.pcl_raw.normal_deg);
+      }
+      std::printf("scored on the %zu points where every method has an estimate\n", scored);
+      std::printf("times (s, %zu points): ours %.2f, ours sel. %.2f, ours sel. 2R %.2f, CGAL %.2f, PCL %.2f, PCL(R/2) %.2f\n",
+                  p.size(), me.t_ours, me.t_sel, me.t_sel2, me.t_cgal, me.t_pcl, me.t_half);
 
       // Renders of the enhanced scan (full resolution): original, positions alpha0 = 2,
       // normals alpha1 = 3 and alpha1 = 3i (skewed).
+      if (!skipped("render")) {
       const Positions& dense = mesh.vertices;
       Normals hints = vn;
       WavejetEnhancementParameters ep2;
@@ -573,6 +761,7 @@ int runBenchCurvature(int argc, char** argv) {
       std::printf("\nrender: %s (original with Wavejet normals | positions alpha0 = 2.5 | normals alpha1 = 3 | "
                   "normals alpha1 = 1+3i), order 6, R_phi %.3f, clamped %zu of %zu\n",
                   png.c_str(), r2.radius, r2.clamped, dense.size());
+      }
     }
   } catch (const Error& e) {
     std::printf("\nscan skipped: %s\n", e.what());
@@ -580,7 +769,7 @@ int runBenchCurvature(int argc, char** argv) {
   (void)have_scan;
 
   // ---- 4. speed ----
-  if (speed_points > 0) {
+  if (speed_points > 0 && !skipped("speed")) {
     const Surface s = analyticSurfaces()[4];
     Positions p;
     std::vector<Truth> truth;

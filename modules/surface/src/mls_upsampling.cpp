@@ -62,8 +62,8 @@ class SeedThinner {
   }
 
   // The kept candidates at radius d: all of them, or (pilot) those of the first `blocks_limit`
-  // blocks only (0: all). Without blocks, or with blocks too small for d, the candidates are
-  // visited in index order, sequentially.
+  // blocks only (0: all). Pilots, and passes without blocks or with blocks too small for d,
+  // visit the candidates in index order, sequentially.
   std::vector<int> run(float d, std::size_t blocks_limit = 0) {
     const float reach = d + 2.f * disc_;
     nearLists(reach);
@@ -73,7 +73,9 @@ class SeedThinner {
     const std::int64_t blocks = static_cast<std::int64_t>(block_parity_.size());
     const std::int64_t nb = blocks_limit ? std::min<std::int64_t>(blocks, blocks_limit) : blocks;
     const std::size_t end = block_start_.empty() ? cand_.size() : block_start_[nb];
-    if (block_start_.empty() || !(side_ >= reach)) {
+    // Pilots (a prefix of the blocks) run sequentially: they are short, and on a loaded
+    // machine the eight parity phases would cost more in waiting than they save.
+    if (block_start_.empty() || !(side_ >= reach) || nb < blocks) {
       std::fill(count_.begin(), count_.end(), 0);
       for (std::size_t c = 0; c < end; ++c)
         if (tryKeep(c, d2)) kept.push_back(static_cast<int>(c));

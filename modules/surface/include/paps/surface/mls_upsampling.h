@@ -46,8 +46,8 @@ struct MlsUpsamplingParameters {
   /// neighbour count at h) (0.1 to 10). The default keeps the seeds close to their input
   /// points (cheap thinning, accurate per-point fits). sqrt(pi) = 1.7725 gives QSR's disc (1.2
   /// mean spacings): on the bench the output then covers the surface more evenly, and the
-  /// error (dense points to their nearest output point) drops by about 25% at low noise, for
-  /// about 1.5x the time (docs/superresolution.md).
+  /// error (dense points to their nearest output point) drops by 17-25% at 0.01% noise, for
+  /// up to 1.5x the time (docs/superresolution.md).
   float disc_scale = 1.f;
   /// Seed of the seed points.
   std::uint64_t seed = 1;

@@ -39,7 +39,7 @@ const char* kCurvatureUsage =
     "                         neighbours (docs/wavejets.md: 2 R_phi, the support PCL's\n"
     "                         curvature estimator sees)\n"
     "  --refits N             plane corrections with refit, at most (default 4)\n"
-    "  --refit-angle D        refit while the tilt exceeds D degrees (default 10)\n"
+    "  --refit-angle D        refit while the tilt exceeds D degrees (default 45)\n"
     "  --orient M             normal orientation: input (input normals, default when present),\n"
     "                         propagate (default otherwise), or viewpoint (towards the origin)\n"
     "  --quiet                no progress bar\n"

@@ -134,6 +134,7 @@ TEST(Wavejet, RefitOnlyForTiltsAboveTheNoise) {
   {
     const Positions p = heightFieldSamples(f, 300, 0.4, 5);
     paps::WavejetParameters params;
+    params.refit_angle = 10;
     const auto r = fitAtApex(p, params, 0.4f, tilted(20, 0.7));
     ASSERT_TRUE(r.valid());
     EXPECT_GE(r.fits, 2);
@@ -146,6 +147,7 @@ TEST(Wavejet, RefitOnlyForTiltsAboveTheNoise) {
     paps::Random rng(1000 + seed);
     for (auto& q : p) q += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * 0.02f;
     paps::WavejetParameters params, no_refit;
+    params.refit_angle = 10;
     no_refit.max_refits = 0;
     const auto r = fitAtApex(p, params, 0.4f, tilted(12, 0.3 * seed));
     const auto r0 = fitAtApex(p, no_refit, 0.4f, tilted(12, 0.3 * seed));

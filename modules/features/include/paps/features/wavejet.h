@@ -50,13 +50,14 @@ struct WavejetParameters {
   /// parameterization plane, the plane is rotated into it (Corollary 1) and the fit redone,
   /// at most `max_refits` times (0 to 50). Below it, the first-order corrections of
   /// Corollaries 1 and 2 are applied without refitting. Range of refit_angle: [0, 90].
-  /// Measured default 10 degrees: without refit, the corrected normal stays within 0.11
-  /// degrees of the truth up to 20 degrees of tilt on the bench surfaces (docs/wavejets.md),
-  /// because the tangent is taken exactly from the fitted height field. No refit either when
-  /// the tilt is not distinguishable from zero given the fit's residuals (a tilt made by the
-  /// noise; WavejetResult::tilt_within_noise).
+  /// Measured default 45 degrees (was 10): without refit, the corrected normal stays within
+  /// 0.03 degrees of the truth up to 20 degrees of tilt on the bench surfaces, because the
+  /// tangent is taken exactly from the fitted height field, and on the rs1 scan every refit
+  /// angle below 45 degrees made the curvatures worse (docs/wavejets.md). No refit either
+  /// when the tilt is not distinguishable from zero given the fit's residuals (a tilt made
+  /// by the noise; WavejetResult::tilt_within_noise).
   int max_refits = 4;
-  float refit_angle = 10.f;
+  float refit_angle = 45.f;
   /// Normals are oriented towards `viewpoint` (metres; PCL's convention, default the
   /// origin), unless an orientation hint is given for the point.
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();

@@ -728,6 +728,52 @@ int runBenchCurvature(int argc, char** argv) {
                     c.sel2.normal_deg, c.cgal.normal_deg, c.pcl_raw.normal_deg);
       }
       std::printf("scored on the %zu points where every method has an estimate\n", scored);
+      {
+        // Where the error of the main reference sits: share of the squared error held by the
+        // worst 1% of the points, median absolute error, and the least-squares best scale of
+        // each estimate against the reference (an oracle; < 1: estimates too large).
+        const std::vector<Truth>& tr = refs.front().truth;
+        std::vector<int> common;
+        for (const int i : eval) {
+          bool ok = true;
+          for (const auto* e : {&me.ours, &me.sel, &me.sel2, &me.pcl, &me.pcl_half, &me.cgal})
+            if (!e->empty()) ok = ok && std::isfinite((*e)[i].k1) && std::isfinite((*e)[i].k2) && isFinite((*e)[i].n);
+          if (ok) common.push_back(i);
+        }
+        std::vector<Eigen::Vector3f> rn(tr.size());
+        for (std::size_t i = 0; i < tr.size(); ++i) rn[i] = tr[i].n;
+        auto profile = [&](const char* name, std::vector<Estimate> e, bool magnitudes) {
+          if (!magnitudes) orientLike(e, rn);
+          std::vector<double> se;
+          double total = 0, num = 0, den = 0;
+          for (const int i : common) {
+            double a1 = tr[i].k1, a2 = tr[i].k2;
+            if (magnitudes) {
+              a1 = std::max(std::abs(tr[i].k1), std::abs(tr[i].k2));
+              a2 = std::min(std::abs(tr[i].k1), std::abs(tr[i].k2));
+            }
+            se.push_back((e[i].k1 - a1) * (e[i].k1 - a1) + (e[i].k2 - a2) * (e[i].k2 - a2));
+            total += se.back();
+            num += e[i].k1 * a1 + e[i].k2 * a2;
+            den += double(e[i].k1) * e[i].k1 + double(e[i].k2) * e[i].k2;
+          }
+          if (se.empty()) return;
+          std::sort(se.begin(), se.end());
+          double top = 0;
+          for (std::size_t k = se.size() - se.size() / 100; k < se.size(); ++k) top += se[k];
+          std::printf("  %s: worst 1%% hold %.0f%% of the squared error, median |error| %.4f, best scale %.2f\n", name,
+                      100 * top / std::max(total, 1e-300), std::sqrt(se[se.size() / 2] / 2), den > 0 ? num / den : NAN);
+        };
+        std::printf("error profile against the main reference (RMS of its curvatures %.4f):\n", [&] {
+          double st = 0;
+          for (const int i : common) st += tr[i].k1 * tr[i].k1 + tr[i].k2 * tr[i].k2;
+          return std::sqrt(st / std::max<std::size_t>(1, 2 * common.size()));
+        }());
+        profile("ours sel.", me.sel, false);
+        profile("CGAL", me.cgal, false);
+        profile("PCL geom.", geometricPcl(me.pcl, radius), true);
+        profile("PCL(R/2) geom.", geometricPcl(me.pcl_half, radius / 2), true);
+      }
       std::printf("times (s, %zu points): ours %.2f, ours sel. %.2f, ours sel. 2R %.2f, CGAL %.2f, PCL %.2f, PCL(R/2) %.2f\n",
                   p.size(), me.t_ours, me.t_sel, me.t_sel2, me.t_cgal, me.t_pcl, me.t_half);
 

@@ -197,6 +197,7 @@ TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
     EXPECT_LT(std::sqrt(s / a.size()), 6e-4);
   }
   EXPECT_EQ(run(MlsSurface::Rimls, false, 1), run(MlsSurface::Rimls, false, 3));
+  EXPECT_EQ(run(MlsSurface::Rimls, true, 1), run(MlsSurface::Rimls, true, 2));
 }
 
 TEST(MlsUpsampling, NeighbourGraphFromRows) {

@@ -30,7 +30,7 @@ const char* kDenoiseUsage =
     "  --own-weight W         weight of the point's own patch, times the similar patches' total\n"
     "                         (default 0: the largest of their weights)\n"
     "  --patches K            similar patches averaged (default 32)\n"
-    "  --checks N             descriptors compared per similarity query (default 64, 0 = exact)\n"
+    "  --checks N             descriptors compared per similarity query (default 48, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";

@@ -45,7 +45,7 @@ struct SimilarityDenoisingParameters {
   int similar_patches = 32;
   /// Descriptors compared per similarity query at most (0: exact search, slow on noisy
   /// data). Measured default, see docs/denoising.md.
-  int search_checks = 64;
+  int search_checks = 48;
   /// How the similar patches are combined.
   ///  - Centre (manuscript 2.2.2): the residual V of each similar point (the patch centre),
   ///    read in its frame, is averaged.

@@ -75,10 +75,10 @@ constexpr std::size_t kOrientBlock = 4096;
 // Hoppe-style propagation inside one block: the points `members` (sorted highest first, ties
 // by index), edges to points of the same block only. Each component inside the block is
 // seeded at its highest point with the normal up; comp[i] receives the component's number
-// (first_comp, first_comp + 1, ...). Returns the number of components.
+// within the block (0, 1, ...). Returns the number of components.
 int propagateInBlock(Normals& normals, const NeighbourGraph& graph,
                      const std::vector<int>& members, const std::vector<int>& block_of, int block,
-                     int first_comp, std::vector<int>& comp, std::vector<std::uint8_t>& flipped,
+                     std::vector<int>& comp, std::vector<std::uint8_t>& flipped,
                      std::vector<std::pair<float, int>>& offer) {
   using Item = std::tuple<float, int, int>;  // (1 - |ni.nj|, target, source): most parallel first
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
@@ -98,7 +98,7 @@ int propagateInBlock(Normals& normals, const NeighbourGraph& graph,
   int comps = 0;
   for (const int seed : members) {
     if (comp[seed] >= 0) continue;
-    const int c = first_comp + comps++;
+    const int c = comps++;
     if (normals[seed].z() < 0) { normals[seed] = -normals[seed]; flipped[seed] ^= 1; }
     comp[seed] = c;
     pushNeighbours(seed);
@@ -112,6 +112,25 @@ int propagateInBlock(Normals& normals, const NeighbourGraph& graph,
     }
   }
   return comps;
+}
+
+// Orders (component a, component b, value) by the pair.
+template <typename T>
+bool byPair(const std::tuple<int, int, T>& x, const std::tuple<int, int, T>& y) {
+  return std::get<0>(x) != std::get<0>(y) ? std::get<0>(x) < std::get<0>(y) : std::get<1>(x) < std::get<1>(y);
+}
+
+// Appends to `out` one (a, b, sum of the values) per run of equal pairs in `sorted` (sorted
+// by pair), summing in order: a fixed order of additions.
+template <typename T>
+void sumPerPair(const std::vector<std::tuple<int, int, T>>& sorted, std::vector<std::tuple<int, int, double>>& out) {
+  for (std::size_t k = 0; k < sorted.size();) {
+    std::size_t e = k;
+    double sum = 0;
+    for (; e < sorted.size() && !byPair(sorted[k], sorted[e]); ++e) sum += std::get<2>(sorted[e]);
+    out.emplace_back(std::get<0>(sorted[k]), std::get<1>(sorted[k]), sum);
+    k = e;
+  }
 }
 
 }  // namespace
@@ -163,7 +182,7 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
 #pragma omp parallel for schedule(dynamic, 1)
   for (int b = 0; b < blocks; ++b) {
     std::sort(members[b].begin(), members[b].end(), higher);
-    block_comps[b] = propagateInBlock(normals, graph, members[b], block_of, b, 0, comp, flipped, offer);
+    block_comps[b] = propagateInBlock(normals, graph, members[b], block_of, b, comp, flipped, offer);
   }
   std::vector<int> comp_base(blocks + 1, 0);
   for (int b = 0; b < blocks; ++b) comp_base[b + 1] = comp_base[b] + block_comps[b];
@@ -193,39 +212,22 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
         out.emplace_back(std::min(comp[i], cj), std::max(comp[i], cj), normals[i].dot(normals[*j]));
       }
     }
-    std::stable_sort(out.begin(), out.end(), [](const auto& x, const auto& y) {
-      return std::get<0>(x) != std::get<0>(y) ? std::get<0>(x) < std::get<0>(y) : std::get<1>(x) < std::get<1>(y);
-    });
+    std::stable_sort(out.begin(), out.end(), byPair<float>);
   }
-  // Sums per pair, in block order then pair order: a fixed order of additions.
+  // Sums per pair, in block order then pair order.
   std::vector<std::tuple<int, int, double>> pairs;
   for (int b = 0; b < blocks; ++b) {
-    const auto& v = crossing[b];
-    for (std::size_t k = 0; k < v.size();) {
-      std::size_t e = k;
-      double sum = 0;
-      for (; e < v.size() && std::get<0>(v[e]) == std::get<0>(v[k]) && std::get<1>(v[e]) == std::get<1>(v[k]); ++e)
-        sum += std::get<2>(v[e]);
-      pairs.emplace_back(std::get<0>(v[k]), std::get<1>(v[k]), sum);
-      k = e;
-    }
+    sumPerPair(crossing[b], pairs);
     std::vector<std::tuple<int, int, float>>().swap(crossing[b]);
   }
-  std::stable_sort(pairs.begin(), pairs.end(), [](const auto& x, const auto& y) {
-    return std::get<0>(x) != std::get<0>(y) ? std::get<0>(x) < std::get<0>(y) : std::get<1>(x) < std::get<1>(y);
-  });
+  std::stable_sort(pairs.begin(), pairs.end(), byPair<double>);
   std::vector<std::int64_t> off(ncomp + 1, 0);
   std::vector<std::pair<int, double>> adj;
   {
     std::vector<std::tuple<int, int, double>> merged;
-    for (std::size_t k = 0; k < pairs.size();) {
-      std::size_t e = k;
-      double sum = 0;
-      for (; e < pairs.size() && std::get<0>(pairs[e]) == std::get<0>(pairs[k]) && std::get<1>(pairs[e]) == std::get<1>(pairs[k]); ++e)
-        sum += std::get<2>(pairs[e]);
-      if (sum != 0) merged.emplace_back(std::get<0>(pairs[k]), std::get<1>(pairs[k]), sum);
-      k = e;
-    }
+    sumPerPair(pairs, merged);
+    merged.erase(std::remove_if(merged.begin(), merged.end(), [](const auto& t) { return std::get<2>(t) == 0; }),
+                 merged.end());
     for (const auto& [a, c, s] : merged) { ++off[a + 1]; ++off[c + 1]; }
     for (int c = 0; c < ncomp; ++c) off[c + 1] += off[c];
     adj.resize(off[ncomp]);
@@ -239,26 +241,22 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
   std::iota(comp_order.begin(), comp_order.end(), 0);
   std::sort(comp_order.begin(), comp_order.end(), [&](int a, int b) { return higher(comp_seed[a], comp_seed[b]); });
   std::vector<std::int8_t> sign(ncomp, 0);
-  using Item = std::tuple<double, int, int>;  // (-|agreement|, target, source)
+  // (-|agreement|, target, source, agreement): strongest first; the edge carries its sign.
+  using Item = std::tuple<double, int, int, double>;
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
   auto push = [&](int c) {
     for (std::int64_t k = off[c]; k < off[c + 1]; ++k)
-      if (!sign[adj[k].first]) heap.emplace(-std::abs(adj[k].second), adj[k].first, c);
-  };
-  auto agreement = [&](int a, int c) {
-    for (std::int64_t k = off[a]; k < off[a + 1]; ++k)
-      if (adj[k].first == c) return adj[k].second;
-    return 0.0;
+      if (!sign[adj[k].first]) heap.emplace(-std::abs(adj[k].second), adj[k].first, c, adj[k].second);
   };
   for (const int root : comp_order) {
     if (sign[root]) continue;
     sign[root] = 1;
     push(root);
     while (!heap.empty()) {
-      const auto [cost, c, from] = heap.top();
+      const auto [cost, c, from, agreement] = heap.top();
       heap.pop();
       if (sign[c]) continue;
-      sign[c] = static_cast<std::int8_t>(agreement(from, c) >= 0 ? sign[from] : -sign[from]);
+      sign[c] = static_cast<std::int8_t>(agreement >= 0 ? sign[from] : -sign[from]);
       push(c);
     }
   }

@@ -28,9 +28,15 @@ const char* kCurvatureUsage =
     "  Wavejet curvatures and corrected normals (manuscript 2.4). OUT (.pcd or .ply) holds x y z,\n"
     "  normal_x/y/z, k1 k2 (1/m, signed w.r.t. the normal, k1 >= k2), mean_curvature,\n"
     "  gaussian_curvature, principal_x/y/z (direction of k1), offset (m), a0 a1_real a1_imag\n"
-    "  (unit-disk units) and order (-1: too few neighbours, outputs NaN).\n"
+    "  (unit-disk units) and order (-1: too few neighbours, outputs NaN). Exact duplicate\n"
+    "  positions are fitted once and counted once; every input point gets an output.\n"
     "  --radius R             R_phi in metres (default: from --neighbours)\n"
-    "  --neighbours N         mean neighbour count that sets R_phi (default 50)\n"
+    "  --neighbours N         mean neighbour count that sets R_phi over the distinct positions\n"
+    "                         (default 50)\n"
+    "  --fixed-radius         no per-point widening: NaN outputs where the ball of R_phi holds\n"
+    "                         fewer points than the order needs, beta (K+1)(K+2)/2 (17 for K = 4);\n"
+    "                         default: such a point is fitted on its N nearest (--neighbours),\n"
+    "                         rescaled to their disk\n"
     "  --order K              Wavejet order, 1 to 20 (default 4)\n"
     "  --beta B               order lowered until neighbours >= B (K+1)(K+2)/2 (default 1.1)\n"
     "  --irls N               IRLS passes against noise/outliers (default 0)\n"
@@ -54,6 +60,7 @@ const char* kEnhanceUsage =
     "                         0 flattens it, imaginary parts skew the normals; positions stay\n"
     "  --radius R             R_phi = s in metres (default: from --neighbours)\n"
     "  --neighbours N         mean neighbour count that sets R_phi (default 50)\n"
+    "  --fixed-radius         no per-point widening (as for paps curvature)\n"
     "  --order K              Wavejet order (default 4; the manuscript uses 6 to 9)\n"
     "  --beta B, --irls N, --select-order   as for paps curvature\n"
     "  --max-motion F         motion clamp as a fraction of R_phi (default 0.5)\n"
@@ -114,6 +121,9 @@ WavejetParameters wavejetParameters(const Arguments& a) {
   w.max_refits = static_cast<int>(a.number("refits", w.max_refits));
   w.refit_angle = static_cast<float>(a.number("refit-angle", w.refit_angle));
   w.select_order = a.has("select-order");
+  // The CLI widens sparse balls also with --radius: a user gets an output at every point
+  // that has enough neighbours somewhere (docs/wavejets.md, "Scans of varying density").
+  w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::always;
   w.validate();
   return w;
 }
@@ -151,13 +161,27 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
     }
 }
 
+// One line on what the neighbourhoods were: duplicates fitted once, sparse balls widened.
+void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float widened_median, int need,
+                              int widen_to, bool fixed) {
+  if (duplicates)
+    std::printf("exact duplicates: %zu points share the position of an earlier one: fitted and counted once\n",
+                duplicates);
+  if (fixed) return;
+  if (widened)
+    std::printf("widened: %zu points had fewer than %d distinct neighbours in the ball: fitted on their %d nearest, "
+                "R_phi = distance of the farthest (median %g m)\n", widened, need, widen_to, widened_median);
+  else
+    std::printf("widened: none (every ball holds at least %d distinct points)\n", need);
+}
+
 }  // namespace
 
 int runCurvature(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kCurvatureUsage, stdout); return 0; }
   a.allowOnly({"radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle", "orient", "quiet",
-               "timings", "select-order"});
+               "timings", "select-order", "fixed-radius"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const WavejetParameters params = wavejetParameters(a);
   const float radius = static_cast<float>(a.number("radius", 0));
@@ -174,11 +198,16 @@ int runCurvature(int argc, char** argv) {
                                     progress, neighbours);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("wavejets: order %d, R_phi %g m%s (mean %.1f neighbours), %.2f s\n", params.order, r.radius,
-              radius > 0 ? "" : " (chosen)", r.mean_neighbours, secs);
+              radius > 0 ? "" : " (chosen: mean neighbour count over the distinct positions)", r.mean_neighbours, secs);
+  printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median, wavejetNeededNeighbours(params),
+                           std::max(wavejetNeededNeighbours(params), neighbours),
+                           params.widening == WavejetParameters::Widening::never);
   std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
               "noise (plane kept) at %zu\n", r.fitted, r.lowered, r.not_converged, r.tilt_within_noise);
   if (r.too_few_neighbours)
-    std::fprintf(stderr, "warning: %zu points have too few neighbours for order 2: NaN outputs\n", r.too_few_neighbours);
+    std::fprintf(stderr, "warning: %zu points have too few neighbours for order 2: NaN outputs%s\n",
+                 r.too_few_neighbours, params.widening == WavejetParameters::Widening::never
+                                           ? " (--fixed-radius: drop it to widen sparse balls)" : "");
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);
   pcl::PointCloud<pcl::PointXYZ> xyz;
   pcl::PointCloud<PointWavejet> wj;
@@ -199,10 +228,10 @@ int runCurvature(int argc, char** argv) {
 }
 
 int runEnhance(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kEnhanceUsage, stdout); return 0; }
   a.allowOnly({"alpha0", "alpha1", "radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle",
-               "max-motion", "orient", "quiet", "timings", "select-order"});
+               "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   if (a.has("alpha0") == a.has("alpha1"))
     throw InvalidParameter("alpha0/alpha1", "both or neither", "exactly one of --alpha0 A or --alpha1 RE[,IM]");
@@ -244,6 +273,9 @@ int runEnhance(int argc, char** argv) {
                 params.alpha1.real(), params.alpha1.imag(), params.wavejet.order, r.radius,
                 params.radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.changed);
   }
+  printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median, wavejetNeededNeighbours(params.wavejet),
+                           std::max(wavejetNeededNeighbours(params.wavejet), params.target_neighbours),
+                           params.wavejet.widening == WavejetParameters::Widening::never);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);
   if (r.unfitted) std::fprintf(stderr, "warning: %zu points have too few neighbours: left in place, normal NaN\n", r.unfitted);
   saveCloudAtomic(a.positional[1], cloud);

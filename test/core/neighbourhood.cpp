@@ -454,3 +454,31 @@ TEST(BuildRadiusNeighbourhood, Errors) {
 }
 
 }  // namespace
+
+namespace {
+
+TEST(ExactDuplicateRepresentatives, FirstOccurrenceNaNAndSignedZero) {
+  Positions p = {{1, 2, 3}, {0, 0, 0}, {1, 2, 3}, {kNaN, 0, 0}, {-0.f, 0, 0}, {1, 2, 3.0001f}, {1, 2, 3}};
+  std::size_t dup = 99;
+  const std::vector<int> rep = paps::exactDuplicateRepresentatives(p, &dup);
+  const std::vector<int> expected = {0, 1, 0, -1, 1, 5, 0};
+  EXPECT_EQ(rep, expected);
+  EXPECT_EQ(dup, 3u);
+  EXPECT_TRUE(paps::exactDuplicateRepresentatives(Positions()).empty());
+}
+
+TEST(ExactDuplicateRepresentatives, EveryPointTwiceInShuffledOrder) {
+  const Positions base = randomPoints(500, 11, 0);
+  Positions p;
+  for (const auto& x : base) p.push_back(x);
+  for (std::size_t i = base.size(); i-- > 0;) p.push_back(base[i]);  // reversed copies
+  std::size_t dup = 0;
+  const std::vector<int> rep = paps::exactDuplicateRepresentatives(p, &dup);
+  EXPECT_EQ(dup, base.size());
+  for (std::size_t i = 0; i < base.size(); ++i) {
+    EXPECT_EQ(rep[i], static_cast<int>(i));
+    EXPECT_EQ(rep[p.size() - 1 - i], static_cast<int>(i));
+  }
+}
+
+}  // namespace

@@ -411,4 +411,129 @@ TEST(Wavejet, OrderSelectionUnderNoise) {
   params.select_order = true;
   EXPECT_EQ(fitAtApex(clean, params, 0.5f).order, 4);
 }
+
+// A unit sphere sampled like a real scan of varying density: 3000 points uniform over the
+// sphere, 6000 more in the cap of 0.15 rad around +z (about 350x denser there), and every
+// point written twice (exact duplicates, as in bun0.pcd). `cap_count` returns how many of
+// the first `base` points are in the cap.
+Positions varyingDensitySphere(std::size_t& base) {
+  paps::Random rng(7);
+  Positions p;
+  auto onSphere = [&]() {
+    const Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    return Eigen::Vector3f(v.normalized().cast<float>());
+  };
+  while (p.size() < 3000) p.push_back(onSphere());
+  while (p.size() < 9000) {
+    const Eigen::Vector3f v = onSphere();
+    if (v.z() > std::cos(0.15f)) p.push_back(v);
+  }
+  base = p.size();
+  for (std::size_t i = 0; i < base; ++i) p.push_back(p[i]);
+  return p;
+}
+
+TEST(WavejetEstimation, VaryingDensityAndDuplicatesFittedEverywhereAtDefaults) {
+  // The bug of bun0.pcd: the automatic radius aims at a mean count, which the dense cap
+  // dominates, so the sparse part had fewer than 7 points per ball and NaN outputs. With
+  // the defaults (duplicates counted once, sparse balls widened to the 50 nearest) every
+  // point is fitted and the curvature stays accurate (truth k1 = k2 = -1 with outward
+  // normals).
+  std::size_t base = 0;
+  const Positions p = varyingDensitySphere(base);
+  paps::Normals out(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = p[i].normalized();
+  paps::WavejetParameters fixed;
+  fixed.widening = paps::WavejetParameters::Widening::never;
+  paps::WavejetReport before;
+  paps::estimateWavejets(p, 0.f, fixed, &before, nullptr, nullptr, &out);
+  EXPECT_GT(before.too_few_neighbours, 5000u);  // most of the sparse part (2 x ~3000 copies)
+
+  paps::WavejetReport report;
+  const auto res = paps::estimateWavejets(p, 0.f, paps::WavejetParameters(), &report, nullptr, nullptr, &out);
+  ASSERT_EQ(res.size(), p.size());
+  EXPECT_EQ(report.too_few_neighbours, 0u);
+  EXPECT_EQ(report.fitted, p.size());
+  EXPECT_EQ(report.duplicates, base);
+  EXPECT_GT(report.widened, 5000u);
+  EXPECT_GT(report.widened_radius_median, 5 * report.radius);
+  double se_sparse = 0, se_dense = 0;
+  std::size_t n_sparse = 0, n_dense = 0;
+  for (std::size_t i = 0; i < base; ++i) {
+    ASSERT_TRUE(res[i].valid()) << i;
+    // Every copy gets its position's output.
+    ASSERT_EQ(res[i + base].k1, res[i].k1);
+    ASSERT_EQ(res[i + base].normal, res[i].normal);
+    const double e = std::pow(res[i].k1 + 1.0, 2) + std::pow(res[i].k2 + 1.0, 2);
+    if (res[i].radius > report.radius) { se_sparse += e; n_sparse += 2; }
+    else { se_dense += e; n_dense += 2; }
+    EXPECT_LT(angleDeg(res[i].normal, out[i]), 0.5);
+  }
+  ASSERT_GT(n_sparse, 0u);
+  ASSERT_GT(n_dense, 0u);
+  // Measured 0.0036 (widened points, about 50 neighbours each) and 0.0007 (ball of R_phi).
+  EXPECT_LT(std::sqrt(se_sparse / n_sparse), 0.01);
+  EXPECT_LT(std::sqrt(se_dense / n_dense), 0.003);
+}
+
+TEST(WavejetEstimation, DuplicatesGiveTheOutputOfTheCloudWithout) {
+  // Counting each position once: a cloud with copies gives exactly the outputs of the
+  // cloud without them (same radius, same neighbour lists), also when not widened.
+  const Positions u = heightFieldSamples([](double x, double y) { return 0.3 * x * x - 0.2 * x * y; }, 3000, 1.0, 12);
+  Positions p = u;
+  for (std::size_t i = 0; i < u.size(); i += 3) p.push_back(u[i]);
+  p.push_back(u[5]);
+  for (const auto widening : {paps::WavejetParameters::Widening::never, paps::WavejetParameters::Widening::always}) {
+    paps::WavejetParameters params;
+    params.widening = widening;
+    paps::WavejetReport ru, rp;
+    const auto a = paps::estimateWavejets(u, 0.f, params, &ru);
+    const auto b = paps::estimateWavejets(p, 0.f, params, &rp);
+    EXPECT_EQ(ru.radius, rp.radius);
+    EXPECT_EQ(rp.duplicates, p.size() - u.size());
+    for (std::size_t i = 0; i < u.size(); ++i) {
+      ASSERT_EQ(a[i].k1, b[i].k1) << i;
+      ASSERT_EQ(a[i].normal, b[i].normal) << i;
+    }
+    std::size_t copies_widened = 0;
+    for (std::size_t i = u.size(); i < p.size(); ++i) {
+      const std::size_t j = i == p.size() - 1 ? 5 : 3 * (i - u.size());
+      ASSERT_EQ(b[i].k1, a[j].k1) << i;
+      copies_widened += a[j].radius > ru.radius;
+    }
+    EXPECT_EQ(rp.widened, ru.widened + copies_widened);  // counted per input point
+  }
+}
+
+TEST(WavejetEstimation, WideningWithAnExplicitRadius) {
+  // setRadiusSearch keeps PCL's semantics by default (NaN where too few); Widening::always
+  // fits those points on their 50 nearest instead.
+  const Positions p = heightFieldSamples([](double x, double y) { return 0.25 * (x * x + y * y); }, 2000, 1.0, 2);
+  auto cloud = toCloud(p);
+  paps::WavejetEstimation<pcl::PointXYZ> wj;
+  wj.setInputCloud(cloud);
+  wj.setRadiusSearch(0.06);  // about 7 neighbours on average
+  wj.setViewPoint(0, 0, 10);
+  pcl::PointCloud<paps::PointWavejet> out;
+  wj.compute(out);
+  EXPECT_FALSE(out.is_dense);
+  EXPECT_GT(wj.getReport().too_few_neighbours, 500u);
+  paps::WavejetParameters params;
+  params.widening = paps::WavejetParameters::Widening::always;
+  wj.setParameters(params);
+  wj.compute(out);
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_EQ(wj.getReport().too_few_neighbours, 0u);
+  EXPECT_GT(wj.getReport().widened, 500u);
+  EXPECT_NEAR(out[0].k1, 0.5, 5e-3);
+  EXPECT_NEAR(out[0].k2, 0.5, 5e-3);
+  // The same through estimateWavejets with the explicit radius.
+  paps::WavejetReport r;
+  paps::estimateWavejets(p, 0.06f, params, &r);
+  EXPECT_EQ(r.too_few_neighbours, 0u);
+  EXPECT_EQ(r.widened, wj.getReport().widened);
+  params.widened_neighbours = -1;
+  EXPECT_THROW(params.validate(), paps::InvalidParameter);
+}
+
 }  // namespace

@@ -204,6 +204,34 @@ float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& i
   return r;
 }
 
+std::vector<int> exactDuplicateRepresentatives(const Positions& points, std::size_t* duplicates) {
+  std::vector<int> rep(points.size(), -1);
+  std::vector<int> order;
+  order.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (isFinite(points[i])) order.push_back(static_cast<int>(i));
+  // Lexicographic by value, then by index: each run of equal positions starts at its first.
+  auto less = [&](int a, int b) {
+    const Eigen::Vector3f& p = points[a];
+    const Eigen::Vector3f& q = points[b];
+    if (p.x() != q.x()) return p.x() < q.x();
+    if (p.y() != q.y()) return p.y() < q.y();
+    if (p.z() != q.z()) return p.z() < q.z();
+    return a < b;
+  };
+  std::sort(order.begin(), order.end(), less);
+  std::size_t dup = 0;
+  for (std::size_t s = 0; s < order.size();) {
+    std::size_t e = s + 1;
+    while (e < order.size() && points[order[e]] == points[order[s]]) ++e;
+    for (std::size_t t = s; t < e; ++t) rep[order[t]] = order[s];
+    dup += e - s - 1;
+    s = e;
+  }
+  if (duplicates) *duplicates = dup;
+  return rep;
+}
+
 }  // namespace paps
 
 namespace paps {

@@ -22,6 +22,7 @@ void WavejetParameters::validate() const {
   requireInRange("max_refits", max_refits, 0, 50);
   if (!std::isfinite(refit_angle)) throw InvalidParameter("refit_angle", detail::toString(refit_angle), "a value in [0, 90]");
   requireInRange("refit_angle", refit_angle, 0.f, 90.f);
+  requireInRange("widened_neighbours", widened_neighbours, 0, 100000);
   if (!isFinite(viewpoint)) throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
 }
 
@@ -575,6 +576,7 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   phi[wavejetIndex(1, 1)] = 0.0;
 
   res.order = order;
+  res.radius = radius;
   res.normal = n_t.cast<float>();
   res.direction1 = dir.cast<float>();
   res.k1 = static_cast<float>(k1);
@@ -595,6 +597,115 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   return res;
 }
 
+int wavejetNeededNeighbours(const WavejetParameters& params) {
+  // The same comparison as the order lowering of fitWavejet (int against float).
+  const int m = wavejetUnknowns(params.order);
+  int need = m;
+  while (need < params.beta * m) ++need;
+  return need;
+}
+
+namespace {
+
+// Wavejets of distinct positions (no exact duplicates). `neighbour_count` gets the count
+// used per point, `widened` whether its radius was widened.
+std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radius, const WavejetParameters& params,
+                                            std::vector<WavejetCoefficients>* coefficients,
+                                            const Normals* initial_normals, const Normals* orientation,
+                                            const ProgressCallback& progress, int target_neighbours,
+                                            std::vector<int>& neighbour_count, std::vector<std::uint8_t>& widened) {
+  const bool automatic = radius == 0;
+  const bool widen = params.widening == WavejetParameters::Widening::always ||
+                     (params.widening == WavejetParameters::Widening::automatic && automatic);
+  std::unique_ptr<SpatialIndex> index;
+  if (automatic || widen) index = std::make_unique<SpatialIndex>(points);
+  if (automatic) radius = radiusForMeanNeighbourCount(points, *index, target_neighbours);
+  const int need = wavejetNeededNeighbours(params);
+  const int widen_to = std::max(need, params.widened_neighbours > 0 ? params.widened_neighbours : target_neighbours);
+  const std::int64_t count = static_cast<std::int64_t>(points.size());
+  std::vector<WavejetResult> out(points.size());
+  neighbour_count.assign(points.size(), 0);
+  widened.assign(points.size(), 0);
+  if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
+  ProgressReporter reporter(progress, "wavejets", points.size());
+  const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
+  // A ball with fewer than `need` positions: the `widen_to` nearest instead, at their
+  // radius. Returns the radius to use (indices into `points` in idx) or 0 when not widened
+  // (the whole cloud holds fewer than `need` finite positions).
+  auto widenAt = [&](int i, std::vector<int>& idx, std::vector<float>& d2) -> float {
+    const int n = index->nearestK(points[i], widen_to, idx, d2);
+    if (n < need) return 0.f;  // the whole cloud holds too few: NaN outputs as before
+    return std::max(radius, std::sqrt(d2[n - 1]));
+  };
+  auto fitPoint = [&](int i, const Positions& pts, const int* nb, int found, const Eigen::Vector3f& q, float r,
+                      WavejetWorkspace& ws) {
+    neighbour_count[i] = found;
+    out[i] = fitWavejet(pts, nb, found, q, r, params, ws, initial_normals ? (*initial_normals)[i] : nan3,
+                        orientation ? (*orientation)[i] : nan3, coefficients ? &(*coefficients)[i] : nullptr);
+  };
+  // Uniform grid of cells of side R_phi (the shared core one); falls back to the kd-tree when
+  // the extent is too large for it.
+  CellGrid grid;
+  if (grid.build(points, radius)) {
+    // Points visited in cell order and fitted on the copy in that order (memory locality);
+    // neighbours come in cell order then index order, whatever the thread count. Results
+    // are stored at their input index.
+    const Positions& sorted = grid.sorted();
+    const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
+#pragma omp parallel
+    {
+      WavejetWorkspacePtr ws = makeWavejetWorkspace();
+      std::vector<int> idx, wide;
+      std::vector<float> d2;
+      idx.reserve(256);
+      CellGrid::Cursor cursor;
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t s = 0; s < finite; ++s) {
+        if (reporter.cancelled()) continue;
+        const int i = grid.original()[s];
+        const int found = grid.query(sorted[s], radius, idx, cursor);
+        const float r = widen && found < need ? widenAt(i, wide, d2) : 0.f;
+        if (r > 0) {
+          widened[i] = 1;
+          fitPoint(i, points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
+        } else {
+          fitPoint(i, sorted, idx.data(), found, sorted[s], radius, *ws);
+        }
+        reporter.advance();
+      }
+    }
+    reporter.advance(static_cast<std::size_t>(count - finite));
+  } else {
+    if (!index) index = std::make_unique<SpatialIndex>(points);
+#pragma omp parallel
+    {
+      WavejetWorkspacePtr ws = makeWavejetWorkspace();
+      std::vector<int> idx, wide;
+      std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t i = 0; i < count; ++i) {
+        if (reporter.cancelled()) continue;
+        if (isFinite(points[i])) {
+          const int found = index->radiusSearch(points[i], radius, idx, d2);
+          const float r = widen && found < need ? widenAt(static_cast<int>(i), wide, d2) : 0.f;
+          if (r > 0) {
+            widened[i] = 1;
+            fitPoint(static_cast<int>(i), points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
+          } else {
+            fitPoint(static_cast<int>(i), points, idx.data(), found, points[i], radius, *ws);
+          }
+        }
+        reporter.advance();
+      }
+    }
+  }
+  reporter.throwIfCancelled();
+  reporter.finish();
+  return out;
+}
+
+}  // namespace
+
 std::vector<WavejetResult> estimateWavejets(const Positions& points, float radius,
                                             const WavejetParameters& params, WavejetReport* report,
                                             std::vector<WavejetCoefficients>* coefficients,
@@ -609,73 +720,63 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (orientation && orientation->size() != points.size())
     throw InvalidParameter("orientation", detail::toString(orientation->size()), "one per point");
   if (countFinite(points) == 0) throw InvalidInput("no finite point");
-  if (radius == 0) {
-    SpatialIndex index(points);
-    radius = radiusForMeanNeighbourCount(points, index, target_neighbours);
-  }
-  const std::int64_t count = static_cast<std::int64_t>(points.size());
-  std::vector<WavejetResult> out(points.size());
-  std::vector<int> neighbour_count(points.size(), 0);
-  if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
-  ProgressReporter reporter(progress, "wavejets", points.size());
-  const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
-  // Uniform grid of cells of side R_phi (the shared core one); falls back to the kd-tree when
-  // the extent is too large for it.
-  CellGrid grid;
-  if (grid.build(points, radius)) {
-    // Points visited in cell order and fitted on the copy in that order (memory locality);
-    // neighbours come in cell order then index order, whatever the thread count. Results
-    // are stored at their input index.
-    const Positions& sorted = grid.sorted();
-    const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
-#pragma omp parallel
-    {
-      WavejetWorkspacePtr ws = makeWavejetWorkspace();
-      std::vector<int> idx;
-      idx.reserve(256);
-      CellGrid::Cursor cursor;
-#pragma omp for schedule(dynamic, 256)
-      for (std::int64_t s = 0; s < finite; ++s) {
-        if (reporter.cancelled()) continue;
-        const int i = grid.original()[s];
-        const int found = grid.query(sorted[s], radius, idx, cursor);
-        neighbour_count[i] = found;
-        out[i] = fitWavejet(sorted, idx.data(), found, sorted[s], radius, params, *ws,
-                            initial_normals ? (*initial_normals)[i] : nan3,
-                            orientation ? (*orientation)[i] : nan3,
-                            coefficients ? &(*coefficients)[i] : nullptr);
-        reporter.advance();
+  // Exact duplicates: each position is fitted once and counted once as a neighbour (a copy
+  // adds no geometry, only weight, and would fake the neighbour count that sets the order);
+  // every copy then gets its position's output. Without duplicates nothing is copied.
+  std::size_t duplicates = 0;
+  const std::vector<int> rep = exactDuplicateRepresentatives(points, &duplicates);
+  std::vector<int> slot;  // input index -> index among the distinct positions (-1: non-finite)
+  Positions distinct;
+  Normals d_initial, d_orientation;
+  if (duplicates > 0) {
+    slot.assign(points.size(), -1);
+    distinct.reserve(points.size() - duplicates);
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (rep[i] == static_cast<int>(i)) {
+        slot[i] = static_cast<int>(distinct.size());
+        distinct.push_back(points[i]);
+        if (initial_normals) d_initial.push_back((*initial_normals)[i]);
+        if (orientation) d_orientation.push_back((*orientation)[i]);
       }
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (rep[i] >= 0) slot[i] = slot[rep[i]];
+  }
+  const bool copy = duplicates > 0;
+  std::vector<int> d_count;
+  std::vector<std::uint8_t> d_widened;
+  std::vector<WavejetCoefficients> d_coefficients;
+  std::vector<WavejetResult> d_out =
+      estimateDistinct(copy ? distinct : points, radius, params,
+                       coefficients ? (copy ? &d_coefficients : coefficients) : nullptr,
+                       initial_normals ? (copy ? &d_initial : initial_normals) : nullptr,
+                       orientation ? (copy ? &d_orientation : orientation) : nullptr, progress,
+                       target_neighbours, d_count, d_widened);
+  std::vector<WavejetResult> out;
+  std::vector<int> neighbour_count;
+  std::vector<std::uint8_t> widened;
+  if (copy) {
+    out.resize(points.size());
+    neighbour_count.assign(points.size(), 0);
+    widened.assign(points.size(), 0);
+    if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (slot[i] < 0) continue;
+      out[i] = d_out[slot[i]];
+      neighbour_count[i] = d_count[slot[i]];
+      widened[i] = d_widened[slot[i]];
+      if (coefficients) (*coefficients)[i] = d_coefficients[slot[i]];
     }
-    reporter.advance(static_cast<std::size_t>(count - finite));
   } else {
-    SpatialIndex index(points);
-#pragma omp parallel
-    {
-      WavejetWorkspacePtr ws = makeWavejetWorkspace();
-      std::vector<int> idx;
-      std::vector<float> d2;
-#pragma omp for schedule(dynamic, 256)
-      for (std::int64_t i = 0; i < count; ++i) {
-        if (reporter.cancelled()) continue;
-        if (isFinite(points[i])) {
-          const int found = index.radiusSearch(points[i], radius, idx, d2);
-          neighbour_count[i] = found;
-          out[i] = fitWavejet(points, idx.data(), found, points[i], radius, params, *ws,
-                              initial_normals ? (*initial_normals)[i] : nan3,
-                              orientation ? (*orientation)[i] : nan3,
-                              coefficients ? &(*coefficients)[i] : nullptr);
-        }
-        reporter.advance();
-      }
-    }
+    out = std::move(d_out);
+    neighbour_count = std::move(d_count);
+    widened = std::move(d_widened);
   }
-  reporter.throwIfCancelled();
-  reporter.finish();
   if (report) {
     *report = WavejetReport();
     report->radius = radius;
+    report->duplicates = duplicates;
     double sum = 0;
+    std::vector<float> widened_radii;
     for (std::size_t i = 0; i < points.size(); ++i) {
       if (!isFinite(points[i])) { ++report->non_finite; continue; }
       if (!out[i].valid()) { ++report->too_few_neighbours; continue; }
@@ -684,6 +785,12 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       report->lowered += out[i].order < params.order;
       report->not_converged += !out[i].converged && !out[i].tilt_within_noise;
       report->tilt_within_noise += out[i].tilt_within_noise;
+      report->max_radius = std::max(report->max_radius, out[i].radius);
+      if (widened[i]) { ++report->widened; widened_radii.push_back(out[i].radius); }
+    }
+    if (!widened_radii.empty()) {
+      std::nth_element(widened_radii.begin(), widened_radii.begin() + widened_radii.size() / 2, widened_radii.end());
+      report->widened_radius_median = widened_radii[widened_radii.size() / 2];
     }
     report->mean_neighbours = report->fitted ? sum / report->fitted : 0.0;
   }

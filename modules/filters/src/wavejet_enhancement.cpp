@@ -38,6 +38,9 @@ std::vector<WavejetResult> fitAll(const Positions& points, const WavejetEnhancem
     report->unfitted = wr.too_few_neighbours;
     report->non_finite = wr.non_finite;
     report->lowered = wr.lowered;
+    report->duplicates = wr.duplicates;
+    report->widened = wr.widened;
+    report->widened_radius_median = wr.widened_radius_median;
   }
   return res;
 }
@@ -50,15 +53,16 @@ Positions enhancePositions(const Positions& points, const WavejetEnhancementPara
   WavejetEnhancementReport local;
   WavejetEnhancementReport& r = report ? *report : local;
   const auto res = fitAll(points, params, &r, progress, orientation, nullptr);
-  const float R = r.radius;
-  const float limit = params.max_motion * R;
   Positions out = points;
   if (normals_out) normals_out->assign(points.size(), Eigen::Vector3f::Constant(NAN));
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!res[i].valid()) continue;
     if (normals_out) (*normals_out)[i] = res[i].normal;
     if (!movable.empty() && !movable[i]) continue;
-    // Equation 2.21 in unit-disk units, scaled back to metres. res.offset is in metres.
+    // Equation 2.21 in unit-disk units, scaled back to metres by the point's own R_phi
+    // (larger than the search radius where widened). res.offset is in metres.
+    const double R = res[i].radius;
+    const double limit = params.max_motion * R;
     double d = res[i].offset - kTwoPi * (params.alpha0 - 1.0) * res[i].a0 * R;
     if (std::abs(d) > limit) { d = d > 0 ? limit : -limit; ++r.clamped; }
     out[i] = points[i] + static_cast<float>(d) * res[i].normal;

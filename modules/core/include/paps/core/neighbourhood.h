@@ -85,6 +85,14 @@ class NeighbourGraph {
 float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& index,
                                   int target_count, int samples = 2000);
 
+/// Exact duplicates: for every point, the index of the first point (in array order) at
+/// exactly the same position (itself when it is the first); -1 for non-finite points.
+/// Positions compare by value (0.0f equals -0.0f). Scans merged from several passes, or
+/// written twice, carry such copies; a local fit should count each position once.
+/// `duplicates`, when given, receives the number of finite points that are not the first
+/// at their position.
+std::vector<int> exactDuplicateRepresentatives(const Positions& points, std::size_t* duplicates = nullptr);
+
 }  // namespace paps
 
 namespace paps {

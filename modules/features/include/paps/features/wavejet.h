@@ -61,6 +61,28 @@ struct WavejetParameters {
   /// Normals are oriented towards `viewpoint` (metres; PCL's convention, default the
   /// origin), unless an orientation hint is given for the point.
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();
+  /// Per-point widening of R_phi where the ball holds too few points. At a point whose ball
+  /// of R_phi holds fewer distinct positions than order K needs (the smallest L >= beta
+  /// (K+1)(K+2)/2, 17 for K = 4), the fit uses its `widened_neighbours` nearest distinct
+  /// positions instead, rescaled to the unit disk of radius the distance of the farthest
+  /// (the manuscript rescales every neighbourhood to the unit disk, so a per-point R_phi
+  /// is the same method at that point's sampling scale). Points whose ball holds enough
+  /// keep R_phi exactly. Without it, a scan whose density varies a lot gets NaN wherever
+  /// it is sparser than the radius assumes (docs/wavejets.md: 83% of bun0.pcd).
+  ///  * automatic (default): only when the radius is chosen from the data (radius 0 in
+  ///    estimateWavejets, WavejetEnhancement); an explicit radius is kept as given
+  ///    (PCL's semantics: NaN outputs where too few neighbours).
+  ///  * always: also with an explicit radius (estimateWavejets, WavejetEstimation with
+  ///    setRadiusSearch; `paps curvature` / `paps enhance` use this).
+  ///  * never: fixed radius everywhere (the curvature bench compares methods on the same
+  ///    balls).
+  enum class Widening { automatic, always, never };
+  Widening widening = Widening::automatic;
+  /// Neighbour count of a widened point (0 to 100000; at least the order's need): 0 = the
+  /// target neighbour count of estimateWavejets (50 by default), 50 in WavejetEstimation.
+  /// Not the bare need: measured on a sphere, order 4 on its 17 nearest is ill-conditioned
+  /// (curvature error 0.31 without noise, 0.0036 with 50 neighbours; docs/wavejets.md).
+  int widened_neighbours = 0;
   /// Throws InvalidParameter naming the first bad value.
   void validate() const;
 };
@@ -108,6 +130,8 @@ struct WavejetResult {
   float a0 = NAN;                         ///< a_0(R_phi), unit-disk units (equation 2.18)
   std::complex<float> a1{NAN, NAN};       ///< a_1(R_phi), unit-disk units
   int order = -1;                         ///< order used (lowered when few neighbours)
+  float radius = NAN;                     ///< R_phi used at this point (metres): the
+                                          ///< search radius, or larger where widened
   int fits = 0;                           ///< least-squares fits done (1 + refits)
   bool converged = false;                 ///< the tilt fell below refit_angle
   /// The tilt stayed above refit_angle but is not distinguishable from zero given the fit's
@@ -146,12 +170,25 @@ struct WavejetReport {
   std::size_t not_converged = 0;     ///< tilt still above refit_angle after max_refits
   std::size_t tilt_within_noise = 0; ///< tilt above refit_angle but within the noise: no refit
   std::size_t non_finite = 0;        ///< NaN/Inf input points (NaN outputs)
+  /// Finite points at exactly the position of an earlier point. The fit counts each
+  /// position once (estimateWavejets); every copy gets the output of its position.
+  std::size_t duplicates = 0;
+  std::size_t widened = 0;           ///< fitted with R_phi widened (WavejetParameters::widening)
+  float widened_radius_median = 0.f; ///< median R_phi of the widened points (metres)
+  float max_radius = 0.f;            ///< largest R_phi used at a fitted point (metres)
 };
 
+/// The count of distinct neighbours (self included) that order `params.order` needs before
+/// it is lowered: the smallest L with L >= beta (K+1)(K+2)/2.
+int wavejetNeededNeighbours(const WavejetParameters& params);
+
 /// Wavejets of every point of `points` with neighbourhoods of radius `radius` (metres; 0:
-/// the radius holding `target_neighbours` on average). `initial_normals` / `orientation`
-/// are optional per-point arrays (see fitWavejet). Deterministic for any thread count.
-/// Throws InvalidParameter / InvalidInput / Cancelled.
+/// the radius holding `target_neighbours` on average over the distinct positions), widened
+/// per point where too few (WavejetParameters::widening). Exact duplicate positions are
+/// fitted once and counted once as neighbours; every input point gets an output (the one
+/// of its position; initial normals and hints of the first copy). `initial_normals` /
+/// `orientation` are optional per-point arrays (see fitWavejet). Deterministic for any
+/// thread count. Throws InvalidParameter / InvalidInput / Cancelled.
 std::vector<WavejetResult> estimateWavejets(const Positions& points, float radius,
                                             const WavejetParameters& params,
                                             WavejetReport* report = nullptr,

@@ -30,7 +30,9 @@ namespace paps {
 
 /// Parameters of Wavejet enhancement. Zero radius means "choose from the data".
 struct WavejetEnhancementParameters {
-  /// R_phi = s in metres (> 0), or 0: the radius holding `target_neighbours` on average.
+  /// R_phi = s in metres (> 0), or 0: the radius holding `target_neighbours` on average
+  /// over the distinct positions, widened per point where the ball holds too few for the
+  /// order (WavejetParameters::widening; the motion is then scaled by that point's R_phi).
   float radius = 0.f;
   /// Mean neighbour count that sets the radius (3 to 100000). Default 50.
   int target_neighbours = 50;
@@ -54,6 +56,9 @@ struct WavejetEnhancementReport {
   std::size_t unfitted = 0;      ///< too few neighbours: left unchanged (normal NaN)
   std::size_t non_finite = 0;    ///< NaN/Inf points passed through
   std::size_t lowered = 0;       ///< fitted with a lowered order
+  std::size_t duplicates = 0;    ///< points at the exact position of an earlier one (fitted once)
+  std::size_t widened = 0;       ///< fitted with R_phi widened (too few points in the ball)
+  float widened_radius_median = 0.f;  ///< median R_phi of those (metres)
 };
 
 /// Position filter (2.21) of `points`; only points with movable[i] (all when empty) move.

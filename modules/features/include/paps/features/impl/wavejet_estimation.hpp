@@ -1,4 +1,5 @@
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 
@@ -38,6 +39,13 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   std::vector<WavejetResult> results(indices.size());
   std::vector<int> neighbour_count(indices.size(), 0);
   const bool by_radius = this->k_ == 0;
+  // Widening (WavejetParameters::widening): the radius here is always explicit, so only
+  // Widening::always widens, to the `widen_to` nearest points of the search surface (exact
+  // duplicates are not merged here: they count as neighbours).
+  const bool widen = by_radius && params_.widening == WavejetParameters::Widening::always;
+  const int need = wavejetNeededNeighbours(params_);
+  const int widen_to = std::max(need, params_.widened_neighbours > 0 ? params_.widened_neighbours : 50);
+  std::vector<std::uint8_t> widened(indices.size(), 0);
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(NAN);
   ProgressReporter reporter(progress_, "wavejets", indices.size());
 #pragma omp parallel
@@ -53,6 +61,15 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
       const Eigen::Vector3f p = (*this->input_)[idx].getVector3fMap();
       if (isFinite(p) && this->searchForNeighbors(idx, this->search_parameter_, nn, d2) > 0) {
         float radius = static_cast<float>(this->search_radius_);
+        if (widen && static_cast<int>(nn.size()) < need &&
+            this->tree_->nearestKSearch((*this->input_)[idx], widen_to, nn, d2) >= need) {
+          widened[i] = 1;
+          float m = 0.f;
+          for (const float d : d2) m = std::max(m, d);
+          radius = std::max(radius, std::sqrt(m));
+        } else if (widen && static_cast<int>(nn.size()) < need) {
+          this->searchForNeighbors(idx, this->search_parameter_, nn, d2);  // restore the ball
+        }
         if (!by_radius) {
           float m = 0.f;
           for (const float d : d2) m = std::max(m, d);
@@ -83,6 +100,8 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
     report_.lowered += results[i].order < params_.order;
     report_.not_converged += !results[i].converged && !results[i].tilt_within_noise;
     report_.tilt_within_noise += results[i].tilt_within_noise;
+    report_.max_radius = std::max(report_.max_radius, results[i].radius);
+    report_.widened += widened[i];
   }
   report_.mean_neighbours = report_.fitted ? sum / report_.fitted : 0.0;
   output.is_dense = dense;

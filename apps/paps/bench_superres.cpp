@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -45,6 +46,10 @@ const char* kUsage =
     "  --samples DIR    sample data (default $PAPS_SAMPLES or ~/.cache/paps/samples)\n"
     "  --points N       dense points per shape (default 700000; the input is 10% of it)\n"
     "  --speed N        input points of the speed test, super-resolved x4 (default 100000, 0: skip)\n"
+    "  --speed-repeat N rounds of the speed test (default 1); the methods alternate within a round,\n"
+    "                   and the summary gives each method's min and median wall time, the\n"
+    "                   median of its ratio to pcl-mls-plane in the same round, and CPU times\n"
+    "  --speed-only     skip the error table (only the speed test)\n"
     "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n"
     "  --shapes LIST    comma-separated subset of engraved-plane,rs1 (default both)\n"
     "  --noises LIST    comma-separated noise fractions of the diagonal (default 0.0001,0.001,0.005)\n"
@@ -136,6 +141,23 @@ double nearestRmse(const Positions& dense, const Positions& output) {
   return n ? std::sqrt(s / n) : NAN;
 }
 
+// The "cpu" line a worker left in its log (process CPU seconds of the call), NAN if none.
+double childCpuSeconds(const std::string& log_path) {
+  std::ifstream f(log_path);
+  std::string key;
+  double v;
+  while (f >> key >> v)
+    if (key == "cpu") return v;
+  return NAN;
+}
+
+std::string loadAverage() {
+  std::ifstream f("/proc/loadavg");
+  std::string a, b, c;
+  f >> a >> b >> c;
+  return a + " " + b + " " + c;
+}
+
 std::string fmtE(double v) {
   char b[32];
   std::snprintf(b, sizeof b, "%.3e", v);
@@ -161,6 +183,8 @@ int runSuperresWorker(int argc, char** argv) {
     for (int i = 0; i < n_scans; ++i) scans.push_back(readRaw(dir + "/sr_in" + std::to_string(i) + ".bin"));
     const std::size_t target = static_cast<std::size_t>(get("count", 0));
     const auto t0 = std::chrono::steady_clock::now();
+    timespec c0{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     Positions out;
     if (method == "qsr") {
       QuadricSuperResolutionParameters q;
@@ -188,7 +212,10 @@ int runSuperresWorker(int argc, char** argv) {
       throw InvalidParameter("method", method, "qsr, apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    timespec c1{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c1);
     writeRaw(dir + "/sr_out.bin", out);
+    lf << "cpu " << (c1.tv_sec - c0.tv_sec) + 1e-9 * (c1.tv_nsec - c0.tv_nsec) << "\n";
     lf << "seconds " << s << "\n";
     return 0;
   } catch (const std::exception& e) {
@@ -198,9 +225,13 @@ int runSuperresWorker(int argc, char** argv) {
 }
 
 int runBenchSuperres(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "speed-only"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "samples", "points", "speed", "quick", "shapes", "noises", "methods"});
+  a.allowOnly({"out", "samples", "points", "speed", "speed-repeat", "speed-only", "quick", "shapes", "noises", "methods"});
+  const bool speed_only = a.has("speed-only");
+  const int speed_repeat = static_cast<int>(a.number("speed-repeat", 1));
+  if (speed_repeat < 1 || speed_repeat > 100)
+    throw InvalidParameter("speed-repeat", std::to_string(speed_repeat), "1 to 100");
   const bool quick = a.has("quick");
   const std::string out_dir = a.text("out", "bench_out");
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
@@ -247,6 +278,7 @@ int runBenchSuperres(int argc, char** argv) {
   std::printf("bench superres: dense %zu points per shape, input 10%%, noise sigma as a fraction of the diagonal\n", n_dense);
   std::printf("%-15s %-6s %-15s %9s %9s %9s %11s\n", "dataset", "noise", "method", "output", "time(s)", "peak MB", "RMSE");
   for (const auto& ds : datasets) {
+    if (speed_only) break;
     const Positions dense = synthetic::sampleMesh(ds.mesh, n_dense, 7);
     const float diag = boundingBoxDiagonal(dense);
     for (double noise : noises) {
@@ -337,14 +369,47 @@ int runBenchSuperres(int argc, char** argv) {
     synthetic::addGaussianNoise(in, 0.0001f, 22);
     const SpatialIndex index(in);
     const float r = radiusForMeanNeighbourCount(in, index, 30);
-    for (const std::string m : {"qsr", "apss", "apss-refit", "apss-wide", "rimls", "rimls-refit", "rimls-wide",
-                                "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel"}) {
-      if (std::find(methods.begin(), methods.end(), m) == methods.end()) continue;
-      const SrResult w = runChild(out_dir, m, {in}, {{"count", 4.0 * n_speed}, {"radius", r}});
-      if (!w.ok) { std::printf("%-15s failed: %s\n", m.c_str(), w.message.c_str()); continue; }
-      std::printf("%-15s %9zu points in %7.2f s, peak %5.0f MB\n", m.c_str(), w.output.size(), w.seconds, w.peak_mb);
-      csv << "speed-rs1," << n_speed * 4 << "," << n_speed << ",0.0001," << m << ",1," << w.seconds << "," << w.peak_mb
-          << "," << w.output.size() << ",\n";
+    std::printf("(PCL MLS search radius %.6g: 30 neighbours on average; %d round(s), load average %s)\n", r,
+                speed_repeat, loadAverage().c_str());
+    struct Times { std::vector<double> wall, cpu, ratio; };
+    std::map<std::string, Times> times;
+    std::vector<std::string> order;
+    for (int round = 0; round < speed_repeat; ++round) {
+      std::map<std::string, double> wall_of;
+      for (const std::string m : {"qsr", "apss", "apss-refit", "apss-wide", "rimls", "rimls-refit", "rimls-wide",
+                                  "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel"}) {
+        if (std::find(methods.begin(), methods.end(), m) == methods.end()) continue;
+        if (round == 0) order.push_back(m);
+        const SrResult w = runChild(out_dir, m, {in}, {{"count", 4.0 * n_speed}, {"radius", r}});
+        if (!w.ok) { std::printf("%-15s failed: %s\n", m.c_str(), w.message.c_str()); continue; }
+        const double cpu = childCpuSeconds(out_dir + "/sr_log.txt");
+        std::printf("%-15s %9zu points in %7.2f s (cpu %6.2f s), peak %5.0f MB\n", m.c_str(), w.output.size(),
+                    w.seconds, cpu, w.peak_mb);
+        std::fflush(stdout);
+        csv << "speed-rs1," << n_speed * 4 << "," << n_speed << ",0.0001," << m << ",1," << w.seconds << ","
+            << w.peak_mb << "," << w.output.size() << ",\n";
+        times[m].wall.push_back(w.seconds);
+        times[m].cpu.push_back(cpu);
+        wall_of[m] = w.seconds;
+      }
+      if (wall_of.count("pcl-mls-plane"))
+        for (const auto& [m, t] : wall_of) times[m].ratio.push_back(t / wall_of["pcl-mls-plane"]);
+      if (speed_repeat > 1) std::printf("  (end of round %d, load average %s)\n", round + 1, loadAverage().c_str());
+    }
+    if (speed_repeat > 1) {
+      auto median = [](std::vector<double> v) {
+        if (v.empty()) return double(NAN);
+        std::sort(v.begin(), v.end());
+        return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+      };
+      std::printf("%-15s %9s %9s %9s %9s %16s\n", "speed summary", "min(s)", "median(s)", "min cpu", "med cpu",
+                  "median / pcl-plane");
+      for (const auto& m : order) {
+        const Times& t = times[m];
+        if (t.wall.empty()) continue;
+        std::printf("%-15s %9.2f %9.2f %9.2f %9.2f %16.3f\n", m.c_str(), *std::min_element(t.wall.begin(), t.wall.end()),
+                    median(t.wall), *std::min_element(t.cpu.begin(), t.cpu.end()), median(t.cpu), median(t.ratio));
+      }
     }
   }
   std::printf("wrote %s/superres.csv and PNG close-ups\n", out_dir.c_str());

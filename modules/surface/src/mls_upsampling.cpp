@@ -391,18 +391,48 @@ inline float expNeg(float x) {
   return p * scale;
 }
 
+// Four lanes of floats (GCC / Clang vector extensions: one SSE register). The loops over a
+// block's neighbours use them explicitly: the compiler's own vectoriser leaves these short
+// loops with many sums scalar (its cost model), and explicit lanes fix the order of the
+// additions, so the result is the same whatever instructions the compiler picks.
+constexpr int kLanes = 4;
+typedef float F4 __attribute__((vector_size(16)));
+typedef std::int32_t I4 __attribute__((vector_size(16)));
+#define PAPS_LANES_INLINE inline __attribute__((always_inline))
+PAPS_LANES_INLINE F4 splat(float v) { return F4{v, v, v, v}; }
+PAPS_LANES_INLINE F4 load4(const float* p) { F4 v; std::memcpy(&v, p, sizeof v); return v; }
+PAPS_LANES_INLINE void store4(float* p, F4 v) { std::memcpy(p, &v, sizeof v); }
+PAPS_LANES_INLINE float hsum(F4 v) { return (v[0] + v[1]) + (v[2] + v[3]); }
+// expNeg on each lane (the same operations lane by lane).
+PAPS_LANES_INLINE F4 expNeg4(F4 x) {
+  x = x < splat(80.f) ? x : splat(80.f);
+  const F4 y = -x * 1.44269504089f;
+  const I4 i = __builtin_convertvector(y, I4);  // toward zero
+  const F4 z = (y - __builtin_convertvector(i, F4)) * 0.69314718056f;
+  const F4 p = 1.f + z * (1.f + z * (0.5f + z * (1.f / 6 + z * (1.f / 24 + z * (1.f / 120 + z * (1.f / 720))))));
+  const I4 bits = (i + 127) << 23;
+  return p * (F4)bits;
+}
+
 // The neighbours (with a finite normal) of one input point in arrays, positions relative to
 // that point and in units of the kernel support h: what the projections of all the seeds
-// generated from it read.
+// generated from it read. The arrays are padded to a multiple of kLanes with points beyond h
+// (weight 0) and zero normals.
 struct Block {
   std::vector<float> x, y, z, nx, ny, nz, alpha;
-  int n = 0;
+  // At the origin (the block's input point), per neighbour: t = 1 - |d|^2 (0 beyond h; the
+  // Wendland weight is t^4) and fx = d.n, with d = -(x, y, z).
+  std::vector<float> t, fx;
+  int n = 0;       // neighbours
+  int padded = 0;  // n rounded up to a multiple of kLanes
   // Neighbours within `within` h of o only.
   void gather(const Positions& p, const Normals& nrm, const int* nb, int count, const Eigen::Vector3f& o, float inv_h,
               float within) {
     const float w2 = within * within;
-    x.resize(count); y.resize(count); z.resize(count); nx.resize(count); ny.resize(count); nz.resize(count);
-    alpha.resize(count);
+    const std::size_t cap = static_cast<std::size_t>(count) + kLanes;
+    if (x.size() < cap) {
+      for (auto* v : {&x, &y, &z, &nx, &ny, &nz, &alpha, &t, &fx}) v->resize(cap);
+    }
     n = 0;
     for (int k = 0; k < count; ++k) {
       const int j = nb[k];
@@ -412,6 +442,21 @@ struct Block {
       x[n] = d.x(); y[n] = d.y(); z[n] = d.z();
       nx[n] = nrm[j].x(); ny[n] = nrm[j].y(); nz[n] = nrm[j].z();
       ++n;
+    }
+    padded = (n + kLanes - 1) / kLanes * kLanes;
+    for (int k = n; k < padded; ++k) {
+      x[k] = 2.f; y[k] = z[k] = 0.f;
+      nx[k] = ny[k] = nz[k] = 0.f;
+      alpha[k] = 0.f;
+    }
+  }
+  // t and fx at the origin (the padding gets t = 0).
+  void prepareOrigin() {
+    for (int k = 0; k < padded; k += kLanes) {
+      const F4 X = load4(&x[k]), Y = load4(&y[k]), Z = load4(&z[k]);
+      const F4 d2 = X * X + Y * Y + Z * Z;
+      store4(&t[k], d2 < splat(1.f) ? 1.f - d2 : splat(0.f));
+      store4(&fx[k], -(X * load4(&nx[k]) + Y * load4(&ny[k]) + Z * load4(&nz[k])));
     }
   }
 };
@@ -534,21 +579,6 @@ bool rimlsStep(const Block& b, const Eigen::Vector3f& q, float sigma_r, float si
   return out.allFinite();
 }
 
-// The robust weights of RIMLS converged at the block's own input point (the origin).
-bool freezeRimlsWeights(Block& b, float sigma_r, float sigma_n, int inner) {
-  float f;
-  Eigen::Vector3f grad, unused;
-  if (!rimlsStep(b, Eigen::Vector3f::Zero(), sigma_r, sigma_n, inner, false, unused, &f, &grad)) return false;
-  const float inv_sr2 = 1.f / (sigma_r * sigma_r), inv_sn2 = 1.f / (sigma_n * sigma_n);
-  for (int k = 0; k < b.n; ++k) {
-    const float fx = -(b.x[k] * b.nx[k] + b.y[k] * b.ny[k] + b.z[k] * b.nz[k]);
-    const float rr = fx - f;
-    const Eigen::Vector3f e = Eigen::Vector3f(b.nx[k], b.ny[k], b.nz[k]) - grad;
-    b.alpha[k] = expNeg(rr * rr * inv_sr2 + e.squaredNorm() * inv_sn2);
-  }
-  return true;
-}
-
 // The RIMLS function with the block's frozen weights, to second order about the origin (the
 // block's input point): f(q) ~ f0 + g.q + q'Hq / 2. One pass over the neighbours per input
 // point instead of one per seed, used for the seeds within kTaylorReach h of the origin, where
@@ -572,37 +602,103 @@ struct RimlsQuadratic {
   }
 };
 
-// Value, gradient and Hessian at the origin of f = sum(w fx) / sum(w), w = alpha t^4 with
-// t = 1 - |d|^2 (d = x - p_k), fx = d.n_k: grad w = -8 alpha t^3 d, hess w = alpha (48 t^2 d d'
-// - 8 t^3 I); grad f = (grad Sf - f grad Sw) / Sw; hess f = (hess Sf - f hess Sw - grad Sw
-// grad f' - grad f grad Sw') / Sw.
-bool rimlsQuadratic(const Block& b, RimlsQuadratic& out) {
-  double sw = 0, sf = 0;
-  Eigen::Vector3d gsw = Eigen::Vector3d::Zero(), gsf = Eigen::Vector3d::Zero();
-  Eigen::Matrix3d hsw = Eigen::Matrix3d::Zero(), hsf = Eigen::Matrix3d::Zero();
-  for (int k = 0; k < b.n; ++k) {
-    const Eigen::Vector3d d(-b.x[k], -b.y[k], -b.z[k]), n(b.nx[k], b.ny[k], b.nz[k]);
-    const double r2 = d.squaredNorm();
-    if (!(r2 < 1.0)) continue;
-    const double t = 1.0 - r2, a = b.alpha[k], t2 = t * t, t3 = t2 * t;
-    const double w = a * t3 * t, fx = d.dot(n);
-    const Eigen::Vector3d gw = -8.0 * a * t3 * d;
-    const Eigen::Matrix3d hw = a * (48.0 * t2 * d * d.transpose() - 8.0 * t3 * Eigen::Matrix3d::Identity());
-    sw += w;
-    sf += w * fx;
-    gsw += gw;
-    gsf += gw * fx + w * n;
-    hsw += hw;
-    hsf += hw * fx + gw * n.transpose() + n * gw.transpose();
+// RIMLS at the block's own input point (the origin), where the Wendland factors and the
+// residuals fx do not change from one reweighting to the next (Block::prepareOrigin): the
+// reweighting iterations (the first with alpha = 1, as rimlsStep), then, in one more pass, the
+// robust weights alpha converged there (kept in b.alpha for the exact steps of far seeds) and
+// the value, gradient and Hessian at the origin of f = sum(w fx) / sum(w) with those frozen
+// weights: w = alpha t^4 with t = 1 - |d|^2 (d = x - p_k), fx = d.n_k; grad w = -8 alpha t^3 d,
+// hess w = alpha (48 t^2 d d' - 8 t^3 I); grad f = (grad Sf - f grad Sw) / Sw; hess f = (hess Sf -
+// f hess Sw - grad Sw grad f' - grad f grad Sw') / Sw. Returns false (origin unusable) when
+// the weights vanish or the gradient does; quad_ok tells whether the expansion is finite.
+__attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float sigma_r, float sigma_n, int inner,
+                                                RimlsQuadratic& quad, bool& quad_ok) {
+  quad_ok = false;
+  b.prepareOrigin();
+  const float inv_sr2 = 1.f / (sigma_r * sigma_r), inv_sn2 = 1.f / (sigma_n * sigma_n);
+  const int np = b.padded;
+  const float *X = b.x.data(), *Y = b.y.data(), *Z = b.z.data(), *NX = b.nx.data(), *NY = b.ny.data(),
+              *NZ = b.nz.data(), *T = b.t.data(), *FX = b.fx.data();
+  float f = 0, gx = 0, gy = 0, gz = 0;
+  for (int it = 0; it < inner; ++it) {
+    const F4 zero = splat(0.f);
+    F4 sw = zero, sf = zero, gwx = zero, gwy = zero, gwz = zero, gfx = zero, gfy = zero, gfz = zero, snx = zero,
+       sny = zero, snz = zero;
+    const bool robust = it > 0;
+    for (int k = 0; k < np; k += kLanes) {
+      const F4 nx = load4(NX + k), ny = load4(NY + k), nz = load4(NZ + k), fk = load4(FX + k), tk = load4(T + k);
+      F4 t3 = tk * tk * tk;
+      if (robust) {
+        const F4 rr = fk - f, ex = nx - gx, ey = ny - gy, ez = nz - gz;
+        t3 *= expNeg4(rr * rr * inv_sr2 + (ex * ex + ey * ey + ez * ez) * inv_sn2);  // alpha t^3
+      }
+      const F4 w = t3 * tk, gw = 8.f * t3;  // grad w = -8 alpha t^3 d, d = -(x, y, z)
+      const F4 gwX = gw * load4(X + k), gwY = gw * load4(Y + k), gwZ = gw * load4(Z + k);
+      sw += w; sf += w * fk;
+      gwx += gwX; gwy += gwY; gwz += gwZ;
+      gfx += gwX * fk; gfy += gwY * fk; gfz += gwZ * fk;
+      snx += w * nx; sny += w * ny; snz += w * nz;
+    }
+    const float Sw = hsum(sw);
+    if (!(Sw > 1e-12f)) return false;
+    const float f_new = hsum(sf) / Sw;
+    gx = (hsum(gfx) - f_new * hsum(gwx) + hsum(snx)) / Sw;
+    gy = (hsum(gfy) - f_new * hsum(gwy) + hsum(sny)) / Sw;
+    gz = (hsum(gfz) - f_new * hsum(gwz) + hsum(snz)) / Sw;
+    const bool done = it > 0 && std::abs(f_new - f) < 1e-4f;
+    f = f_new;
+    if (done) break;
   }
-  if (!(sw > 1e-12)) return false;
-  const double f = sf / sw;
-  const Eigen::Vector3d gf = (gsf - f * gsw) / sw;
-  const Eigen::Matrix3d hf = (hsf - f * hsw - gsw * gf.transpose() - gf * gsw.transpose()) / sw;
-  out.f0 = static_cast<float>(f);
-  out.g = gf.cast<float>();
-  out.H = hf.cast<float>();
-  return std::isfinite(out.f0) && out.g.allFinite() && out.H.allFinite();
+  const float g2 = gx * gx + gy * gy + gz * gz;
+  if (!(g2 > 1e-12f) || !std::isfinite(f / g2)) return false;
+  // Frozen weights and the expansion, in one pass. hess Sw = 48 A2 - 8 A3 I, hess Sf = 48 B2 -
+  // 8 B3 I + C with A2 = sum(alpha t^2 d d'), A3 = sum(alpha t^3), B2, B3 the same times fx,
+  // C = sum(gw n' + n gw') (symmetric matrices as xx, yy, zz, xy, xz, yz).
+  float* AL = b.alpha.data();
+  const F4 zero = splat(0.f);
+  F4 sw = zero, sf = zero, gsx = zero, gsy = zero, gsz = zero, gfx = zero, gfy = zero, gfz = zero, a3 = zero,
+     b3 = zero;
+  F4 axx = zero, ayy = zero, azz = zero, axy = zero, axz = zero, ayz = zero;
+  F4 bxx = zero, byy = zero, bzz = zero, bxy = zero, bxz = zero, byz = zero;
+  F4 cxx = zero, cyy = zero, czz = zero, cxy = zero, cxz = zero, cyz = zero;
+  for (int k = 0; k < np; k += kLanes) {
+    const F4 nx = load4(NX + k), ny = load4(NY + k), nz = load4(NZ + k), fk = load4(FX + k), tk = load4(T + k);
+    const F4 rr = fk - f, ex = nx - gx, ey = ny - gy, ez = nz - gz;
+    const F4 a = expNeg4(rr * rr * inv_sr2 + (ex * ex + ey * ey + ez * ez) * inv_sn2);
+    store4(AL + k, a);
+    const F4 dx = -load4(X + k), dy = -load4(Y + k), dz = -load4(Z + k);
+    const F4 at2 = a * tk * tk, at3 = at2 * tk, w = at3 * tk;
+    const F4 gwx = -8.f * at3 * dx, gwy = -8.f * at3 * dy, gwz = -8.f * at3 * dz;
+    sw += w; sf += w * fk;
+    gsx += gwx; gsy += gwy; gsz += gwz;
+    gfx += gwx * fk + w * nx; gfy += gwy * fk + w * ny; gfz += gwz * fk + w * nz;
+    a3 += at3; b3 += at3 * fk;
+    const F4 pxx = at2 * dx * dx, pyy = at2 * dy * dy, pzz = at2 * dz * dz, pxy = at2 * dx * dy, pxz = at2 * dx * dz,
+             pyz = at2 * dy * dz;
+    axx += pxx; ayy += pyy; azz += pzz; axy += pxy; axz += pxz; ayz += pyz;
+    bxx += pxx * fk; byy += pyy * fk; bzz += pzz * fk; bxy += pxy * fk; bxz += pxz * fk; byz += pyz * fk;
+    cxx += 2.f * gwx * nx; cyy += 2.f * gwy * ny; czz += 2.f * gwz * nz;
+    cxy += gwx * ny + nx * gwy; cxz += gwx * nz + nx * gwz; cyz += gwy * nz + ny * gwz;
+  }
+  const double Sw = hsum(sw);
+  if (!(Sw > 1e-12)) return false;
+  const double f0 = hsum(sf) / Sw, A3 = hsum(a3), B3 = hsum(b3);
+  const Eigen::Vector3d gsw(hsum(gsx), hsum(gsy), hsum(gsz));
+  const Eigen::Vector3d gf = (Eigen::Vector3d(hsum(gfx), hsum(gfy), hsum(gfz)) - f0 * gsw) / Sw;
+  const double Axx = hsum(axx), Ayy = hsum(ayy), Azz = hsum(azz), Axy = hsum(axy), Axz = hsum(axz), Ayz = hsum(ayz);
+  const double Bxx = hsum(bxx), Byy = hsum(byy), Bzz = hsum(bzz), Bxy = hsum(bxy), Bxz = hsum(bxz), Byz = hsum(byz);
+  const double Cxx = hsum(cxx), Cyy = hsum(cyy), Czz = hsum(czz), Cxy = hsum(cxy), Cxz = hsum(cxz), Cyz = hsum(cyz);
+  Eigen::Matrix3d hsw, hsf;
+  hsw << 48 * Axx - 8 * A3, 48 * Axy, 48 * Axz, 48 * Axy, 48 * Ayy - 8 * A3, 48 * Ayz, 48 * Axz, 48 * Ayz,
+      48 * Azz - 8 * A3;
+  hsf << 48 * Bxx - 8 * B3 + Cxx, 48 * Bxy + Cxy, 48 * Bxz + Cxz, 48 * Bxy + Cxy, 48 * Byy - 8 * B3 + Cyy,
+      48 * Byz + Cyz, 48 * Bxz + Cxz, 48 * Byz + Cyz, 48 * Bzz - 8 * B3 + Czz;
+  const Eigen::Matrix3d hf = (hsf - f0 * hsw - gsw * gf.transpose() - gf * gsw.transpose()) / Sw;
+  quad.f0 = static_cast<float>(f0);
+  quad.g = gf.cast<float>();
+  quad.H = hf.cast<float>();
+  quad_ok = std::isfinite(quad.f0) && quad.g.allFinite() && quad.H.allFinite();
+  return true;
 }
 
 }  // namespace
@@ -683,8 +779,7 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
       RimlsQuadratic quad;
       bool quad_ok = false;
       if (per_point && !apss) {
-        origin_ok = freezeRimlsWeights(b, params.sigma_r, params.sigma_n, params.inner_iterations);
-        quad_ok = origin_ok && rimlsQuadratic(b, quad);
+        origin_ok = fitRimlsAtOrigin(b, params.sigma_r, params.sigma_n, params.inner_iterations, quad, quad_ok);
       }
       for (std::int64_t k = s0; k < s1; ++k) {
         const int s = slist[k];

@@ -376,6 +376,27 @@ TEST(RadiusForMeanNeighbourCount, UniformPlaneHitsTheTarget) {
   }
 }
 
+// A real scan's density varies: here 30% of the points crowd 0.25% of the plane (like the
+// returns next to a sensor) and every point is stored twice (bun0.pcd). A typical point must
+// still get the target count; a mean count made by the dense spot gave 2 (its duplicate).
+TEST(RadiusForMeanNeighbourCount, TypicalPointHitsTheTargetOnVeryUnevenDensity) {
+  Positions p = randomPlane(14000, 21);
+  paps::Random rng(22);
+  for (int i = 0; i < 6000; ++i) p.emplace_back(0.5f + 0.05f * rng.uniform(), 0.5f + 0.05f * rng.uniform(), 0.f);
+  const std::size_t unique = p.size();
+  for (std::size_t i = 0; i < unique; ++i) p.push_back(p[i]);
+  const SpatialIndex index(p);
+  const float r = paps::radiusForMeanNeighbourCount(p, index, 30);
+  const NeighbourGraph g = NeighbourGraph::byRadius(p, index, r);
+  std::vector<int> counts;
+  for (std::size_t i = 0; i < p.size(); ++i) counts.push_back(g.count(i));
+  std::sort(counts.begin(), counts.end());
+  EXPECT_NEAR(counts[counts.size() / 2], 30, 4.5) << "radius " << r;
+  // Sparse part: 28000 stored points per unit area, count ~ 28000 pi r^2.
+  EXPECT_NEAR(r, std::sqrt(30 / (28000 * M_PI)), 0.15 * std::sqrt(30 / (28000 * M_PI)));
+  EXPECT_LT(std::count_if(counts.begin(), counts.end(), [](int c) { return c < 6; }), 0.01 * p.size());
+}
+
 TEST(RadiusForMeanNeighbourCount, ScalesWithTheData) {
   Positions p = randomPlane(5000, 12);
   const float r1 = paps::radiusForMeanNeighbourCount(p, SpatialIndex(p), 20);

@@ -79,8 +79,11 @@ class NeighbourGraph {
   friend class NeighbourGraphBuilder;
 };
 
-/// Radius (metres) at which a ball around a point holds on average `target_count` points
-/// (self included), measured on a deterministic sample of at most `samples` points.
+/// Radius (metres) at which a ball around a typical point holds `target_count` points (self
+/// included): the median over a deterministic sample of at most `samples` points of the
+/// distance to their target_count-th nearest point. The median, not the mean count, so that
+/// the densest spots of a real scan do not shrink the radius for the rest of the cloud; on
+/// evenly sampled surfaces both agree.
 /// Throws InvalidInput when there are fewer than 2 finite points.
 float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& index,
                                   int target_count, int samples = 2000);

@@ -359,6 +359,22 @@ TEST(SimilarityDenoising, DuplicatePointsGiveFiniteOutput) {
   EXPECT_LT(spread, 0.5 * noise);
 }
 
+TEST(SimilarityDenoising, DuplicatedScanKeepsItsSimilarityScale) {
+  // Scans are often stored with every point twice (bun0.pcd). sigma comes from the descriptor
+  // distance between neighbouring points: taken from the duplicate it was 0, every weight
+  // vanished and the filter fell back to each point's own patch.
+  const Positions once = engravedPlane(6000, 0.0025f, 200).noisy;
+  Positions twice = once;
+  twice.insert(twice.end(), once.begin(), once.end());
+  SimilarityDenoisingParameters params;
+  params.radius = 0.04f;
+  SimilarityDenoisingReport r1, r2;
+  paps::denoiseBySimilarity(once, params, &r1);
+  paps::denoiseBySimilarity(twice, params, &r2);
+  ASSERT_GT(r1.sigma, 0.f);
+  EXPECT_NEAR(r2.sigma, r1.sigma, 0.3f * r1.sigma);
+}
+
 TEST(SimilarityDenoising, AllIdenticalPointsDoNotCrash) {
   const Positions same(200, Eigen::Vector3f(1.f, 2.f, 3.f));
   SimilarityDenoisingParameters params;

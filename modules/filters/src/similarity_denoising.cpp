@@ -350,9 +350,13 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
     std::vector<float> adjacent;
     adjacent.reserve(n);
     for (std::size_t i = 0; i < n; ++i) {
-      if (!usable[i] || graph.count(i) < 2) continue;
-      const int j = graph.begin(i)[1];
-      if (!usable[j]) continue;
+      if (!usable[i]) continue;
+      // The nearest distinct point: a duplicate (scans are often stored with each point
+      // twice) has the same descriptor and would set sigma to nothing.
+      int j = -1;
+      for (const int* q = graph.begin(i) + 1; q != graph.begin(i) + graph.count(i); ++q)
+        if (points[*q] != points[i]) { j = *q; break; }
+      if (j < 0 || !usable[j]) continue;
       const float* di = &desc[rows_of_point[i] * dims];
       float best = std::numeric_limits<float>::max();
       for (int o = 0; o < orientations; ++o) {

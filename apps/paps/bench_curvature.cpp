@@ -468,7 +468,7 @@ const char* kBenchCurvatureUsage =
     "  --scan-step N      evaluate on every N-th scan vertex (default 4)\n"
     "  --speed-points N   size of the speed run (default 1000000, 0: skip)\n"
     "  --out DIR          where the PNG renders go (default .)\n"
-    "  --skip LIST        parts left out, a comma list of analytic, tilt, scan, render, speed\n";
+    "  --skip LIST        parts left out, a comma list of analytic, tilt, scan, density, render, speed\n";
 
 }  // namespace
 
@@ -480,8 +480,9 @@ int runBenchCurvature(int argc, char** argv) {
   for (std::size_t b = 1; b < skip.size();) {
     const std::size_t e = skip.find(',', b);
     const std::string item = skip.substr(b, e - b);
-    if (!item.empty() && item != "analytic" && item != "tilt" && item != "scan" && item != "render" && item != "speed")
-      throw InvalidParameter("skip", item, "a comma list of analytic, tilt, scan, render, speed");
+    if (!item.empty() && item != "analytic" && item != "tilt" && item != "scan" && item != "render" && item != "speed" &&
+        item != "density")
+      throw InvalidParameter("skip", item, "a comma list of analytic, tilt, scan, density, render, speed");
     b = e + 1;
   }
   auto skipped = [&](const char* part) { return skip.find("," + std::string(part) + ",") != std::string::npos; };
@@ -814,6 +815,116 @@ int runBenchCurvature(int argc, char** argv) {
     std::printf("\nscan skipped: %s\n", e.what());
   }
   (void)have_scan;
+
+  // ---- 3b. varying density and duplicates: the defaults a scan user gets ----
+  if (!skipped("density")) {
+    std::printf("\n## Varying density and exact duplicates (the automatic radius, as paps curvature chooses it)\n");
+    std::printf("%zu samples per surface: 30%% uniform over [-1, 1]^2, 70%% in the disk of radius 0.15 around\n"
+                "(0.3, 0.2) (about 130x denser), every sample written twice (exact duplicates, as in bun0.pcd);\n"
+                "scored on the first copies with |x|, |y| < 0.8. R_phi = radiusForMeanNeighbourCount(%d) over the\n"
+                "distinct positions. fixed R = --fixed-radius (no widening, NaN where too few); default = a point\n"
+                "whose ball holds fewer than %d distinct positions is fitted on its %d nearest (R_phi there =\n"
+                "distance of the farthest); widen below need = the same only where the ball holds fewer than the\n"
+                "order needs (an alternative, not used); kNN = every point on its %d nearest distinct positions.\n"
+                "default curv widened / in ball: the default on its widened points / on the others.\n"
+                "Curvature error as above (RMSE / RMS); fixed R is scored on its own fitted points only.\n\n",
+                npts, neighbours, neighbours, neighbours, neighbours);
+    std::printf("| surface | noise (abs.) | R_phi | NaN fixed R | NaN default | widened | default curv | default curv widened "
+                "| default curv in ball | widen below need curv | kNN curv | fixed R curv (its fitted points) | default s | kNN s |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    std::uint64_t seed = 101;
+    for (const Surface& s : analyticSurfaces()) {
+      for (const double noise : {0.0, 2e-5}) {
+        Random rng(seed++);
+        Positions p;
+        std::vector<Truth> truth;
+        while (p.size() < npts) {
+          double x, y;
+          if (rng.uniform() < 0.3) { x = rng.uniform(-1, 1); y = rng.uniform(-1, 1); }
+          else {
+            do { x = rng.uniform(-0.15, 0.15); y = rng.uniform(-0.15, 0.15); } while (x * x + y * y > 0.15 * 0.15);
+            x += 0.3; y += 0.2;
+          }
+          Eigen::Vector3f q(float(x), float(y), float(s.f(x, y)));
+          q += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise);
+          p.push_back(q);
+          truth.push_back(truthOf(s, x, y));
+        }
+        const std::size_t base = p.size();
+        for (std::size_t i = 0; i < base; ++i) { p.push_back(p[i]); truth.push_back(truth[i]); }
+        Normals tn(p.size());
+        for (std::size_t i = 0; i < p.size(); ++i) tn[i] = truth[i].n;
+        std::vector<int> eval, eval_wide, eval_ball;
+        WavejetParameters params;
+        params.order = order;
+        params.widening = WavejetParameters::Widening::never;
+        WavejetReport r_fixed, r_def;
+        const auto fixed = estimateWavejets(p, 0.f, params, &r_fixed, nullptr, nullptr, &tn, {}, neighbours);
+        params.widening = WavejetParameters::Widening::automatic;
+        auto t0 = Clock::now();
+        const auto def = estimateWavejets(p, 0.f, params, &r_def, nullptr, nullptr, &tn, {}, neighbours);
+        const double t_def = since(t0);
+        // Alternatives fitted here from explicit lists on the distinct positions: kNN (every
+        // point on its `neighbours` nearest) and "need" (the `neighbours` nearest only where the
+        // ball of R_phi holds fewer than the order needs, 17 for K = 4; else the ball).
+        const std::vector<int> rep = exactDuplicateRepresentatives(p);
+        Positions u;
+        std::vector<int> slot(p.size(), -1);
+        for (std::size_t i = 0; i < p.size(); ++i)
+          if (rep[i] == int(i)) { slot[i] = int(u.size()); u.push_back(p[i]); }
+        const SpatialIndex uindex(u);
+        const int need = wavejetNeededNeighbours(params);
+        auto custom = [&](bool knn_everywhere) {
+          std::vector<WavejetResult> ku(u.size()), res(p.size());
+#pragma omp parallel
+          {
+            WavejetWorkspacePtr ws = makeWavejetWorkspace();
+            std::vector<int> idx;
+            std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+            for (std::int64_t j = 0; j < std::int64_t(p.size()); ++j) {
+              if (slot[j] < 0) continue;
+              float rj = r_def.radius;
+              int n = knn_everywhere ? 0 : uindex.radiusSearch(p[j], rj, idx, d2);
+              if (knn_everywhere || n < need) {
+                n = uindex.nearestK(p[j], neighbours, idx, d2);
+                rj = std::max(knn_everywhere ? 0.f : rj, std::sqrt(d2[n - 1]));
+              }
+              ku[slot[j]] = fitWavejet(u, idx.data(), n, p[j], rj, params, *ws, Eigen::Vector3f::Constant(NAN), tn[j]);
+            }
+          }
+          for (std::size_t i = 0; i < p.size(); ++i) res[i] = ku[slot[rep[i]]];
+          return res;
+        };
+        t0 = Clock::now();
+        const std::vector<WavejetResult> knn = custom(true);
+        const double t_knn = since(t0);
+        const std::vector<WavejetResult> below_need = custom(false);
+        std::size_t nan_fixed = 0, nan_def = 0;
+        for (std::size_t i = 0; i < base; ++i) {
+          nan_fixed += !fixed[i].valid();
+          nan_def += !def[i].valid();
+          if (!(std::abs(p[i].x()) < 0.8f && std::abs(p[i].y()) < 0.8f)) continue;
+          eval.push_back(int(i));
+          (def[i].radius > r_def.radius ? eval_wide : eval_ball).push_back(int(i));
+        }
+        auto toEst = [&](const std::vector<WavejetResult>& res) {
+          std::vector<Estimate> e(res.size());
+          for (std::size_t i = 0; i < res.size(); ++i) e[i] = {res[i].normal, res[i].k1, res[i].k2};
+          orientLike(e, tn);
+          return e;
+        };
+        const auto e_def = toEst(def), e_knn = toEst(knn), e_fixed = toEst(fixed), e_need = toEst(below_need);
+        std::printf("| %s | %.1e | %.4f | %.1f%% | %.1f%% | %.1f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.2f | %.2f |\n",
+                    s.name.c_str(), noise, r_def.radius, 100.0 * nan_fixed / base, 100.0 * nan_def / base,
+                    100.0 * r_def.widened / p.size(), score(e_def, truth, eval, false).curv_rel,
+                    score(e_def, truth, eval_wide, false).curv_rel, score(e_def, truth, eval_ball, false).curv_rel,
+                    score(e_need, truth, eval, false).curv_rel, score(e_knn, truth, eval, false).curv_rel,
+                    score(e_fixed, truth, eval, false).curv_rel, t_def, t_knn);
+        std::fflush(stdout);
+      }
+    }
+  }
 
   // ---- 4. speed ----
   if (speed_points > 0 && !skipped("speed")) {

@@ -33,10 +33,10 @@ const char* kCurvatureUsage =
     "  --radius R             R_phi in metres (default: from --neighbours)\n"
     "  --neighbours N         mean neighbour count that sets R_phi over the distinct positions\n"
     "                         (default 50)\n"
-    "  --fixed-radius         no per-point widening: NaN outputs where the ball of R_phi holds\n"
-    "                         fewer points than the order needs, beta (K+1)(K+2)/2 (17 for K = 4);\n"
-    "                         default: such a point is fitted on its N nearest (--neighbours),\n"
-    "                         rescaled to their disk\n"
+    "  --fixed-radius         no per-point widening (NaN outputs where the ball holds fewer than\n"
+    "                         beta (K+1)(K+2)/2 points, 17 for K = 4). Default: a point whose ball\n"
+    "                         of R_phi holds fewer than N distinct positions (--neighbours) is\n"
+    "                         fitted on its N nearest, rescaled to their disk\n"
     "  --order K              Wavejet order, 1 to 20 (default 4)\n"
     "  --beta B               order lowered until neighbours >= B (K+1)(K+2)/2 (default 1.1)\n"
     "  --irls N               IRLS passes against noise/outliers (default 0)\n"
@@ -162,17 +162,17 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
 }
 
 // One line on what the neighbourhoods were: duplicates fitted once, sparse balls widened.
-void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float widened_median, int need,
-                              int widen_to, bool fixed) {
+void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float widened_median, int widen_to,
+                              bool fixed) {
   if (duplicates)
     std::printf("exact duplicates: %zu points share the position of an earlier one: fitted and counted once\n",
                 duplicates);
   if (fixed) return;
   if (widened)
-    std::printf("widened: %zu points had fewer than %d distinct neighbours in the ball: fitted on their %d nearest, "
-                "R_phi = distance of the farthest (median %g m)\n", widened, need, widen_to, widened_median);
+    std::printf("widened: %zu points had fewer than %d distinct positions in the ball of R_phi: fitted on their %d "
+                "nearest, R_phi = distance of the farthest (median %g m)\n", widened, widen_to, widen_to, widened_median);
   else
-    std::printf("widened: none (every ball holds at least %d distinct points)\n", need);
+    std::printf("widened: none (every ball holds at least %d distinct positions)\n", widen_to);
 }
 
 }  // namespace
@@ -198,8 +198,8 @@ int runCurvature(int argc, char** argv) {
                                     progress, neighbours);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("wavejets: order %d, R_phi %g m%s (mean %.1f neighbours), %.2f s\n", params.order, r.radius,
-              radius > 0 ? "" : " (chosen: mean neighbour count over the distinct positions)", r.mean_neighbours, secs);
-  printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median, wavejetNeededNeighbours(params),
+              radius > 0 ? "" : " (chosen from --neighbours over the distinct positions)", r.mean_neighbours, secs);
+  printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
                            std::max(wavejetNeededNeighbours(params), neighbours),
                            params.widening == WavejetParameters::Widening::never);
   std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
@@ -273,7 +273,7 @@ int runEnhance(int argc, char** argv) {
                 params.alpha1.real(), params.alpha1.imag(), params.wavejet.order, r.radius,
                 params.radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.changed);
   }
-  printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median, wavejetNeededNeighbours(params.wavejet),
+  printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
                            std::max(wavejetNeededNeighbours(params.wavejet), params.target_neighbours),
                            params.wavejet.widening == WavejetParameters::Widening::never);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);

@@ -436,9 +436,9 @@ Positions varyingDensitySphere(std::size_t& base) {
 TEST(WavejetEstimation, VaryingDensityAndDuplicatesFittedEverywhereAtDefaults) {
   // The bug of bun0.pcd: the automatic radius aims at a mean count, which the dense cap
   // dominates, so the sparse part had fewer than 7 points per ball and NaN outputs. With
-  // the defaults (duplicates counted once, sparse balls widened to the 50 nearest) every
-  // point is fitted and the curvature stays accurate (truth k1 = k2 = -1 with outward
-  // normals).
+  // the defaults (duplicates counted once, balls holding fewer than 50 distinct positions
+  // widened to the 50 nearest) every point is fitted and the curvature stays accurate
+  // (truth k1 = k2 = -1 with outward normals).
   std::size_t base = 0;
   const Positions p = varyingDensitySphere(base);
   paps::Normals out(p.size());
@@ -471,7 +471,8 @@ TEST(WavejetEstimation, VaryingDensityAndDuplicatesFittedEverywhereAtDefaults) {
   }
   ASSERT_GT(n_sparse, 0u);
   ASSERT_GT(n_dense, 0u);
-  // Measured 0.0036 (widened points, about 50 neighbours each) and 0.0007 (ball of R_phi).
+  // Measured 0.0031 (widened points, 50 neighbours each) and 0.0005 (the others, ball of
+  // R_phi).
   EXPECT_LT(std::sqrt(se_sparse / n_sparse), 0.01);
   EXPECT_LT(std::sqrt(se_dense / n_dense), 0.003);
 }
@@ -507,7 +508,7 @@ TEST(WavejetEstimation, DuplicatesGiveTheOutputOfTheCloudWithout) {
 
 TEST(WavejetEstimation, WideningWithAnExplicitRadius) {
   // setRadiusSearch keeps PCL's semantics by default (NaN where too few); Widening::always
-  // fits those points on their 50 nearest instead.
+  // fits every point whose ball holds fewer than 50 on its 50 nearest instead.
   const Positions p = heightFieldSamples([](double x, double y) { return 0.25 * (x * x + y * y); }, 2000, 1.0, 2);
   auto cloud = toCloud(p);
   paps::WavejetEstimation<pcl::PointXYZ> wj;

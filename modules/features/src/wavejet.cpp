@@ -629,9 +629,10 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   ProgressReporter reporter(progress, "wavejets", points.size());
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
-  // A ball with fewer than `need` positions: the `widen_to` nearest instead, at their
-  // radius. Returns the radius to use (indices into `points` in idx) or 0 when not widened
-  // (the whole cloud holds fewer than `need` finite positions).
+  // A ball with fewer than `widen_to` positions: the `widen_to` nearest instead, at their
+  // radius (R_phi at the point = max(R_phi, distance of its widen_to-th nearest)). Returns
+  // the radius to use (indices into `points` in idx) or 0 when not widened (the whole cloud
+  // holds fewer than `need` finite positions: NaN outputs as before).
   auto widenAt = [&](int i, std::vector<int>& idx, std::vector<float>& d2) -> float {
     const int n = index->nearestK(points[i], widen_to, idx, d2);
     if (n < need) return 0.f;  // the whole cloud holds too few: NaN outputs as before
@@ -664,7 +665,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
         if (reporter.cancelled()) continue;
         const int i = grid.original()[s];
         const int found = grid.query(sorted[s], radius, idx, cursor);
-        const float r = widen && found < need ? widenAt(i, wide, d2) : 0.f;
+        const float r = widen && found < widen_to ? widenAt(i, wide, d2) : 0.f;
         if (r > 0) {
           widened[i] = 1;
           fitPoint(i, points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
@@ -687,7 +688,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
         if (reporter.cancelled()) continue;
         if (isFinite(points[i])) {
           const int found = index->radiusSearch(points[i], radius, idx, d2);
-          const float r = widen && found < need ? widenAt(static_cast<int>(i), wide, d2) : 0.f;
+          const float r = widen && found < widen_to ? widenAt(static_cast<int>(i), wide, d2) : 0.f;
           if (r > 0) {
             widened[i] = 1;
             fitPoint(static_cast<int>(i), points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);

@@ -61,14 +61,14 @@ struct WavejetParameters {
   /// Normals are oriented towards `viewpoint` (metres; PCL's convention, default the
   /// origin), unless an orientation hint is given for the point.
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();
-  /// Per-point widening of R_phi where the ball holds too few points. At a point whose ball
-  /// of R_phi holds fewer distinct positions than order K needs (the smallest L >= beta
-  /// (K+1)(K+2)/2, 17 for K = 4), the fit uses its `widened_neighbours` nearest distinct
-  /// positions instead, rescaled to the unit disk of radius the distance of the farthest
-  /// (the manuscript rescales every neighbourhood to the unit disk, so a per-point R_phi
-  /// is the same method at that point's sampling scale). Points whose ball holds enough
-  /// keep R_phi exactly. Without it, a scan whose density varies a lot gets NaN wherever
-  /// it is sparser than the radius assumes (docs/wavejets.md: 83% of bun0.pcd).
+  /// Per-point widening of R_phi where the ball holds too few points: at a point whose
+  /// ball of R_phi holds fewer than N = `widened_neighbours` distinct positions (self
+  /// included), the fit uses its N nearest distinct positions, rescaled to the unit disk of
+  /// radius the distance of the farthest; i.e. R_phi at the point = max(R_phi, distance of
+  /// its N-th nearest). The manuscript rescales every neighbourhood to the unit disk, so a
+  /// per-point R_phi is the same method at that point's sampling scale. Points whose ball
+  /// holds N or more keep R_phi exactly. Without it, a scan whose density varies a lot gets
+  /// NaN wherever it is sparser than the radius assumes (docs/wavejets.md: 83% of bun0.pcd).
   ///  * automatic (default): only when the radius is chosen from the data (radius 0 in
   ///    estimateWavejets, WavejetEnhancement); an explicit radius is kept as given
   ///    (PCL's semantics: NaN outputs where too few neighbours).
@@ -78,10 +78,12 @@ struct WavejetParameters {
   ///    balls).
   enum class Widening { automatic, always, never };
   Widening widening = Widening::automatic;
-  /// Neighbour count of a widened point (0 to 100000; at least the order's need): 0 = the
+  /// N above (0 to 100000, at least the count the order needs, beta (K+1)(K+2)/2): 0 = the
   /// target neighbour count of estimateWavejets (50 by default), 50 in WavejetEstimation.
-  /// Not the bare need: measured on a sphere, order 4 on its 17 nearest is ill-conditioned
-  /// (curvature error 0.31 without noise, 0.0036 with 50 neighbours; docs/wavejets.md).
+  /// Measured (docs/wavejets.md, bench part "density"): widening only below the order's
+  /// need (17 for K = 4) and to that count is ill-conditioned (order 4 on 17 points: sphere
+  /// curvature error 0.31 without noise, 0.0036 on 50); "at least N" beats both that and
+  /// plain N-nearest neighbourhoods on every surface of the bench.
   int widened_neighbours = 0;
   /// Throws InvalidParameter naming the first bad value.
   void validate() const;

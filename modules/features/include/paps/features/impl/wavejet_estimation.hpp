@@ -61,13 +61,13 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
       const Eigen::Vector3f p = (*this->input_)[idx].getVector3fMap();
       if (isFinite(p) && this->searchForNeighbors(idx, this->search_parameter_, nn, d2) > 0) {
         float radius = static_cast<float>(this->search_radius_);
-        if (widen && static_cast<int>(nn.size()) < need &&
+        if (widen && static_cast<int>(nn.size()) < widen_to &&
             this->tree_->nearestKSearch((*this->input_)[idx], widen_to, nn, d2) >= need) {
           widened[i] = 1;
           float m = 0.f;
           for (const float d : d2) m = std::max(m, d);
           radius = std::max(radius, std::sqrt(m));
-        } else if (widen && static_cast<int>(nn.size()) < need) {
+        } else if (widen && static_cast<int>(nn.size()) < widen_to) {
           this->searchForNeighbors(idx, this->search_parameter_, nn, d2);  // restore the ball
         }
         if (!by_radius) {

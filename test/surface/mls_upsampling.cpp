@@ -238,3 +238,35 @@ TEST(MlsUpsampling, RimlsFitPerInputPointFollowsTheRefit) {
   EXPECT_LT(std::sqrt(s / a.size()), 5e-4);
   EXPECT_LT(m, 4e-3);
 }
+
+TEST(MlsUpsampling, SeedSurplusDroppedWhereCrowded) {
+  // The thinning keeps a few percent more seeds than asked (3.5% aimed at) and
+  // drops the surplus where seeds are closest to an earlier one, not at random: the closest
+  // pair of the output is farther apart (0.292 against 0.286 with a random drop) and the
+  // output covers the plane better (RMS distance from a fine grid of probes to the nearest
+  // seed 0.2300 against 0.2321; this is what the bench's error measures at low noise).
+  Positions pts;
+  for (int i = 0; i < 150; ++i)
+    for (int j = 0; j < 150; ++j) pts.emplace_back(i, j, 0.f);
+  const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
+  const Positions a = upsamplingSeeds(pts, normals, 90000, 0.7f, 11);
+  ASSERT_EQ(a.size(), 90000u);
+  const SpatialIndex index(a);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  float closest = INFINITY;
+  for (const auto& p : a) {
+    index.nearestK(p, 2, idx, d2);
+    closest = std::min(closest, std::sqrt(d2[1]));
+  }
+  EXPECT_GT(closest, 0.29f);
+  double sq = 0;
+  std::size_t probes = 0;
+  for (float x = 10; x < 140; x += 0.173f)
+    for (float y = 10; y < 140; y += 0.191f) {
+      index.nearestK(Eigen::Vector3f(x, y, 0), 1, idx, d2);
+      sq += d2[0];
+      ++probes;
+    }
+  EXPECT_LT(std::sqrt(sq / probes), 0.231);
+}

@@ -477,6 +477,22 @@ TEST(WavejetEstimation, VaryingDensityAndDuplicatesFittedEverywhereAtDefaults) {
   EXPECT_LT(std::sqrt(se_dense / n_dense), 0.003);
 }
 
+TEST(WavejetEstimation, WidenedRunDeterministicAcrossThreadCounts) {
+  std::size_t base = 0;
+  const Positions p = varyingDensitySphere(base);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto a = paps::estimateWavejets(p, 0.f, paps::WavejetParameters());
+  omp_set_num_threads(std::max(2, threads));
+  const auto b = paps::estimateWavejets(p, 0.f, paps::WavejetParameters());
+  omp_set_num_threads(threads);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    ASSERT_EQ(a[i].k1, b[i].k1) << i;
+    ASSERT_EQ(a[i].radius, b[i].radius) << i;
+    ASSERT_EQ(a[i].normal, b[i].normal) << i;
+  }
+}
+
 TEST(WavejetEstimation, DuplicatesGiveTheOutputOfTheCloudWithout) {
   // Counting each position once: a cloud with copies gives exactly the outputs of the
   // cloud without them (same radius, same neighbour lists), also when not widened.

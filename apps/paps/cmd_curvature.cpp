@@ -30,13 +30,14 @@ const char* kCurvatureUsage =
     "  gaussian_curvature, principal_x/y/z (direction of k1), offset (m), a0 a1_real a1_imag\n"
     "  (unit-disk units) and order (-1: too few neighbours, outputs NaN). Exact duplicate\n"
     "  positions are fitted once and counted once; every input point gets an output.\n"
-    "  --radius R             R_phi in metres (default: from --neighbours)\n"
-    "  --neighbours N         mean neighbour count that sets R_phi over the distinct positions\n"
-    "                         (default 50)\n"
-    "  --fixed-radius         no per-point widening (NaN outputs where the ball holds fewer than\n"
-    "                         beta (K+1)(K+2)/2 points, 17 for K = 4). Default: a point whose ball\n"
-    "                         of R_phi holds fewer than N distinct positions (--neighbours) is\n"
-    "                         fitted on its N nearest, rescaled to their disk\n"
+    "  --radius R             R_phi in metres, the same at every point (NaN outputs where the ball\n"
+    "                         holds fewer than beta (K+1)(K+2)/2 points, 17 for K = 4). Default:\n"
+    "                         chosen from --neighbours over the distinct positions, and a point\n"
+    "                         whose ball holds fewer than N distinct positions is fitted on its N\n"
+    "                         nearest, rescaled to their disk (scans of varying density)\n"
+    "  --neighbours N         neighbour count that sets the automatic R_phi and the minimum per\n"
+    "                         point (default 50)\n"
+    "  --fixed-radius         automatic R_phi without the per-point widening\n"
     "  --order K              Wavejet order, 1 to 20 (default 4)\n"
     "  --beta B               order lowered until neighbours >= B (K+1)(K+2)/2 (default 1.1)\n"
     "  --irls N               IRLS passes against noise/outliers (default 0)\n"
@@ -58,9 +59,10 @@ const char* kEnhanceUsage =
     "                         >1 enhances details, 0..1 smooths, <0 inverts them\n"
     "  --alpha1 RE[,IM]       normal filter (eq. 2.22), complex gain: 2 sharpens the shading,\n"
     "                         0 flattens it, imaginary parts skew the normals; positions stay\n"
-    "  --radius R             R_phi = s in metres (default: from --neighbours)\n"
-    "  --neighbours N         mean neighbour count that sets R_phi (default 50)\n"
-    "  --fixed-radius         no per-point widening (as for paps curvature)\n"
+    "  --radius R             R_phi = s in metres, fixed (default: automatic, widened where\n"
+    "                         sparse, as for paps curvature)\n"
+    "  --neighbours N         neighbour count that sets the automatic R_phi (default 50)\n"
+    "  --fixed-radius         automatic R_phi without the per-point widening\n"
     "  --order K              Wavejet order (default 4; the manuscript uses 6 to 9)\n"
     "  --beta B, --irls N, --select-order   as for paps curvature\n"
     "  --max-motion F         motion clamp as a fraction of R_phi (default 0.5)\n"
@@ -121,9 +123,9 @@ WavejetParameters wavejetParameters(const Arguments& a) {
   w.max_refits = static_cast<int>(a.number("refits", w.max_refits));
   w.refit_angle = static_cast<float>(a.number("refit-angle", w.refit_angle));
   w.select_order = a.has("select-order");
-  // The CLI widens sparse balls also with --radius: a user gets an output at every point
-  // that has enough neighbours somewhere (docs/wavejets.md, "Scans of varying density").
-  w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::always;
+  // Widening with the automatic radius (the library's default: an explicit --radius is kept
+  // as given); --fixed-radius turns it off (docs/wavejets.md, "Real scans").
+  w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
   w.validate();
   return w;
 }
@@ -201,13 +203,14 @@ int runCurvature(int argc, char** argv) {
               radius > 0 ? "" : " (chosen from --neighbours over the distinct positions)", r.mean_neighbours, secs);
   printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
                            std::max(wavejetNeededNeighbours(params), neighbours),
-                           params.widening == WavejetParameters::Widening::never);
+                           params.widening == WavejetParameters::Widening::never || radius > 0);
   std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
               "noise (plane kept) at %zu\n", r.fitted, r.lowered, r.not_converged, r.tilt_within_noise);
   if (r.too_few_neighbours)
     std::fprintf(stderr, "warning: %zu points have too few neighbours for order 2: NaN outputs%s\n",
-                 r.too_few_neighbours, params.widening == WavejetParameters::Widening::never
-                                           ? " (--fixed-radius: drop it to widen sparse balls)" : "");
+                 r.too_few_neighbours, radius > 0 ? " (--radius: without it, sparse balls are widened)"
+                                       : params.widening == WavejetParameters::Widening::never
+                                           ? " (--fixed-radius: without it, sparse balls are widened)" : "");
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);
   pcl::PointCloud<pcl::PointXYZ> xyz;
   pcl::PointCloud<PointWavejet> wj;
@@ -275,7 +278,7 @@ int runEnhance(int argc, char** argv) {
   }
   printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
                            std::max(wavejetNeededNeighbours(params.wavejet), params.target_neighbours),
-                           params.wavejet.widening == WavejetParameters::Widening::never);
+                           params.wavejet.widening == WavejetParameters::Widening::never || params.radius > 0);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);
   if (r.unfitted) std::fprintf(stderr, "warning: %zu points have too few neighbours: left in place, normal NaN\n", r.unfitted);
   saveCloudAtomic(a.positional[1], cloud);

@@ -73,7 +73,8 @@ struct WavejetParameters {
   ///    estimateWavejets, WavejetEnhancement); an explicit radius is kept as given
   ///    (PCL's semantics: NaN outputs where too few neighbours).
   ///  * always: also with an explicit radius (estimateWavejets, WavejetEstimation with
-  ///    setRadiusSearch; `paps curvature` / `paps enhance` use this).
+  ///    setRadiusSearch). `paps curvature` / `paps enhance` use automatic (`--fixed-radius`:
+  ///    never).
   ///  * never: fixed radius everywhere (the curvature bench compares methods on the same
   ///    balls).
   enum class Widening { automatic, always, never };

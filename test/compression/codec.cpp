@@ -10,6 +10,7 @@
 #include <paps/compression/point_cloud_compression.h>
 #include <paps/compression/self_similarity_codec.h>
 #include <paps/core/metrics.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 
@@ -155,4 +156,36 @@ TEST(SelfSimilarityCodec, WiderSeedSpacingCostsFewerBytesAndStillCovers) {
   EXPECT_LT(e.rmse, 0.2 * spacing);
   EXPECT_LT(d1, 0.9 * spacing);
   EXPECT_GT(out.size(), s.points.size() * 6 / 10);
+}
+
+// Real scans are unevenly dense (returns crowd next to the sensor) and are sometimes stored
+// with every point twice (bun0.pcd). The patch radius must suit a typical point, not the mean
+// made by the dense spot: with that mean, bun0.pcd decoded to 873 of its 56,159 positions.
+TEST(SelfSimilarityCodec, UnevenDensityAndDuplicatesStillCoverTheSurface) {
+  Random rng(5);
+  Positions sparse;
+  for (int i = 0; i < 30000; ++i) {
+    const float x = rng.uniform(), y = rng.uniform();
+    sparse.emplace_back(x, y, 0.02f * std::sin(6.f * x));
+  }
+  Positions in = sparse;
+  for (int i = 0; i < 12000; ++i) {
+    const float x = 0.5f + 0.05f * rng.uniform(), y = 0.5f + 0.05f * rng.uniform();
+    in.emplace_back(x, y, 0.02f * std::sin(6.f * x));
+  }
+  const std::size_t unique = in.size();
+  for (std::size_t i = 0; i < unique; ++i) in.push_back(in[i]);
+  const auto bytes = compressPositions(in, CompressionParameters{});
+  const Positions out = decompressPositions(bytes.data(), bytes.size());
+  // Every sparse point has a decoded point within two of its spacings (1 / sqrt(30000)).
+  const SpatialIndex index(out);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  const float reach = 2.f / std::sqrt(30000.f);
+  std::size_t covered = 0;
+  for (const auto& p : sparse) covered += index.nearestK(p, 1, idx, d2) == 1 && d2[0] <= reach * reach;
+  std::printf("uneven density: %zu points (%zu distinct) -> %zu bytes, %zu decoded, %.1f%% of the sparse part covered\n",
+              in.size(), unique, bytes.size(), out.size(), 100.0 * covered / sparse.size());
+  EXPECT_GT(covered, sparse.size() * 95 / 100);
+  EXPECT_GT(out.size(), sparse.size() / 2);
 }

@@ -15,8 +15,8 @@ namespace paps::compression {
 
 /// The five parameters of the manuscript, plus the few that an expert may tune.
 struct CompressionParameters {
-  /// R, patch radius in metres. 0 = automatic: the radius whose ball holds `patch_points`
-  /// input points on average. Valid: 0 or a finite value > 0.
+  /// R, patch radius in metres. 0 = automatic: the radius whose ball around a typical point
+  /// (the median) holds `patch_points` input points. Valid: 0 or a finite value > 0.
   float patch_radius = 0.f;
   /// Mean number of input points in a patch when the radius is automatic, in [8, 100000].
   int patch_points = 256;

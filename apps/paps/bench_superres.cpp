@@ -144,10 +144,9 @@ double nearestRmse(const Positions& dense, const Positions& output) {
 // The "cpu" line a worker left in its log (process CPU seconds of the call), NAN if none.
 double childCpuSeconds(const std::string& log_path) {
   std::ifstream f(log_path);
-  std::string key;
-  double v;
-  while (f >> key >> v)
-    if (key == "cpu") return v;
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("cpu ", 0) == 0) return std::atof(line.c_str() + 4);
   return NAN;
 }
 

@@ -130,7 +130,7 @@ class SeedThinner {
     const int k = cand_rank_[c];
     float best = INFINITY;
     std::size_t best_slot = 0;
-    for (std::int64_t m = near_off_[k]; m < near_off_[k + 1]; ++m) {
+    for (std::int64_t m = near_off_[k]; m < near_end_[k]; ++m) {
       const int r = near_[m];
       // The seeds of input point r lie within disc of it: skip it when p is farther than d + disc.
       if (count_[r] == 0 || (opos_[r] - p).squaredNorm() >= reach1_sq_) continue;
@@ -164,27 +164,21 @@ class SeedThinner {
     near_reach_ = reach;
     const float reach2 = reach * reach;
     const std::int64_t n = static_cast<std::int64_t>(ranked_.size());
+    // One pass: each list gets the room of its graph list (an upper bound) and notes its end.
     near_off_.assign(n + 1, 0);
-    auto visit = [&](std::int64_t k, auto&& emit) {
-      const int i = ranked_[k];
-      emit(static_cast<int>(k));
-      for (const int* j = graph_->begin(i); j != graph_->end(i); ++j) {
-        const int r = rank_of_[*j];
-        if (r >= 0 && *j != i && (points_[*j] - points_[i]).squaredNorm() <= reach2) emit(r);
-      }
-    };
-#pragma omp parallel for schedule(dynamic, 512)
-    for (std::int64_t k = 0; k < n; ++k) {
-      std::int64_t c = 0;
-      visit(k, [&](int) { ++c; });
-      near_off_[k + 1] = c;
-    }
-    for (std::int64_t k = 0; k < n; ++k) near_off_[k + 1] += near_off_[k];
+    near_end_.resize(n);
+    for (std::int64_t k = 0; k < n; ++k) near_off_[k + 1] = near_off_[k] + graph_->count(ranked_[k]) + 1;
     near_.resize(static_cast<std::size_t>(near_off_[n]));
 #pragma omp parallel for schedule(dynamic, 512)
     for (std::int64_t k = 0; k < n; ++k) {
+      const int i = ranked_[k];
       std::int64_t pos = near_off_[k];
-      visit(k, [&](int r) { near_[pos++] = r; });
+      near_[pos++] = static_cast<int>(k);
+      for (const int* j = graph_->begin(i); j != graph_->end(i); ++j) {
+        const int r = rank_of_[*j];
+        if (r >= 0 && *j != i && (points_[*j] - points_[i]).squaredNorm() <= reach2) near_[pos++] = r;
+      }
+      near_end_[k] = pos;
     }
   }
 
@@ -198,7 +192,7 @@ class SeedThinner {
   float graph_radius_;
   NeighbourGraph own_graph_;
   std::vector<int> rank_of_, near_;
-  std::vector<std::int64_t> near_off_;
+  std::vector<std::int64_t> near_off_, near_end_;
   std::vector<Eigen::Vector3f> kept_;
   std::vector<int> kept_c_;   // per slot: the candidate kept there
   std::vector<float> cand_m2_;  // per kept candidate of the last run: squared distance to the
@@ -460,7 +454,7 @@ inline float expNeg(float x) {
 // loops with many sums scalar (its cost model), and explicit lanes fix the order of the
 // additions, so the result is the same whatever instructions run them (no FMA: each lane
 // does the same float operations in either clone).
-#pragma GCC diagnostic push
+// (-Wpsabi: the 32-byte vectors never cross a call boundary: the helpers are always inlined.)
 #pragma GCC diagnostic ignored "-Wpsabi"
 constexpr int kLanes = 8;
 typedef float FV __attribute__((vector_size(32)));
@@ -769,7 +763,6 @@ PAPS_AVX2_CLONE __attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float 
   quad_ok = std::isfinite(quad.f0) && quad.g.allFinite() && quad.H.allFinite();
   return true;
 }
-#pragma GCC diagnostic pop
 
 }  // namespace
 

@@ -385,7 +385,8 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
     const std::size_t surplus = best.size() - count;
     auto closer = [&](int a, int b) { return best_m2[a] < best_m2[b] || (best_m2[a] == best_m2[b] && a < b); };
     const std::size_t span = std::min(order.size(), 3 * surplus + 1);
-    std::partial_sort(order.begin(), order.begin() + span, order.end(), closer);
+    std::nth_element(order.begin(), order.begin() + (span - 1), order.end(), closer);
+    std::sort(order.begin(), order.begin() + span, closer);
     std::size_t dropped = 0;
     for (std::size_t i = 0; i < span && dropped < surplus; ++i) {
       const int k = order[i];

@@ -152,40 +152,11 @@ void orientLike(std::vector<Estimate>& est, const std::vector<Eigen::Vector3f>& 
     }
 }
 
-// The bench's radius: R_phi holding `target` neighbours ON AVERAGE (self included), as the
-// figures of docs/wavejets.md were measured. The core's automatic radius became the median
-// k-th neighbour distance (commit 54b20af), which is smaller on the bench's irregular
-// sampling (0.0569 instead of 0.0585 on the sphere); keeping the mean-count setup here keeps
-// every row comparable across runs. Start from the median k-th neighbour distance, then
-// correct by the surface law count ~ r^2 until the mean count over a sample is within 3%.
-float benchRadiusForMeanCount(const Positions& points, const SpatialIndex& index, int target) {
-  std::vector<int> finite;
-  for (std::size_t i = 0; i < points.size(); ++i)
-    if (isFinite(points[i])) finite.push_back(int(i));
-  const std::size_t m = std::min<std::size_t>(2000, finite.size());
-  const double stride = double(finite.size()) / double(m);
-  std::vector<int> idx;
-  std::vector<float> d2, kth;
-  for (std::size_t s = 0; s < m; ++s) {
-    const int i = finite[std::size_t(s * stride)];
-    const int n = index.nearestK(points[i], target, idx, d2);
-    if (n > 1) kth.push_back(std::sqrt(d2[n - 1]));
-  }
-  if (kth.empty()) throw InvalidInput("fewer than 2 finite points: cannot choose a radius");
-  std::nth_element(kth.begin(), kth.begin() + kth.size() / 2, kth.end());
-  float r = kth[kth.size() / 2];
-  for (int iter = 0; iter < 6 && r > 0; ++iter) {
-    double total = 0;
-    std::size_t used = 0;
-    for (std::size_t s = 0; s < m; s += std::max<std::size_t>(1, m / 500)) {
-      total += index.radiusSearch(points[finite[std::size_t(s * stride)]], r, idx, d2);
-      ++used;
-    }
-    const double mean = total / double(used);
-    if (mean <= 0 || std::abs(mean - target) < 0.03 * target) break;
-    r *= float(std::clamp(std::sqrt(target / mean), 0.5, 2.0));
-  }
-  return r;
+// The bench's radius: R_phi holding `neighbours` points ON AVERAGE (self included), the
+// protocol the figures of docs/wavejets.md were measured with (on this bench's evenly spread
+// irregular samples the median count, core's default, gives a 3% smaller radius).
+float benchRadius(const Positions& points, const SpatialIndex& index, int neighbours) {
+  return radiusForNeighbourCount(points, index, neighbours, NeighbourCountStatistic::Mean);
 }
 
 // ---- the three methods, same radius ----
@@ -569,7 +540,7 @@ int runBenchCurvature(int argc, char** argv) {
     for (std::size_t i = 0; i < clean.size(); ++i)
       if (std::abs(clean[i].x()) < 0.8 && std::abs(clean[i].y()) < 0.8) eval.push_back(int(i));
     SpatialIndex idx0(clean);
-    const float radius = benchRadiusForMeanCount(clean, idx0, neighbours);
+    const float radius = benchRadius(clean, idx0, neighbours);
     Normals tn(clean.size());
     for (std::size_t i = 0; i < clean.size(); ++i) tn[i] = truth[i].n;
     for (const double noise : noise_levels) {
@@ -630,7 +601,7 @@ int runBenchCurvature(int argc, char** argv) {
     std::vector<Truth> truth;
     sampleSurface(s, npts / 4, seed++, p, truth);
     SpatialIndex index(p);
-    const float radius = benchRadiusForMeanCount(p, index, neighbours);
+    const float radius = benchRadius(p, index, neighbours);
     Normals tn(p.size());
     for (std::size_t i = 0; i < p.size(); ++i) tn[i] = truth[i].n;
     for (const double tilt : {0.0, 5.0, 10.0, 15.0, 20.0}) {
@@ -683,7 +654,7 @@ int runBenchCurvature(int argc, char** argv) {
       std::vector<int> dense_of;
       for (std::size_t i = 0; i < mesh.vertices.size(); i += scan_step) { p.push_back(mesh.vertices[i]); dense_of.push_back(int(i)); }
       SpatialIndex sidx(p);
-      const float radius = benchRadiusForMeanCount(p, sidx, neighbours);
+      const float radius = benchRadius(p, sidx, neighbours);
       // Reference at scale: average the dense tensors and normals over the ball of R_phi / 2.
       SpatialIndex didx(mesh.vertices);
       std::vector<Truth> truth(p.size());
@@ -858,7 +829,7 @@ int runBenchCurvature(int argc, char** argv) {
     std::printf("%zu samples per surface: 30%% uniform over [-1, 1]^2, 70%% in the disk of radius 0.15 around\n"
                 "(0.3, 0.2) (about 130x denser), every sample written twice (exact duplicates, as in bun0.pcd);\n"
                 "scored on the first copies with |x|, |y| < 0.8. R_phi = the automatic radius of paps curvature\n"
-                "(core radiusForMeanNeighbourCount(%d)) over the distinct positions. fixed R = --fixed-radius (no\n"
+                "(core radiusForNeighbourCount(%d), median) over the distinct positions. fixed R = --fixed-radius (no\n"
                 "widening, NaN where too few); default = a point\n"
                 "whose ball holds fewer than %d distinct positions is fitted on its %d nearest (R_phi there =\n"
                 "distance of the farthest); widen below need = the same only where the ball holds fewer than the\n"
@@ -970,7 +941,7 @@ int runBenchCurvature(int argc, char** argv) {
     std::vector<Truth> truth;
     sampleSurface(s, speed_points, 12345, p, truth);
     SpatialIndex index(p);
-    const float radius = benchRadiusForMeanCount(p, index, neighbours);
+    const float radius = benchRadius(p, index, neighbours);
     WavejetParameters params;
     params.order = order;
     WavejetReport rep;
@@ -986,7 +957,7 @@ int runBenchCurvature(int argc, char** argv) {
     const std::size_t sub = std::min<std::size_t>(p.size(), 100000);
     Positions ps(p.begin(), p.begin() + sub);
     SpatialIndex is(ps);
-    const float rs = benchRadiusForMeanCount(ps, is, neighbours);
+    const float rs = benchRadius(ps, is, neighbours);
     omp_set_num_threads(1);
     double t1 = 0, tc = NAN, tp = 0;
     Normals none(ps.size(), Eigen::Vector3f::Constant(NAN));

@@ -115,7 +115,7 @@ int runBenchDenoise(int argc, char** argv) {
       Positions noisy = clean;
       synthetic::addGaussianNoise(noisy, static_cast<float>(noise), 11);
       const SpatialIndex index(noisy);
-      const float r = radiusForMeanNeighbourCount(noisy, index, 30);
+      const float r = radiusForNeighbourCount(noisy, index, 30);
       const std::string noise_s = fmt("%.2f%%", noise * 100);
       Row input{ds.name, noise_s, "input", "noisy", false, {}, pointToMeshError(noisy, truth)};
       input.run.ok = true;
@@ -181,7 +181,7 @@ int runBenchDenoise(int argc, char** argv) {
   std::printf("%-28s %-10s %10s %9s %9s\n", "input", "method", "points", "time(s)", "peak MB");
   auto speed = [&](const std::string& name, const Positions& pts) {
     const SpatialIndex index(pts);
-    const float r = radiusForMeanNeighbourCount(pts, index, 30);
+    const float r = radiusForNeighbourCount(pts, index, 30);
     double t_mls = 0;
     for (const std::string m : {"ours", "mls", "bilateral"}) {
       std::map<std::string, double> p{{"radius", r}};

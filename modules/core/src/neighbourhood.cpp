@@ -158,8 +158,8 @@ double NeighbourGraph::meanCount() const {
   return pts ? static_cast<double>(total) / pts : 0.0;
 }
 
-float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& index,
-                                  int target_count, int samples) {
+float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index, int target_count,
+                              NeighbourCountStatistic statistic, int samples) {
   requireInRange("target_count", target_count, 2, 100000);
   requirePositive("samples", samples);
   if (index.size() < 2) throw InvalidInput("fewer than 2 finite points: cannot choose a radius");
@@ -178,16 +178,29 @@ float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& i
     if (n > 1) kth.push_back(std::sqrt(d2[n - 1]));
   }
   // The median of the k-th neighbour distances: half of the points have at least
-  // target_count points within it. A mean count would be made by the densest spots on real
-  // scans (near the sensor, overlapping scans, duplicated points) and shrink the radius until
-  // most points have no neighbour at all: table_scene_lms400 had a median of 13 neighbours and
-  // 6.5% of its points under 6 with a mean of 30; bun0.pcd 81% under 6.
+  // target_count points within it.
   std::nth_element(kth.begin(), kth.begin() + kth.size() / 2, kth.end());
   float r = kth[kth.size() / 2];
   if (!(r > 0)) {
     // Duplicates dominate: fall back to a fraction of the extent.
     r = boundingBoxDiagonal(points) * 1e-3f;
     if (!(r > 0)) throw InvalidInput("all points are identical: cannot choose a radius");
+  }
+  if (statistic == NeighbourCountStatistic::Mean) {
+    // The k-th neighbour distance overshoots the mean count near borders and undershoots in
+    // dense spots; correct by the surface law count ~ r^2 until within 3% (scan lines make
+    // the law inexact, hence a few rounds).
+    for (int iter = 0; iter < 6; ++iter) {
+      double total = 0;
+      std::size_t used = 0;
+      for (std::size_t s = 0; s < m; s += std::max<std::size_t>(1, m / 500)) {
+        total += index.radiusSearch(points[finite[static_cast<std::size_t>(s * stride)]], r, idx, d2);
+        ++used;
+      }
+      const double mean = total / used;
+      if (mean <= 0 || std::abs(mean - target_count) < 0.03 * target_count) break;
+      r *= static_cast<float>(std::clamp(std::sqrt(target_count / mean), 0.5, 2.0));
+    }
   }
   return r;
 }
@@ -233,7 +246,7 @@ RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radi
   nb.index = std::make_unique<SpatialIndex>(points);
   if (nb.index->size() == 0) throw InvalidInput("no finite point in the cloud");
   if (nb.index->size() < 2) throw InvalidInput("only one finite point: no neighbourhood exists");
-  nb.radius = radius > 0 ? radius : radiusForMeanNeighbourCount(points, *nb.index, target_neighbours);
+  nb.radius = radius > 0 ? radius : radiusForNeighbourCount(points, *nb.index, target_neighbours);
   nb.graph = NeighbourGraph::byRadius(points, *nb.index, nb.radius, max_count, progress);
   return nb;
 }

@@ -619,7 +619,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
                      (params.widening == WavejetParameters::Widening::automatic && automatic);
   std::unique_ptr<SpatialIndex> index;
   if (automatic || widen) index = std::make_unique<SpatialIndex>(points);
-  if (automatic) radius = radiusForMeanNeighbourCount(points, *index, target_neighbours);
+  if (automatic) radius = radiusForNeighbourCount(points, *index, target_neighbours);
   const int need = wavejetNeededNeighbours(params);
   const int widen_to = std::max(need, params.widened_neighbours > 0 ? params.widened_neighbours : target_neighbours);
   const std::int64_t count = static_cast<std::int64_t>(points.size());

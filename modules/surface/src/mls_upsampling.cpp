@@ -483,8 +483,8 @@ PAPS_LANES_INLINE FV expNegV(FV x) {
 
 // The neighbours (with a finite normal) of one input point in arrays, positions relative to
 // that point and in units of the kernel support h: what the projections of all the seeds
-// generated from it read. The arrays are padded to a multiple of kLanes with points beyond h
-// (weight 0) and zero normals.
+// generated from it read. The arrays are padded to a multiple of kLanes with points far beyond
+// h (weight 0 seen from any seed) and zero normals.
 struct Block {
   std::vector<float> x, y, z, nx, ny, nz, alpha;
   // At the origin (the block's input point), per neighbour: t = 1 - |d|^2 (0 beyond h; the
@@ -512,7 +512,7 @@ struct Block {
     }
     padded = (n + kLanes - 1) / kLanes * kLanes;
     for (int k = n; k < padded; ++k) {
-      x[k] = 2.f; y[k] = z[k] = 0.f;
+      x[k] = 1e4f; y[k] = z[k] = 0.f;
       nx[k] = ny[k] = nz[k] = 0.f;
       alpha[k] = 0.f;
     }
@@ -546,26 +546,30 @@ struct Sphere {
   }
 };
 
-__attribute__((noinline)) Sphere fitSphere(const Block& b, const Eigen::Vector3f& q) {
+PAPS_AVX2_CLONE __attribute__((noinline)) Sphere fitSphere(const Block& b, const Eigen::Vector3f& q) {
   Sphere s;
   s.centre = q;
-  float sw = 0, spx = 0, spy = 0, spz = 0, snx = 0, sny = 0, snz = 0, spn = 0, spp = 0;
-  int used = 0;
-  const float qx = q.x(), qy = q.y(), qz = q.z();
+  const FV zero = splat(0.f);
+  FV vw = zero, vpx = zero, vpy = zero, vpz = zero, vnx = zero, vny = zero, vnz = zero, vpn = zero, vpp = zero,
+     vused = zero;
   const float *X = b.x.data(), *Y = b.y.data(), *Z = b.z.data(), *NX = b.nx.data(), *NY = b.ny.data(), *NZ = b.nz.data();
-#pragma omp simd reduction(+ : sw, spx, spy, spz, snx, sny, snz, spn, spp, used)
-  for (int k = 0; k < b.n; ++k) {
-    const float dx = X[k] - qx, dy = Y[k] - qy, dz = Z[k] - qz;
-    const float d2 = dx * dx + dy * dy + dz * dz;
-    const float t = d2 < 1.f ? 1.f - d2 : 0.f;
-    const float w = t * t * t * t;
-    sw += w;
-    spx += w * dx; spy += w * dy; spz += w * dz;
-    snx += w * NX[k]; sny += w * NY[k]; snz += w * NZ[k];
-    spn += w * (dx * NX[k] + dy * NY[k] + dz * NZ[k]);
-    spp += w * d2;
-    used += t > 0.f ? 1 : 0;
+  for (int k = 0; k < b.padded; k += kLanes) {  // the padding is far away: weight 0
+    const FV dx = loadv(X + k) - q.x(), dy = loadv(Y + k) - q.y(), dz = loadv(Z + k) - q.z();
+    const FV nx = loadv(NX + k), ny = loadv(NY + k), nz = loadv(NZ + k);
+    const FV d2 = dx * dx + dy * dy + dz * dz;
+    const IV inside = d2 < splat(1.f);
+    const FV t = inside ? 1.f - d2 : zero;
+    const FV t2 = t * t, w = t2 * t2;
+    vw += w;
+    vpx += w * dx; vpy += w * dy; vpz += w * dz;
+    vnx += w * nx; vny += w * ny; vnz += w * nz;
+    vpn += w * (dx * nx + dy * ny + dz * nz);
+    vpp += w * d2;
+    vused += inside ? splat(1.f) : zero;
   }
+  const float sw = hsum(vw), spx = hsum(vpx), spy = hsum(vpy), spz = hsum(vpz), snx = hsum(vnx), sny = hsum(vny),
+              snz = hsum(vnz), spn = hsum(vpn), spp = hsum(vpp);
+  const int used = static_cast<int>(hsum(vused));
   if (used < 4 || !(sw > 0)) return s;
   const Eigen::Vector3d mp = Eigen::Vector3d(spx, spy, spz) / sw, mn = Eigen::Vector3d(snx, sny, snz) / sw;
   const double den = double(spp) / sw - mp.squaredNorm();

@@ -291,7 +291,7 @@ int runBenchSuperres(int argc, char** argv) {
         scans.push_back(std::move(sub));
       }
       const SpatialIndex index(scans[0]);
-      const float r = radiusForMeanNeighbourCount(scans[0], index, 30);
+      const float r = radiusForNeighbourCount(scans[0], index, 30, NeighbourCountStatistic::Median);
       const double e_in = nearestRmse(dense, scans[0]);
       char noise_s[16];
       std::snprintf(noise_s, sizeof noise_s, "%.2f%%", noise * 100);
@@ -367,8 +367,8 @@ int runBenchSuperres(int argc, char** argv) {
     Positions in = synthetic::sampleMesh(rs1_set->mesh, n_speed, 21);
     synthetic::addGaussianNoise(in, 0.0001f, 22);
     const SpatialIndex index(in);
-    const float r = radiusForMeanNeighbourCount(in, index, 30);
-    std::printf("(PCL MLS search radius %.6g: 30 neighbours on average; %d round(s), load average %s)\n", r,
+    const float r = radiusForNeighbourCount(in, index, 30, NeighbourCountStatistic::Median);
+    std::printf("(PCL MLS search radius %.6g: a typical point holds 30 neighbours; %d round(s), load average %s)\n", r,
                 speed_repeat, loadAverage().c_str());
     struct Times { std::vector<double> wall, cpu, ratio; };
     std::map<std::string, Times> times;

@@ -781,7 +781,7 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
   float h = params.radius;
   if (h <= 0) {
     const SpatialIndex index(points);
-    h = radiusForMeanNeighbourCount(points, index, params.target_neighbours);
+    h = radiusForNeighbourCount(points, index, params.target_neighbours, NeighbourCountStatistic::Median);
   }
   const bool per_point = params.fit_per_input_point;
   const bool apss = surface == MlsSurface::Apss;

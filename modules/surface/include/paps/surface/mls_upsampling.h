@@ -21,7 +21,7 @@ enum class MlsSurface { Apss, Rimls };
 struct MlsUpsamplingParameters {
   /// Kernel support h in metres (> 0), or 0: the radius holding `target_neighbours` points.
   float radius = 0.f;
-  /// Mean neighbour count that sets the radius (6 to 1000).
+  /// Neighbour count that sets the radius: a typical (median) point holds it (6 to 1000).
   int target_neighbours = 30;
   /// Output count = factor x finite input count when output_count is 0 (1 to 1000).
   float factor = 4.f;

@@ -49,6 +49,26 @@ TEST(QuadricSuperResolution, BeatsPlainInterpolationOnEngravedPlane) {
   EXPECT_EQ(r0.without_similar, r0.patches);
 }
 
+// Scans are often stored with every point twice (bun0.pcd). A point's copy has the same
+// descriptor: taken as its most similar patch it set the automatic similarity radius to
+// nothing (bun0: 8e-8 m), so no other patch counted.
+TEST(QuadricSuperResolution, DuplicatedScanKeepsItsSimilarityRadius) {
+  Case c;
+  synthetic::addGaussianNoise(c.sparse, 0.0005f, 9);
+  Positions twice = c.sparse;
+  twice.insert(twice.end(), c.sparse.begin(), c.sparse.end());
+  QuadricSuperResolutionParameters p;
+  p.factor = 2;
+  QuadricSuperResolutionReport r1, r2;
+  superResolveQuadric({c.sparse}, p, &r1);
+  p.patch_radius = r1.patch_radius;  // the same patches and grid, each position seen twice
+  p.grid_lr = r1.grid_lr;
+  superResolveQuadric({twice}, p, &r2);
+  std::printf("similarity radius once %g, twice %g; similar weight %.2f, %.2f\n", r1.similarity_radius,
+              r2.similarity_radius, r1.mean_similar_weight, r2.mean_similar_weight);
+  EXPECT_NEAR(r2.similarity_radius, r1.similarity_radius, 0.3 * r1.similarity_radius);
+}
+
 TEST(QuadricSuperResolution, NoSimilarPatchStillInterpolates) {
   Case c;
   const PointToMeshDistance truth(c.mesh);

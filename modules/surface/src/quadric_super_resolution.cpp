@@ -132,6 +132,11 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   for (std::size_t r = 0; r < rows.size(); ++r)
     std::copy(&desc[rows[r] * B], &desc[rows[r] * B] + B, &table[r * B]);
   const std::size_t n0 = scans[0].size();
+  const Positions& P0 = scans[0];
+  auto positionOf = [&](int g) -> const Eigen::Vector3f& {
+    const Scan& sg = sc[scan_of[g]];
+    return (*sg.points)[static_cast<std::size_t>(g) - sg.offset];
+  };
   std::vector<std::vector<std::pair<float, Similar>>> cand(n0);  // squared distance, patch
   if (params.similar_patches > 0 && rows.size() > 1) {
     const DescriptorIndex index(table.data(), rows.size(), B, params.search_checks);
@@ -153,7 +158,9 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
           index.nearestK(flip ? rev.data() : a, params.candidates, idx, d2);
           for (int c : idx) {
             const int g = rows[c];
-            if (g == i) continue;
+            // An exact copy of the point (scans are often stored with every point twice) is
+            // not a second measurement, and would set the similarity radius to nothing.
+            if (g == i || positionOf(g) == P0[i]) continue;
             const float* o = &desc[static_cast<std::size_t>(g) * B];
             const std::uint8_t* vo = &valid[static_cast<std::size_t>(g) * B];
             double s = 0;
@@ -337,7 +344,6 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   }
 
   // 5. Output: Poisson-regularised seeds projected on the SR surface (2.6, robust).
-  const Positions& P0 = scans[0];
   Normals n0s(n0, Eigen::Vector3f::Constant(NAN));
   for (std::size_t i = 0; i < n0; ++i) if (usable[i]) n0s[i] = fits[i].frame.n;
   const std::size_t count = params.output_count ? params.output_count

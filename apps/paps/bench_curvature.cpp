@@ -532,6 +532,7 @@ int runBenchCurvature(int argc, char** argv) {
   double worst_sel2_pcl = 0, worst_sel2_geom = 0, worst_sel2_raw = 0, worst_sel_half = 0, worst_sel_cgal = 0,
          worst_sel2_cgal = 0;
   std::uint64_t seed = 1;
+  std::size_t analytic_narrowed = 0, analytic_checked = 0;
   for (const Surface& s : analyticSurfaces()) {
     Positions clean;
     std::vector<Truth> truth;
@@ -549,6 +550,16 @@ int runBenchCurvature(int argc, char** argv) {
       for (auto& x : p)
         x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
       const MethodEstimates m = runMethods(p, radius, order, tn, true);
+      {
+        // The cap of narrowing at the automatic radius (paps curvature's defaults) on an evenly
+        // sampled surface: counted, expected 0.
+        WavejetParameters dp;
+        dp.order = order;
+        WavejetReport dr;
+        estimateWavejets(p, 0.f, dp, &dr, nullptr, nullptr, &tn, {}, neighbours);
+        analytic_narrowed += dr.narrowed;
+        analytic_checked += p.size();
+      }
       std::size_t scored = 0;
       const Comparison c = scoreMethods(m, radius, truth, eval, &scored);
       min_scored = std::min(min_scored, double(scored) / double(eval.size()));
@@ -588,6 +599,8 @@ int runBenchCurvature(int argc, char** argv) {
               worst_ratio_cgal);
   std::printf("against CGAL (degree %d, where CGAL > 1e-3): ours sel. %.3f, ours sel. 2R %.3f\n", order, worst_sel_cgal,
               worst_sel2_cgal);
+  std::printf("narrowing at the automatic radius (defaults of paps curvature, cap 4 x %d): %zu of %zu points "
+              "narrowed over the table's surfaces and noise levels\n", neighbours, analytic_narrowed, analytic_checked);
 
   }
 
@@ -826,21 +839,26 @@ int runBenchCurvature(int argc, char** argv) {
   // ---- 3b. varying density and duplicates: the defaults a scan user gets ----
   if (!skipped("density")) {
     std::printf("\n## Varying density and exact duplicates (the automatic radius, as paps curvature chooses it)\n");
-    std::printf("%zu samples per surface: 30%% uniform over [-1, 1]^2, 70%% in the disk of radius 0.15 around\n"
-                "(0.3, 0.2) (about 130x denser), every sample written twice (exact duplicates, as in bun0.pcd);\n"
+    std::printf("%zu samples per surface: a share (uniform share) uniform over [-1, 1]^2, the rest in the disk of\n"
+                "radius 0.15 around (0.3, 0.2) (share 0.3: about 130x denser; 0.9: 6x), every sample written twice (exact duplicates, as in bun0.pcd);\n"
                 "scored on the first copies with |x|, |y| < 0.8. R_phi = the automatic radius of paps curvature\n"
                 "(core radiusForNeighbourCount(%d), median) over the distinct positions. fixed R = --fixed-radius (no\n"
                 "widening, NaN where too few); default = a point\n"
                 "whose ball holds fewer than %d distinct positions is fitted on its %d nearest (R_phi there =\n"
                 "distance of the farthest); widen below need = the same only where the ball holds fewer than the\n"
                 "order needs (an alternative, not used); kNN = every point on its %d nearest distinct positions.\n"
-                "default curv widened / in ball: the default on its widened points / on the others.\n"
+                "default curv widened / narrowed / in ball: the default on its widened points / on its points\n"
+                "whose ball held more than the cap (4 x %d distinct positions: fitted on that many nearest) / on the\n"
+                "others. no cap = the default without the cap (full crowded balls, the default before narrowing).\n"
                 "Curvature error as above (RMSE / RMS); fixed R is scored on its own fitted points only.\n\n",
-                npts, neighbours, neighbours, neighbours, neighbours);
-    std::printf("| surface | noise (abs.) | R_phi | NaN fixed R | NaN default | widened | default curv | default curv widened "
-                "| default curv in ball | widen below need curv | kNN curv | fixed R curv (its fitted points) | default s | kNN s |\n"
-                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+                npts, neighbours, neighbours, neighbours, neighbours, neighbours);
+    std::printf("| surface | uniform share | noise (abs.) | R_phi | NaN fixed R | NaN default | widened | narrowed | default curv | default curv widened "
+                "| default curv narrowed | no cap curv | no cap curv narrowed pts | default curv in ball | widen below need curv | kNN curv | fixed R curv (its fitted points) | default s | no cap s | kNN s |\n"
+                "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     std::uint64_t seed = 101;
+    // Sparse share 0.3: the dense disk sets the radius (sparse balls widened); 0.9: the
+    // sparse part sets it and the disk (6x denser) holds more than the cap (narrowed).
+    for (const double sparse_share : {0.3, 0.9})
     for (const Surface& s : analyticSurfaces()) {
       for (const double noise : {0.0, 2e-5}) {
         Random rng(seed++);
@@ -848,7 +866,7 @@ int runBenchCurvature(int argc, char** argv) {
         std::vector<Truth> truth;
         while (p.size() < npts) {
           double x, y;
-          if (rng.uniform() < 0.3) { x = rng.uniform(-1, 1); y = rng.uniform(-1, 1); }
+          if (rng.uniform() < sparse_share) { x = rng.uniform(-1, 1); y = rng.uniform(-1, 1); }
           else {
             do { x = rng.uniform(-0.15, 0.15); y = rng.uniform(-0.15, 0.15); } while (x * x + y * y > 0.15 * 0.15);
             x += 0.3; y += 0.2;
@@ -862,7 +880,7 @@ int runBenchCurvature(int argc, char** argv) {
         for (std::size_t i = 0; i < base; ++i) { p.push_back(p[i]); truth.push_back(truth[i]); }
         Normals tn(p.size());
         for (std::size_t i = 0; i < p.size(); ++i) tn[i] = truth[i].n;
-        std::vector<int> eval, eval_wide, eval_ball;
+        std::vector<int> eval, eval_wide, eval_narrow, eval_ball;
         WavejetParameters params;
         params.order = order;
         params.widening = WavejetParameters::Widening::never;
@@ -872,6 +890,13 @@ int runBenchCurvature(int argc, char** argv) {
         auto t0 = Clock::now();
         const auto def = estimateWavejets(p, 0.f, params, &r_def, nullptr, nullptr, &tn, {}, neighbours);
         const double t_def = since(t0);
+        // The same without the cap of narrowing (full balls where crowded: the default before it).
+        params.narrowed_neighbours = 1000000;
+        WavejetReport r_nocap;
+        t0 = Clock::now();
+        const auto nocap = estimateWavejets(p, 0.f, params, &r_nocap, nullptr, nullptr, &tn, {}, neighbours);
+        const double t_nocap = since(t0);
+        params.narrowed_neighbours = 0;
         // Alternatives fitted here from explicit lists on the distinct positions: kNN (every
         // point on its `neighbours` nearest) and "need" (the `neighbours` nearest only where the
         // ball of R_phi holds fewer than the order needs, 17 for K = 4; else the ball).
@@ -914,7 +939,8 @@ int runBenchCurvature(int argc, char** argv) {
           nan_def += !def[i].valid();
           if (!(std::abs(p[i].x()) < 0.8f && std::abs(p[i].y()) < 0.8f)) continue;
           eval.push_back(int(i));
-          (def[i].radius > r_def.radius ? eval_wide : eval_ball).push_back(int(i));
+          (def[i].radius > r_def.radius ? eval_wide : def[i].radius < r_def.radius ? eval_narrow : eval_ball)
+              .push_back(int(i));
         }
         auto toEst = [&](const std::vector<WavejetResult>& res) {
           std::vector<Estimate> e(res.size());
@@ -922,13 +948,18 @@ int runBenchCurvature(int argc, char** argv) {
           orientLike(e, tn);
           return e;
         };
+        const auto e_nocap = toEst(nocap);
         const auto e_def = toEst(def), e_knn = toEst(knn), e_fixed = toEst(fixed), e_need = toEst(below_need);
-        std::printf("| %s | %.1e | %.4f | %.1f%% | %.1f%% | %.1f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.2f | %.2f |\n",
-                    s.name.c_str(), noise, r_def.radius, 100.0 * nan_fixed / base, 100.0 * nan_def / base,
-                    100.0 * r_def.widened / p.size(), score(e_def, truth, eval, false).curv_rel,
-                    score(e_def, truth, eval_wide, false).curv_rel, score(e_def, truth, eval_ball, false).curv_rel,
+        std::printf("| %s | %.1f | %.1e | %.4f | %.1f%% | %.1f%% | %.1f%% | %.1f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.2f | %.2f | %.2f |\n",
+                    s.name.c_str(), sparse_share, noise, r_def.radius, 100.0 * nan_fixed / base, 100.0 * nan_def / base,
+                    100.0 * r_def.widened / p.size(), 100.0 * r_def.narrowed / p.size(),
+                    score(e_def, truth, eval, false).curv_rel, score(e_def, truth, eval_wide, false).curv_rel,
+                    eval_narrow.empty() ? 0.0 : score(e_def, truth, eval_narrow, false).curv_rel,
+                    score(e_nocap, truth, eval, false).curv_rel,
+                    eval_narrow.empty() ? 0.0 : score(e_nocap, truth, eval_narrow, false).curv_rel,
+                    score(e_def, truth, eval_ball, false).curv_rel,
                     score(e_need, truth, eval, false).curv_rel, score(e_knn, truth, eval, false).curv_rel,
-                    score(e_fixed, truth, eval, false).curv_rel, t_def, t_knn);
+                    score(e_fixed, truth, eval, false).curv_rel, t_def, t_nocap, t_knn);
         std::fflush(stdout);
       }
     }

@@ -34,10 +34,12 @@ const char* kCurvatureUsage =
     "                         holds fewer than beta (K+1)(K+2)/2 points, 17 for K = 4). Default:\n"
     "                         chosen from --neighbours over the distinct positions, and a point\n"
     "                         whose ball holds fewer than N distinct positions is fitted on its N\n"
-    "                         nearest, rescaled to their disk (scans of varying density)\n"
+    "                         nearest, rescaled to their disk (scans of varying density); one\n"
+    "                         whose ball holds more than 4 N is fitted on its 4 N nearest\n"
     "  --neighbours N         neighbour count that sets the automatic R_phi and the minimum per\n"
     "                         point (default 50)\n"
-    "  --fixed-radius         automatic R_phi without the per-point widening\n"
+    "  --max-neighbours M     the maximum per point with the automatic R_phi (default 4 N)\n"
+    "  --fixed-radius         automatic R_phi without the per-point widening or narrowing\n"
     "  --order K              Wavejet order, 1 to 20 (default 4)\n"
     "  --beta B               order lowered until neighbours >= B (K+1)(K+2)/2 (default 1.1)\n"
     "  --irls N               IRLS passes against noise/outliers (default 0)\n"
@@ -62,7 +64,8 @@ const char* kEnhanceUsage =
     "  --radius R             R_phi = s in metres, fixed (default: automatic, widened where\n"
     "                         sparse, as for paps curvature)\n"
     "  --neighbours N         neighbour count that sets the automatic R_phi (default 50)\n"
-    "  --fixed-radius         automatic R_phi without the per-point widening\n"
+    "  --max-neighbours M     the maximum per point with the automatic R_phi (default 4 N)\n"
+    "  --fixed-radius         automatic R_phi without the per-point widening or narrowing\n"
     "  --order K              Wavejet order (default 4; the manuscript uses 6 to 9)\n"
     "  --beta B, --irls N, --select-order   as for paps curvature\n"
     "  --max-motion F         motion clamp as a fraction of R_phi (default 0.5)\n"
@@ -126,6 +129,8 @@ WavejetParameters wavejetParameters(const Arguments& a) {
   // Widening with the automatic radius (the library's default: an explicit --radius is kept
   // as given); --fixed-radius turns it off (docs/wavejets.md, "Real scans").
   w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
+  // The cap of narrowing (0: 4 x --neighbours).
+  w.narrowed_neighbours = static_cast<int>(a.number("max-neighbours", w.narrowed_neighbours));
   w.validate();
   return w;
 }
@@ -163,9 +168,10 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
     }
 }
 
-// One line on what the neighbourhoods were: duplicates fitted once, sparse balls widened.
+// One line on what the neighbourhoods were: duplicates fitted once, sparse balls widened,
+// crowded balls narrowed.
 void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float widened_median, int widen_to,
-                              bool fixed) {
+                              std::size_t narrowed, float narrowed_median, int narrow_to, bool fixed) {
   if (duplicates)
     std::printf("exact duplicates: %zu points share the position of an earlier one: fitted and counted once\n",
                 duplicates);
@@ -175,6 +181,12 @@ void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float
                 "nearest, R_phi = distance of the farthest (median %g m)\n", widened, widen_to, widen_to, widened_median);
   else
     std::printf("widened: none (every ball holds at least %d distinct positions)\n", widen_to);
+  if (narrowed)
+    std::printf("narrowed: %zu points had more than %d distinct positions in the ball of R_phi: fitted on their %d "
+                "nearest, R_phi = distance of the farthest (median %g m)\n", narrowed, narrow_to, narrow_to,
+                narrowed_median);
+  else
+    std::printf("narrowed: none (no ball holds more than %d distinct positions)\n", narrow_to);
 }
 
 }  // namespace
@@ -183,7 +195,7 @@ int runCurvature(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kCurvatureUsage, stdout); return 0; }
   a.allowOnly({"radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle", "orient", "quiet",
-               "timings", "select-order", "fixed-radius"});
+               "timings", "select-order", "fixed-radius", "max-neighbours"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const WavejetParameters params = wavejetParameters(a);
   const float radius = static_cast<float>(a.number("radius", 0));
@@ -202,7 +214,8 @@ int runCurvature(int argc, char** argv) {
   std::printf("wavejets: order %d, R_phi %g m%s (mean %.1f neighbours), %.2f s\n", params.order, r.radius,
               radius > 0 ? "" : " (chosen from --neighbours over the distinct positions)", r.mean_neighbours, secs);
   printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
-                           std::max(wavejetNeededNeighbours(params), neighbours),
+                           wavejetWidenedNeighbours(params, neighbours), r.narrowed, r.narrowed_radius_median,
+                           wavejetNarrowedNeighbours(params, neighbours),
                            params.widening == WavejetParameters::Widening::never || radius > 0);
   std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
               "noise (plane kept) at %zu\n", r.fitted, r.lowered, r.not_converged, r.tilt_within_noise);
@@ -234,7 +247,7 @@ int runEnhance(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kEnhanceUsage, stdout); return 0; }
   a.allowOnly({"alpha0", "alpha1", "radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle",
-               "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius"});
+               "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius", "max-neighbours"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   if (a.has("alpha0") == a.has("alpha1"))
     throw InvalidParameter("alpha0/alpha1", "both or neither", "exactly one of --alpha0 A or --alpha1 RE[,IM]");
@@ -277,7 +290,8 @@ int runEnhance(int argc, char** argv) {
                 params.radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.changed);
   }
   printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
-                           std::max(wavejetNeededNeighbours(params.wavejet), params.target_neighbours),
+                           wavejetWidenedNeighbours(params.wavejet, params.target_neighbours), r.narrowed,
+                           r.narrowed_radius_median, wavejetNarrowedNeighbours(params.wavejet, params.target_neighbours),
                            params.wavejet.widening == WavejetParameters::Widening::never || params.radius > 0);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);
   if (r.unfitted) std::fprintf(stderr, "warning: %zu points have too few neighbours: left in place, normal NaN\n", r.unfitted);

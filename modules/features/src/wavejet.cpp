@@ -23,6 +23,7 @@ void WavejetParameters::validate() const {
   if (!std::isfinite(refit_angle)) throw InvalidParameter("refit_angle", detail::toString(refit_angle), "a value in [0, 90]");
   requireInRange("refit_angle", refit_angle, 0.f, 90.f);
   requireInRange("widened_neighbours", widened_neighbours, 0, 100000);
+  requireInRange("narrowed_neighbours", narrowed_neighbours, 0, 1000000);
   if (!isFinite(viewpoint)) throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
 }
 
@@ -605,10 +606,20 @@ int wavejetNeededNeighbours(const WavejetParameters& params) {
   return need;
 }
 
+int wavejetWidenedNeighbours(const WavejetParameters& params, int default_neighbours) {
+  return std::max(wavejetNeededNeighbours(params),
+                  params.widened_neighbours > 0 ? params.widened_neighbours : default_neighbours);
+}
+
+int wavejetNarrowedNeighbours(const WavejetParameters& params, int default_neighbours) {
+  const int n = wavejetWidenedNeighbours(params, default_neighbours);
+  return std::max(n, params.narrowed_neighbours > 0 ? params.narrowed_neighbours : 4 * n);
+}
+
 namespace {
 
 // Wavejets of distinct positions (no exact duplicates). `neighbour_count` gets the count
-// used per point, `widened` whether its radius was widened.
+// used per point, `widened` whether its radius was widened (1) or narrowed (2).
 std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radius, const WavejetParameters& params,
                                             std::vector<WavejetCoefficients>* coefficients,
                                             const Normals* initial_normals, const Normals* orientation,
@@ -621,7 +632,8 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   if (automatic || widen) index = std::make_unique<SpatialIndex>(points);
   if (automatic) radius = radiusForNeighbourCount(points, *index, target_neighbours);
   const int need = wavejetNeededNeighbours(params);
-  const int widen_to = std::max(need, params.widened_neighbours > 0 ? params.widened_neighbours : target_neighbours);
+  const int widen_to = wavejetWidenedNeighbours(params, target_neighbours);
+  const int narrow_to = wavejetNarrowedNeighbours(params, target_neighbours);
   const std::int64_t count = static_cast<std::int64_t>(points.size());
   std::vector<WavejetResult> out(points.size());
   neighbour_count.assign(points.size(), 0);
@@ -637,6 +649,22 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     const int n = index->nearestK(points[i], widen_to, idx, d2);
     if (n < need) return 0.f;  // the whole cloud holds too few: NaN outputs as before
     return std::max(radius, std::sqrt(d2[n - 1]));
+  };
+  // A ball with more than `narrow_to` positions (`found` indices into `pts` in idx, squared
+  // distances to q in d2, filled here when empty): keeps its `narrow_to` nearest, ties broken
+  // by index (the same choice whatever the order of the ball), moved to the front of idx in
+  // that order, and returns their radius (the distance of the farthest).
+  auto narrowAt = [&](const Positions& pts, const Eigen::Vector3f& q, std::vector<int>& idx,
+                      std::vector<float>& d2, std::vector<std::pair<float, int>>& order) -> float {
+    const int found = static_cast<int>(idx.size());
+    order.resize(found);
+    for (int j = 0; j < found; ++j)
+      order[j] = {d2.size() == idx.size() ? d2[j] : (pts[idx[j]] - q).squaredNorm(), idx[j]};
+    std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end());
+    std::sort(order.begin(), order.begin() + narrow_to);
+    for (int j = 0; j < narrow_to; ++j) idx[j] = order[j].second;
+    idx.resize(narrow_to);
+    return std::sqrt(order[narrow_to - 1].first);
   };
   auto fitPoint = [&](int i, const Positions& pts, const int* nb, int found, const Eigen::Vector3f& q, float r,
                       WavejetWorkspace& ws) {
@@ -657,7 +685,8 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     {
       WavejetWorkspacePtr ws = makeWavejetWorkspace();
       std::vector<int> idx, wide;
-      std::vector<float> d2;
+      std::vector<float> d2, none;
+      std::vector<std::pair<float, int>> order;
       idx.reserve(256);
       CellGrid::Cursor cursor;
 #pragma omp for schedule(dynamic, 256)
@@ -669,6 +698,11 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
         if (r > 0) {
           widened[i] = 1;
           fitPoint(i, points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
+        } else if (widen && found > narrow_to) {
+          idx.resize(found);
+          const float rn = narrowAt(sorted, sorted[s], idx, none, order);
+          widened[i] = 2;
+          fitPoint(i, sorted, idx.data(), narrow_to, sorted[s], rn, *ws);
         } else {
           fitPoint(i, sorted, idx.data(), found, sorted[s], radius, *ws);
         }
@@ -683,6 +717,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
       WavejetWorkspacePtr ws = makeWavejetWorkspace();
       std::vector<int> idx, wide;
       std::vector<float> d2;
+      std::vector<std::pair<float, int>> order;
 #pragma omp for schedule(dynamic, 256)
       for (std::int64_t i = 0; i < count; ++i) {
         if (reporter.cancelled()) continue;
@@ -692,6 +727,12 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
           if (r > 0) {
             widened[i] = 1;
             fitPoint(static_cast<int>(i), points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
+          } else if (widen && found > narrow_to) {
+            idx.resize(found);
+            d2.resize(found);
+            const float rn = narrowAt(points, points[i], idx, d2, order);
+            widened[i] = 2;
+            fitPoint(static_cast<int>(i), points, idx.data(), narrow_to, points[i], rn, *ws);
           } else {
             fitPoint(static_cast<int>(i), points, idx.data(), found, points[i], radius, *ws);
           }
@@ -777,7 +818,7 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
     report->radius = radius;
     report->duplicates = duplicates;
     double sum = 0;
-    std::vector<float> widened_radii;
+    std::vector<float> widened_radii, narrowed_radii;
     for (std::size_t i = 0; i < points.size(); ++i) {
       if (!isFinite(points[i])) { ++report->non_finite; continue; }
       if (!out[i].valid()) { ++report->too_few_neighbours; continue; }
@@ -787,12 +828,16 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       report->not_converged += !out[i].converged && !out[i].tilt_within_noise;
       report->tilt_within_noise += out[i].tilt_within_noise;
       report->max_radius = std::max(report->max_radius, out[i].radius);
-      if (widened[i]) { ++report->widened; widened_radii.push_back(out[i].radius); }
+      if (widened[i] == 1) { ++report->widened; widened_radii.push_back(out[i].radius); }
+      if (widened[i] == 2) { ++report->narrowed; narrowed_radii.push_back(out[i].radius); }
     }
-    if (!widened_radii.empty()) {
-      std::nth_element(widened_radii.begin(), widened_radii.begin() + widened_radii.size() / 2, widened_radii.end());
-      report->widened_radius_median = widened_radii[widened_radii.size() / 2];
-    }
+    auto median = [](std::vector<float>& v) {
+      if (v.empty()) return 0.f;
+      std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+      return v[v.size() / 2];
+    };
+    report->widened_radius_median = median(widened_radii);
+    report->narrowed_radius_median = median(narrowed_radii);
     report->mean_neighbours = report->fitted ? sum / report->fitted : 0.0;
   }
   return out;

@@ -41,6 +41,8 @@ std::vector<WavejetResult> fitAll(const Positions& points, const WavejetEnhancem
     report->duplicates = wr.duplicates;
     report->widened = wr.widened;
     report->widened_radius_median = wr.widened_radius_median;
+    report->narrowed = wr.narrowed;
+    report->narrowed_radius_median = wr.narrowed_radius_median;
   }
   return res;
 }

@@ -86,6 +86,16 @@ struct WavejetParameters {
   /// curvature error 0.31 without noise, 0.0036 on 50); "at least N" beats both that and
   /// plain N-nearest neighbourhoods on every surface of the bench.
   int widened_neighbours = 0;
+  /// Per-point narrowing, the converse of widening, under the same rule (`widening`: by
+  /// default only with the automatic radius): at a point whose ball of R_phi holds more than
+  /// `narrowed_neighbours` distinct positions (self included), the fit uses its
+  /// `narrowed_neighbours` nearest distinct positions (ties broken by index), rescaled to the
+  /// unit disk of radius the distance of the farthest; i.e. R_phi at the point = distance of
+  /// its cap-th nearest. Bounds the cost per point where the density is far above the
+  /// median (docs/wavejets.md: bun0.pcd, ~2,000 per ball in its dense parts, 6-9 s -> see the
+  /// table). 0 = 4 N (N the widening count above, 200 by default); any value is raised to at
+  /// least N. Never binds on evenly sampled surfaces (bench part "analytic": 0 narrowed).
+  int narrowed_neighbours = 0;
   /// Throws InvalidParameter naming the first bad value.
   void validate() const;
 };
@@ -178,12 +188,20 @@ struct WavejetReport {
   std::size_t duplicates = 0;
   std::size_t widened = 0;           ///< fitted with R_phi widened (WavejetParameters::widening)
   float widened_radius_median = 0.f; ///< median R_phi of the widened points (metres)
+  std::size_t narrowed = 0;          ///< fitted with R_phi narrowed (WavejetParameters::narrowed_neighbours)
+  float narrowed_radius_median = 0.f;///< median R_phi of the narrowed points (metres)
   float max_radius = 0.f;            ///< largest R_phi used at a fitted point (metres)
 };
 
 /// The count of distinct neighbours (self included) that order `params.order` needs before
 /// it is lowered: the smallest L with L >= beta (K+1)(K+2)/2.
 int wavejetNeededNeighbours(const WavejetParameters& params);
+
+/// The per-point neighbour counts of widening and narrowing: N = max(need,
+/// widened_neighbours or `default_neighbours` when 0) and the cap = max(N,
+/// narrowed_neighbours or 4 N when 0).
+int wavejetWidenedNeighbours(const WavejetParameters& params, int default_neighbours);
+int wavejetNarrowedNeighbours(const WavejetParameters& params, int default_neighbours);
 
 /// Wavejets of every point of `points` with neighbourhoods of radius `radius` (metres; 0:
 /// the radius holding `target_neighbours` on average over the distinct positions), widened

@@ -59,6 +59,8 @@ struct WavejetEnhancementReport {
   std::size_t duplicates = 0;    ///< points at the exact position of an earlier one (fitted once)
   std::size_t widened = 0;       ///< fitted with R_phi widened (too few points in the ball)
   float widened_radius_median = 0.f;  ///< median R_phi of those (metres)
+  std::size_t narrowed = 0;      ///< fitted with R_phi narrowed (more than the cap in the ball)
+  float narrowed_radius_median = 0.f; ///< median R_phi of those (metres)
 };
 
 /// Position filter (2.21) of `points`; only points with movable[i] (all when empty) move.

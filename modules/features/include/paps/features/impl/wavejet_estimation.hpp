@@ -44,8 +44,11 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   // duplicates are not merged here: they count as neighbours).
   const bool widen = by_radius && params_.widening == WavejetParameters::Widening::always;
   const int need = wavejetNeededNeighbours(params_);
-  const int widen_to = std::max(need, params_.widened_neighbours > 0 ? params_.widened_neighbours : 50);
-  std::vector<std::uint8_t> widened(indices.size(), 0);
+  const int widen_to = wavejetWidenedNeighbours(params_, 50);
+  // Narrowing under the same rule: a ball with more than `narrow_to` points keeps its
+  // `narrow_to` nearest (ties by index), at their radius.
+  const int narrow_to = wavejetNarrowedNeighbours(params_, 50);
+  std::vector<std::uint8_t> widened(indices.size(), 0), narrowed(indices.size(), 0);
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(NAN);
   ProgressReporter reporter(progress_, "wavejets", indices.size());
 #pragma omp parallel
@@ -54,6 +57,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
     pcl::Indices nn;
     std::vector<float> d2;
     std::vector<int> nn_int;
+    std::vector<std::pair<float, int>> order;
 #pragma omp for schedule(dynamic, 256)
     for (std::int64_t i = 0; i < count; ++i) {
       if (reporter.cancelled()) continue;
@@ -69,6 +73,15 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
           radius = std::max(radius, std::sqrt(m));
         } else if (widen && static_cast<int>(nn.size()) < widen_to) {
           this->searchForNeighbors(idx, this->search_parameter_, nn, d2);  // restore the ball
+        } else if (widen && static_cast<int>(nn.size()) > narrow_to) {
+          order.resize(nn.size());
+          for (std::size_t j = 0; j < nn.size(); ++j) order[j] = {d2[j], static_cast<int>(nn[j])};
+          std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end());
+          std::sort(order.begin(), order.begin() + narrow_to);
+          nn.resize(narrow_to);
+          for (int j = 0; j < narrow_to; ++j) nn[j] = order[j].second;
+          narrowed[i] = 1;
+          radius = std::sqrt(order[narrow_to - 1].first);
         }
         if (!by_radius) {
           float m = 0.f;
@@ -102,6 +115,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
     report_.tilt_within_noise += results[i].tilt_within_noise;
     report_.max_radius = std::max(report_.max_radius, results[i].radius);
     report_.widened += widened[i];
+    report_.narrowed += narrowed[i];
   }
   report_.mean_neighbours = report_.fitted ? sum / report_.fitted : 0.0;
   output.is_dense = dense;

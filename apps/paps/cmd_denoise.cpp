@@ -16,7 +16,7 @@ const char* kDenoiseUsage =
     "  IN, OUT                .pcd or .ply; every field of IN is kept, only x y z move\n"
     "  --method M             similarity (default) or bilateral\n"
     "  --radius R             neighbourhood radius in metres (default: from --neighbours)\n"
-    "  --neighbours N         mean neighbour count that sets the radius (default 30)\n"
+    "  --neighbours N         neighbour count of a typical point (median) that sets the radius (default 30)\n"
     "  --grid N               descriptor grid N x N (default 4)\n"
     "  --sigma S              similarity scale in metres (default: from the descriptors)\n"
     "  --sigma-scale F        multiplier of the automatic sigma^2 (default 2)\n"

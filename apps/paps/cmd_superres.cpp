@@ -25,7 +25,7 @@ const char* kSuperresUsage =
     "  --method M             qsr (default), apss or rimls\n"
     "  --radius R             patch radius (QSR) or kernel support (APSS/RIMLS) in metres\n"
     "                         (default: from --neighbours)\n"
-    "  --neighbours N         mean neighbour count that sets the radius (default 36 QSR, 30 others)\n"
+    "  --neighbours N         neighbour count of a typical point (median) that sets the radius (default 36 QSR, 30 others)\n"
     "  --similarity S         QSR similarity radius in metres (RMS height difference; default: the\n"
     "                         median distance of patches to their most similar patch)\n"
     "  --grid-lr N, --grid-sr N  QSR bins per side (default: from the data)\n"

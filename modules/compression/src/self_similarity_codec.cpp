@@ -333,7 +333,7 @@ namespace {
 // over a deterministic sample of at most 2000 points), and a grid of about that cell size.
 // The first guess comes from the area the points cover (occupied cells of a fine grid); then
 // the surface law count ~ r^2 corrects it until within 3%. The median, as in core's
-// radiusForMeanNeighbourCount: a mean count is made by the densest spots of a real scan and
+// radiusForNeighbourCount: a mean count is made by the densest spots of a real scan and
 // shrank R until most points had only their duplicate (bun0.pcd decoded to 873 points).
 float chooseRadius(const Positions& pts, std::size_t finite, float diag, int target, const std::vector<int>& sample,
                    std::unique_ptr<detail::PointGrid>& grid) {

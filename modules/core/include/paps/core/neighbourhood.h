@@ -99,12 +99,6 @@ float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index
                               NeighbourCountStatistic statistic = NeighbourCountStatistic::Median,
                               int samples = 2000);
 
-/// Former name, kept until its last callers move (same as the Median statistic).
-inline float radiusForMeanNeighbourCount(const Positions& points, const SpatialIndex& index,
-                                         int target_count, int samples = 2000) {
-  return radiusForNeighbourCount(points, index, target_count, NeighbourCountStatistic::Median, samples);
-}
-
 /// Exact duplicates: for every point, the index of the first point (in array order) at
 /// exactly the same position (itself when it is the first); -1 for non-finite points.
 /// Positions compare by value (0.0f equals -0.0f). Scans merged from several passes, or
@@ -126,7 +120,7 @@ struct RadiusNeighbourhood {
 };
 
 /// Builds a RadiusNeighbourhood. radius > 0 is used as given; radius == 0 picks the radius
-/// holding `target_neighbours` on average. At most `max_count` neighbours per point (0: all).
+/// holding `target_neighbours` around a typical point (radiusForNeighbourCount). At most `max_count` neighbours per point (0: all).
 /// Throws InvalidInput when fewer than 2 points are finite.
 RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
                                              int target_neighbours, int max_count = 0,

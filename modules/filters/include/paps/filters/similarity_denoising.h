@@ -20,7 +20,7 @@ namespace paps {
 struct SimilarityDenoisingParameters {
   /// Neighbourhood radius in metres (> 0), or 0: chosen so a ball holds `target_neighbours`.
   float radius = 0.f;
-  /// Mean neighbour count used to choose the radius (3 to 1000). Manuscript: 30.
+  /// Neighbour count of a typical (median) point at the automatic radius (3 to 1000). Manuscript: 30.
   int target_neighbours = 30;
   /// Descriptor grid is grid_size x grid_size (1 to 16). Manuscript: 3 or 4.
   int grid_size = 4;

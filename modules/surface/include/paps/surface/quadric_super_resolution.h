@@ -22,7 +22,7 @@ namespace paps {
 struct QuadricSuperResolutionParameters {
   /// Patch radius R in metres (> 0), or 0: the radius holding `target_neighbours` points.
   float patch_radius = 0.f;
-  /// Mean neighbour count that sets R when patch_radius is 0 (9 to 1000).
+  /// Neighbour count of a typical (median) point that sets R when patch_radius is 0 (9 to 1000).
   int target_neighbours = 36;
   /// Similarity radius r_sim in metres (RMS height difference over the shared valid bins),
   /// or 0: the median over patches of the distance to their most similar other patch.

@@ -29,6 +29,18 @@ double maxRadiusError(const Positions& p, float r) {
   for (const auto& x : p) e = std::max(e, static_cast<double>(std::abs(x.norm() - r)));
   return e;
 }
+// Distance between the two closest points of a cloud (Poisson-disk checks).
+float closestPairDistance(const Positions& a) {
+  const SpatialIndex index(a);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  float closest = INFINITY;
+  for (const auto& p : a) {
+    index.nearestK(p, 2, idx, d2);
+    closest = std::min(closest, std::sqrt(d2[1]));
+  }
+  return closest;
+}
 }  // namespace
 
 TEST(MlsUpsampling, ApssLandsOnSphere) {
@@ -160,14 +172,7 @@ TEST(MlsUpsampling, SeedsExactCountAndThreadIndependentOnLargeInput) {
   EXPECT_EQ(o1, o2);
   for (std::size_t s = 0; s < a.size(); s += 97) EXPECT_LE((a[s] - pts[o1[s]]).norm(), 0.7f * 1.0001f);
   // Poisson-disk: no pair much closer than the typical spacing (0.5 at this density).
-  const SpatialIndex index(a);
-  std::vector<int> idx;
-  std::vector<float> d2;
-  float closest = INFINITY;
-  for (const auto& p : a) {
-    index.nearestK(p, 2, idx, d2);
-    closest = std::min(closest, std::sqrt(d2[1]));
-  }
+  const float closest = closestPairDistance(a);
   EXPECT_GT(closest, 0.25f);
   EXPECT_LT(closest, 0.5f);
 }
@@ -251,15 +256,11 @@ TEST(MlsUpsampling, SeedSurplusDroppedWhereCrowded) {
   const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
   const Positions a = upsamplingSeeds(pts, normals, 90000, 0.7f, 11);
   ASSERT_EQ(a.size(), 90000u);
+  const float closest = closestPairDistance(a);
+  EXPECT_GT(closest, 0.29f);
   const SpatialIndex index(a);
   std::vector<int> idx;
   std::vector<float> d2;
-  float closest = INFINITY;
-  for (const auto& p : a) {
-    index.nearestK(p, 2, idx, d2);
-    closest = std::min(closest, std::sqrt(d2[1]));
-  }
-  EXPECT_GT(closest, 0.29f);
   double sq = 0;
   std::size_t probes = 0;
   for (float x = 10; x < 140; x += 0.173f)

@@ -64,10 +64,10 @@ class SeedThinner {
     side_ = side;
   }
 
-  // The kept candidates at radius d: all of them, or (pilot) those of blocks first_block to
-  // blocks_limit - 1 only (blocks_limit 0: all). Pilots, and passes without blocks or with
-  // blocks too small for d, visit the candidates in index order, sequentially.
-  std::vector<int> run(float d, std::size_t blocks_limit = 0, std::size_t first_block = 0) {
+  // The kept candidates at radius d: all of them, or (pilot) those of the first
+  // `blocks_limit` blocks only (0: all). Pilots, and passes without blocks or with blocks too
+  // small for d, visit the candidates in index order, sequentially.
+  std::vector<int> run(float d, std::size_t blocks_limit = 0) {
     const float reach = d + 2.f * disc_;
     nearLists(reach);
     reach1_sq_ = (d + disc_) * (d + disc_) * 1.0001f;
@@ -76,12 +76,11 @@ class SeedThinner {
     const std::int64_t blocks = static_cast<std::int64_t>(block_parity_.size());
     const std::int64_t nb = blocks_limit ? std::min<std::int64_t>(blocks, blocks_limit) : blocks;
     const std::size_t end = block_start_.empty() ? cand_.size() : block_start_[nb];
-    const std::size_t begin = block_start_.empty() ? 0 : block_start_[std::min<std::size_t>(first_block, nb)];
-    // Pilots (a range of the blocks) run sequentially: they are short, and on a loaded
+    // Pilots (a prefix of the blocks) run sequentially: they are short, and on a loaded
     // machine the eight parity phases would cost more in waiting than they save.
-    if (block_start_.empty() || !(side_ >= reach) || nb < blocks || begin > 0) {
+    if (block_start_.empty() || !(side_ >= reach) || nb < blocks) {
       std::fill(count_.begin(), count_.end(), 0);
-      for (std::size_t c = begin; c < end; ++c)
+      for (std::size_t c = 0; c < end; ++c)
         if (tryKeep(c, d2)) kept.push_back(static_cast<int>(c));
       return kept;
     }
@@ -329,7 +328,6 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // Two pilot passes on the first candidates (a compact part of the surface, thinned exactly
   // as the full pass would) set the radius and the exponent, so that the full pass is usually
   // right the first time.
-  const std::size_t pilot_first = 0;
   const std::size_t pilot_blocks = thinner.blocksCovering(std::max<std::size_t>(cand.size() / 12, 30000));
   const std::size_t pilot = block_start[pilot_blocks];
   double slope_hint = -1.5;
@@ -337,7 +335,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
     const double scale = static_cast<double>(cand.size()) / pilot;
     double& slope = slope_hint;
     for (int it = 0; it < 2; ++it) {
-      const double found = scale * static_cast<double>(thinner.run(static_cast<float>(d), pilot_blocks, pilot_first).size());
+      const double found = scale * static_cast<double>(thinner.run(static_cast<float>(d), pilot_blocks).size());
       if (!(found > 0)) break;
       if (prev_d > 0 && std::abs(std::log(d / prev_d)) > 1e-6 && prev_n > 0)
         slope = std::clamp(std::log(found / prev_n) / std::log(d / prev_d), -4.0, -0.3);

@@ -618,13 +618,16 @@ int wavejetNarrowedNeighbours(const WavejetParameters& params, int default_neigh
 
 namespace {
 
+// Which neighbours a point was fitted on.
+enum Support : std::uint8_t { kBall = 0, kWidened = 1, kNarrowed = 2 };
+
 // Wavejets of distinct positions (no exact duplicates). `neighbour_count` gets the count
-// used per point, `widened` whether its radius was widened (1) or narrowed (2).
+// used per point, `support` its Support.
 std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radius, const WavejetParameters& params,
                                             std::vector<WavejetCoefficients>* coefficients,
                                             const Normals* initial_normals, const Normals* orientation,
                                             const ProgressCallback& progress, int target_neighbours,
-                                            std::vector<int>& neighbour_count, std::vector<std::uint8_t>& widened) {
+                                            std::vector<int>& neighbour_count, std::vector<std::uint8_t>& support) {
   const bool automatic = radius == 0;
   const bool widen = params.widening == WavejetParameters::Widening::always ||
                      (params.widening == WavejetParameters::Widening::automatic && automatic);
@@ -637,7 +640,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   const std::int64_t count = static_cast<std::int64_t>(points.size());
   std::vector<WavejetResult> out(points.size());
   neighbour_count.assign(points.size(), 0);
-  widened.assign(points.size(), 0);
+  support.assign(points.size(), kBall);
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   ProgressReporter reporter(progress, "wavejets", points.size());
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
@@ -696,12 +699,12 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
         const int found = grid.query(sorted[s], radius, idx, cursor);
         const float r = widen && found < widen_to ? widenAt(i, wide, d2) : 0.f;
         if (r > 0) {
-          widened[i] = 1;
+          support[i] = kWidened;
           fitPoint(i, points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
         } else if (widen && found > narrow_to) {
           idx.resize(found);
           const float rn = narrowAt(sorted, sorted[s], idx, none, order);
-          widened[i] = 2;
+          support[i] = kNarrowed;
           fitPoint(i, sorted, idx.data(), narrow_to, sorted[s], rn, *ws);
         } else {
           fitPoint(i, sorted, idx.data(), found, sorted[s], radius, *ws);
@@ -725,13 +728,13 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
           const int found = index->radiusSearch(points[i], radius, idx, d2);
           const float r = widen && found < widen_to ? widenAt(static_cast<int>(i), wide, d2) : 0.f;
           if (r > 0) {
-            widened[i] = 1;
+            support[i] = kWidened;
             fitPoint(static_cast<int>(i), points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
           } else if (widen && found > narrow_to) {
             idx.resize(found);
             d2.resize(found);
             const float rn = narrowAt(points, points[i], idx, d2, order);
-            widened[i] = 2;
+            support[i] = kNarrowed;
             fitPoint(static_cast<int>(i), points, idx.data(), narrow_to, points[i], rn, *ws);
           } else {
             fitPoint(static_cast<int>(i), points, idx.data(), found, points[i], radius, *ws);
@@ -785,33 +788,33 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   }
   const bool copy = duplicates > 0;
   std::vector<int> d_count;
-  std::vector<std::uint8_t> d_widened;
+  std::vector<std::uint8_t> d_support;
   std::vector<WavejetCoefficients> d_coefficients;
   std::vector<WavejetResult> d_out =
       estimateDistinct(copy ? distinct : points, radius, params,
                        coefficients ? (copy ? &d_coefficients : coefficients) : nullptr,
                        initial_normals ? (copy ? &d_initial : initial_normals) : nullptr,
                        orientation ? (copy ? &d_orientation : orientation) : nullptr, progress,
-                       target_neighbours, d_count, d_widened);
+                       target_neighbours, d_count, d_support);
   std::vector<WavejetResult> out;
   std::vector<int> neighbour_count;
-  std::vector<std::uint8_t> widened;
+  std::vector<std::uint8_t> support;
   if (copy) {
     out.resize(points.size());
     neighbour_count.assign(points.size(), 0);
-    widened.assign(points.size(), 0);
+    support.assign(points.size(), kBall);
     if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
     for (std::size_t i = 0; i < points.size(); ++i) {
       if (slot[i] < 0) continue;
       out[i] = d_out[slot[i]];
       neighbour_count[i] = d_count[slot[i]];
-      widened[i] = d_widened[slot[i]];
+      support[i] = d_support[slot[i]];
       if (coefficients) (*coefficients)[i] = d_coefficients[slot[i]];
     }
   } else {
     out = std::move(d_out);
     neighbour_count = std::move(d_count);
-    widened = std::move(d_widened);
+    support = std::move(d_support);
   }
   if (report) {
     *report = WavejetReport();
@@ -828,8 +831,8 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       report->not_converged += !out[i].converged && !out[i].tilt_within_noise;
       report->tilt_within_noise += out[i].tilt_within_noise;
       report->max_radius = std::max(report->max_radius, out[i].radius);
-      if (widened[i] == 1) { ++report->widened; widened_radii.push_back(out[i].radius); }
-      if (widened[i] == 2) { ++report->narrowed; narrowed_radii.push_back(out[i].radius); }
+      if (support[i] == kWidened) { ++report->widened; widened_radii.push_back(out[i].radius); }
+      if (support[i] == kNarrowed) { ++report->narrowed; narrowed_radii.push_back(out[i].radius); }
     }
     auto median = [](std::vector<float>& v) {
       if (v.empty()) return 0.f;

@@ -120,7 +120,8 @@ struct RadiusNeighbourhood {
 };
 
 /// Builds a RadiusNeighbourhood. radius > 0 is used as given; radius == 0 picks the radius
-/// holding `target_neighbours` around a typical point (radiusForNeighbourCount). At most `max_count` neighbours per point (0: all).
+/// holding `target_neighbours` around a typical point (radiusForNeighbourCount). At most
+/// `max_count` neighbours per point (0: all).
 /// Throws InvalidInput when fewer than 2 points are finite.
 RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
                                              int target_neighbours, int max_count = 0,

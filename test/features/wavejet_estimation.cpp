@@ -414,25 +414,33 @@ TEST(Wavejet, OrderSelectionUnderNoise) {
   EXPECT_EQ(fitAtApex(clean, params, 0.5f).order, 4);
 }
 
-// A unit sphere sampled like a real scan of varying density: 3000 points uniform over the
-// sphere, 6000 more in the cap of 0.15 rad around +z (about 350x denser there), and every
-// point written twice (exact duplicates, as in bun0.pcd). `cap_count` returns how many of
-// the first `base` points are in the cap.
-Positions varyingDensitySphere(std::size_t& base) {
-  paps::Random rng(7);
+// A unit sphere sampled like a real scan of uneven density: `uniform` points over the whole
+// sphere, then `cap` more in the cap of angular radius `cap_angle` around +z, every point
+// written twice when `copies` (exact duplicates, as in bun0.pcd).
+Positions sphereWithDenseCap(std::uint64_t seed, std::size_t uniform, std::size_t cap, float cap_angle, bool copies) {
+  paps::Random rng(seed);
   Positions p;
   auto onSphere = [&]() {
     const Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
     return Eigen::Vector3f(v.normalized().cast<float>());
   };
-  while (p.size() < 3000) p.push_back(onSphere());
-  while (p.size() < 9000) {
+  while (p.size() < uniform) p.push_back(onSphere());
+  while (p.size() < uniform + cap) {
     const Eigen::Vector3f v = onSphere();
-    if (v.z() > std::cos(0.15f)) p.push_back(v);
+    if (v.z() > std::cos(cap_angle)) p.push_back(v);
   }
-  base = p.size();
-  for (std::size_t i = 0; i < base; ++i) p.push_back(p[i]);
+  if (copies) {
+    const std::size_t base = p.size();
+    for (std::size_t i = 0; i < base; ++i) p.push_back(p[i]);
+  }
   return p;
+}
+
+// Varying density: 3000 points over the sphere and 6000 in the cap of 0.15 rad (about 350x
+// denser), every point twice; `base` gets the count before the copies.
+Positions varyingDensitySphere(std::size_t& base) {
+  base = 9000;
+  return sphereWithDenseCap(7, 3000, 6000, 0.15f, true);
 }
 
 TEST(WavejetEstimation, VaryingDensityAndDuplicatesFittedEverywhereAtDefaults) {
@@ -557,26 +565,9 @@ TEST(WavejetEstimation, WideningWithAnExplicitRadius) {
 
 // The converse of varyingDensitySphere: a unit sphere sampled evenly (6000 points, which
 // set the automatic radius, about 50 per ball) plus a dense cluster of 4000 in a cap of
-// angular radius 0.08, where every ball of R_phi holds thousands. Every position written
-// twice (exact duplicates, as in bun0.pcd) when `copies`.
-Positions denseClusterSphere(bool copies) {
-  paps::Random rng(19);
-  Positions p;
-  auto onSphere = [&]() {
-    const Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
-    return Eigen::Vector3f(v.normalized().cast<float>());
-  };
-  while (p.size() < 6000) p.push_back(onSphere());
-  while (p.size() < 10000) {
-    const Eigen::Vector3f v = onSphere();
-    if (v.z() > std::cos(0.08f)) p.push_back(v);
-  }
-  if (copies) {
-    const std::size_t base = p.size();
-    for (std::size_t i = 0; i < base; ++i) p.push_back(p[i]);
-  }
-  return p;
-}
+// angular radius 0.08, where every ball of R_phi holds thousands; every position twice when
+// `copies`.
+Positions denseClusterSphere(bool copies) { return sphereWithDenseCap(19, 6000, 4000, 0.08f, copies); }
 
 TEST(WavejetEstimation, NarrowingBoundsCrowdedBalls) {
   // The cost of bun0.pcd: its dense parts held ~2,000 per ball of the automatic radius.

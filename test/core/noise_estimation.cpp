@@ -1,0 +1,111 @@
+// Tests of paps/core/noise_estimation.h: the noise of a plane and of a sphere with known
+// Gaussian noise is recovered, curvature is not taken for noise, a noise slab thicker than the
+// ball is handled by growing the ball, errors, determinism across thread counts.
+#include <cmath>
+#include <limits>
+
+#include <omp.h>
+
+#include <gtest/gtest.h>
+
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/noise_estimation.h>
+#include <paps/core/random.h>
+
+namespace {
+
+using paps::Positions;
+
+/// `count` points uniform on the unit square at z = 0, with Gaussian noise of `sigma`
+/// (metres) on every axis.
+Positions noisyPlane(int count, float sigma, std::uint64_t seed) {
+  paps::Random rng(seed);
+  Positions p;
+  for (int i = 0; i < count; ++i)
+    p.emplace_back(rng.uniform() + sigma * rng.gaussian(), rng.uniform() + sigma * rng.gaussian(),
+                   sigma * rng.gaussian());
+  return p;
+}
+
+/// `count` points uniform on the sphere of `radius`, Gaussian noise of `sigma` on every axis.
+Positions noisySphere(int count, float radius, float sigma, std::uint64_t seed) {
+  paps::Random rng(seed);
+  Positions p;
+  for (int i = 0; i < count; ++i) {
+    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    d.normalize();
+    p.push_back(radius * d + sigma * Eigen::Vector3f(rng.gaussian(), rng.gaussian(), rng.gaussian()));
+  }
+  return p;
+}
+
+TEST(EstimateNoiseLevel, RecoversTheNoiseOfAPlane) {
+  for (float sigma : {0.001f, 0.003f}) {
+    const Positions p = noisyPlane(50000, sigma, 3);
+    const paps::SpatialIndex index(p);
+    const float r = paps::radiusForNeighbourCount(p, index, 30);
+    const paps::NoiseEstimate e = paps::estimateNoiseLevel(p, index, r);
+    EXPECT_NEAR(e.sigma, sigma, 0.08f * sigma) << "radius " << r;
+    EXPECT_GT(e.fits, 1000u);
+  }
+}
+
+TEST(EstimateNoiseLevel, CleanSurfacesHaveNoNoiseWhateverTheirCurvature) {
+  // A sphere of radius 0.5 sampled with about 30 neighbours a ball: the quadric absorbs the
+  // curvature, so the estimate stays far below the sag of the ball (r^2 / 2R ~ 1e-3).
+  const Positions p = noisySphere(50000, 0.5f, 0.f, 5);
+  const paps::SpatialIndex index(p);
+  const float r = paps::radiusForNeighbourCount(p, index, 30);
+  const paps::NoiseEstimate e = paps::estimateNoiseLevel(p, index, r);
+  EXPECT_LT(e.sigma, 0.02f * r * r / (2 * 0.5f));
+  EXPECT_FLOAT_EQ(e.radius, r);
+}
+
+TEST(EstimateNoiseLevel, RecoversTheNoiseOfASphere) {
+  const float sigma = 0.002f;
+  const Positions p = noisySphere(50000, 0.5f, sigma, 7);
+  const paps::SpatialIndex index(p);
+  const float r = paps::radiusForNeighbourCount(p, index, 30);
+  EXPECT_NEAR(paps::estimateNoiseLevel(p, index, r).sigma, sigma, 0.08f * sigma);
+}
+
+TEST(EstimateNoiseLevel, NoiseThickerThanTheBallGrowsTheBall) {
+  // sigma = 0.6 r: at r a PCA plane is noise; the ball must grow to about 6 sigma.
+  const Positions p = noisyPlane(50000, 0.006f, 9);
+  const paps::SpatialIndex index(p);
+  const float r = 0.01f;
+  const paps::NoiseEstimate e = paps::estimateNoiseLevel(p, index, r);
+  EXPECT_GT(e.radius, 5 * 0.006f);
+  EXPECT_NEAR(e.sigma, 0.006f, 0.1f * 0.006f);
+}
+
+TEST(EstimateNoiseLevel, SameResultWithAnyThreadCount) {
+  const Positions p = noisySphere(20000, 0.5f, 0.003f, 11);
+  const paps::SpatialIndex index(p);
+  omp_set_num_threads(1);
+  const paps::NoiseEstimate a = paps::estimateNoiseLevel(p, index, 0.03f);
+  omp_set_num_threads(2);
+  const paps::NoiseEstimate b = paps::estimateNoiseLevel(p, index, 0.03f);
+  EXPECT_EQ(a.sigma, b.sigma);
+  EXPECT_EQ(a.radius, b.radius);
+  EXPECT_EQ(a.fits, b.fits);
+}
+
+TEST(EstimateNoiseLevel, BadInputGivesClearErrors) {
+  const Positions p = noisyPlane(1000, 0.001f, 13);
+  const paps::SpatialIndex index(p);
+  EXPECT_THROW(paps::estimateNoiseLevel(p, index, 0.f), paps::InvalidParameter);
+  EXPECT_THROW(paps::estimateNoiseLevel(p, index, std::numeric_limits<float>::quiet_NaN()),
+               paps::InvalidParameter);
+  EXPECT_THROW(paps::estimateNoiseLevel(p, index, 0.1f, 0), paps::InvalidParameter);
+  // No ball of 1e-6 m holds 10 points.
+  EXPECT_THROW(paps::estimateNoiseLevel(p, index, 1e-6f), paps::InvalidInput);
+  // Fewer than 10 finite points.
+  Positions few(p.begin(), p.begin() + 9);
+  few.push_back(Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
+  const paps::SpatialIndex few_index(few);
+  EXPECT_THROW(paps::estimateNoiseLevel(few, few_index, 1.f), paps::InvalidInput);
+}
+
+}  // namespace

@@ -68,6 +68,8 @@ WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::stri
   while (std::getline(lf, line)) {
     if (line.rfind("seconds ", 0) == 0) r.seconds = std::atof(line.c_str() + 8);
     else if (line.rfind("error ", 0) == 0) r.message = line.substr(6);
+    else if (line.rfind("radius ", 0) == 0) r.radius = std::atof(line.c_str() + 7);
+    else if (line.rfind("chosen ", 0) == 0) r.chosen = line.substr(7);
   }
   r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
   if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
@@ -110,8 +112,18 @@ int runBenchWorker(int argc, char** argv) {
       q.descriptor_smoothing = static_cast<int>(get("guide", q.descriptor_smoothing));
       q.guided_passes = get("guided", 1) != 0;
       q.own_weight = static_cast<float>(get("own", q.own_weight));
+      q.adapt_to_noise = get("adapt", 1) != 0;
       if (get("centre", 0) != 0) q.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
-      output = denoiseBySimilarity(input, q);
+      SimilarityDenoisingReport report;
+      output = denoiseBySimilarity(input, q, &report);
+      lf << "radius " << report.radius << "\n";
+      if (report.noise_sigma > 0) {
+        char b[160];
+        std::snprintf(b, sizeof b, "noise %.3g, radius x%.2f, own %g, %d pass%s", report.noise_sigma,
+                      report.radius_scale, report.own_weight, report.passes,
+                      report.passes > 1 ? (report.guided_passes ? "es guided" : "es refiltered") : "");
+        lf << "chosen " << b << "\n";
+      }
     } else if (method == "bilateral") {
       PointBilateralParameters q;
       q.radius = static_cast<float>(get("radius", 0));

@@ -14,6 +14,8 @@ struct WorkerResult {
   double seconds = 0;      // algorithm wall time, measured in the child around the call only
   double peak_mb = 0;      // peak resident memory of the child
   std::string message;     // child's error line when !ok
+  double radius = 0;       // radius the method used, when it reports one (metres)
+  std::string chosen;      // what an automatic setting chose, when it reports it
   Positions output;
 };
 

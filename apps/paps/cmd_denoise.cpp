@@ -3,6 +3,8 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
 
@@ -15,8 +17,13 @@ const char* kDenoiseUsage =
     "usage: paps denoise IN OUT [options]\n"
     "  IN, OUT                .pcd or .ply; every field of IN is kept, only x y z move\n"
     "  --method M             similarity (default) or bilateral\n"
-    "  --radius R             neighbourhood radius in metres (default: from --neighbours)\n"
-    "  --neighbours N         neighbour count of a typical point (median) that sets the radius (default 30)\n"
+    "  --radius R             neighbourhood radius in metres (default: from --neighbours, grown\n"
+    "                         with the measured noise; see --no-adapt)\n"
+    "  --neighbours N         neighbour count of a typical point (median) that sets the base radius (default 30)\n"
+    "  --noise S              noise standard deviation of IN in metres (default: measured)\n"
+    "  --no-adapt             keep the base radius and the given passes/own weight whatever the\n"
+    "                         noise (default: radius, passes and own weight follow the noise;\n"
+    "                         --passes, --refilter, --own-weight given explicitly are kept)\n"
     "  --grid N               descriptor grid N x N (default 4)\n"
     "  --sigma S              similarity scale in metres (default: from the descriptors)\n"
     "  --sigma-scale F        multiplier of the automatic sigma^2 (default 2)\n"
@@ -35,12 +42,21 @@ const char* kDenoiseUsage =
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 
+namespace {
+std::string adaptedNote(float noise, bool measured, float scale) {
+  char b[160];
+  std::snprintf(b, sizeof b, " (chosen: noise %.3g m%s, %.2f x the base radius)", noise, measured ? " measured" : "",
+                scale);
+  return b;
+}
+}  // namespace
+
 int runDenoise(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
-               "refilter", "aggregate", "own-weight"});
+               "refilter", "aggregate", "own-weight", "noise", "no-adapt"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
@@ -75,12 +91,32 @@ int runDenoise(int argc, char** argv) {
       p.use_viewpoint = true;
       p.viewpoint = origin;
     }
+    p.noise_sigma = static_cast<float>(a.number("noise", 0));
+    p.adapt_to_noise = !a.has("no-adapt");
+    p.validate();
+    // Explicit schedule options keep their values: only the radius then follows the noise.
+    const bool explicit_schedule = a.has("passes") || a.has("refilter") || a.has("own-weight");
+    std::string adapted;
+    if (p.radius == 0 && p.adapt_to_noise && explicit_schedule) {
+      const SpatialIndex index(in);
+      const float r0 = radiusForNeighbourCount(in, index, p.target_neighbours);
+      const float noise = p.noise_sigma > 0 ? p.noise_sigma : estimateNoiseLevel(in, index, r0).sigma;
+      p.radius = noiseAdaptedParameters(p, r0, noise).radius;
+      p.adapt_to_noise = false;
+      adapted = adaptedNote(noise, !a.has("noise"), p.radius / r0);
+    }
     SimilarityDenoisingReport r;
     out = denoiseBySimilarity(in, p, &r, {}, progress);
+    if (r.noise_sigma > 0 || (p.adapt_to_noise && p.radius == 0))
+      adapted = adaptedNote(r.noise_sigma, r.noise_estimated, r.radius_scale);
+    else if (adapted.empty() && a.number("radius", 0) == 0)
+      adapted = " (chosen from the neighbour count)";
     std::printf("similarity denoising: radius %g m%s (mean %.1f neighbours), grid %dx%d, sigma %g m%s, "
-                "%d smoothing iterations, %d similar patches\n",
-                r.radius, p.radius > 0 ? "" : " (chosen)", r.mean_neighbours, p.grid_size, p.grid_size,
-                r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches);
+                "%d smoothing iterations, %d similar patches, %d pass%s%s, own weight %g\n",
+                r.radius, adapted.c_str(), r.mean_neighbours, p.grid_size, p.grid_size,
+                r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches,
+                r.passes, r.passes > 1 ? "es" : "", r.passes > 1 ? (r.guided_passes ? " (guided)" : " (refiltered)") : "",
+                r.own_weight);
     std::printf("normals oriented %s; moved %zu points; %zu NaN points passed through\n",
                 p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours and were left in place\n", r.isolated);

@@ -13,6 +13,7 @@
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/plane_height_patch.h>
 
 namespace paps {
@@ -21,6 +22,8 @@ void SimilarityDenoisingParameters::validate() const {
   if (!(radius >= 0) || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   requireInRange("target_neighbours", target_neighbours, 3, 1000);
+  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma))
+    throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "0 (estimated) or a finite value > 0");
   requireInRange("grid_size", grid_size, 1, 16);
   if (!(sigma >= 0) || !std::isfinite(sigma))
     throw InvalidParameter("sigma", detail::toString(sigma), "0 (automatic) or a finite value > 0");
@@ -435,20 +438,69 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
 
 }  // namespace
 
+SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingParameters& params,
+                                                     float base_radius, float noise_sigma) {
+  requirePositive("base_radius", base_radius);
+  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma))
+    throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "a finite value >= 0");
+  // Measured (docs/denoising.md, "Noise-adaptive defaults"): below q = 0.2 the detail costs
+  // more than the noise and the target-count radius is best; the best radius then grows with
+  // the noise until the neighbour cap (4 x target) makes a larger ball pointless (x2.5).
+  // The own patch at half the weight wins below q = 0.6; above, the guide itself is too noisy
+  // and filtering the first output once more wins.
+  const float q = noise_sigma / base_radius;
+  SimilarityDenoisingParameters p = params;
+  const float scale = std::clamp(1.f + (q - 0.2f) * (1.5f / 0.45f), 1.f, 2.5f);
+  p.radius = base_radius * scale;
+  if (q < 0.6f) {
+    p.passes = 1;
+    p.own_weight = 1.f;
+  } else {
+    p.passes = 2;
+    p.guided_passes = false;
+    p.own_weight = 0.f;
+  }
+  return p;
+}
+
 Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
                               SimilarityDenoisingReport* report_out,
                               const std::vector<std::uint8_t>& movable,
                               const ProgressCallback& progress) {
   params.validate();
+  SimilarityDenoisingParameters run = params;
+  float noise = 0.f, scale = 1.f;
+  bool estimated = false;
+  if (params.radius == 0 && params.adapt_to_noise && countFinite(points) >= 10) {
+    const SpatialIndex index(points);
+    const float r0 = radiusForNeighbourCount(points, index, params.target_neighbours);
+    noise = params.noise_sigma;
+    if (noise == 0) {
+      try {
+        noise = estimateNoiseLevel(points, index, r0).sigma;
+        estimated = true;
+      } catch (const InvalidInput&) {
+        noise = 0;  // no ball holds enough points for a fit: nothing to adapt to
+      }
+    }
+    run = noiseAdaptedParameters(params, r0, noise);
+    scale = run.radius / r0;
+  }
   Positions cur = points;
   SimilarityDenoisingReport report;
-  for (int pass = 0; pass < params.passes; ++pass) {
+  for (int pass = 0; pass < run.passes; ++pass) {
     // Later passes keep the radius of the first, so the scale does not drift.
-    SimilarityDenoisingParameters p = params;
+    SimilarityDenoisingParameters p = run;
     if (pass > 0) p.radius = report.radius;
-    if (pass > 0 && params.guided_passes) cur = denoiseOnce(points, p, &report, movable, progress, &cur);
+    if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, p, &report, movable, progress, &cur);
     else cur = denoiseOnce(cur, p, &report, movable, progress);
   }
+  report.noise_sigma = noise;
+  report.noise_estimated = estimated;
+  report.radius_scale = scale;
+  report.passes = run.passes;
+  report.guided_passes = run.guided_passes;
+  report.own_weight = run.own_weight;
   if (report_out) *report_out = report;
   return cur;
 }

@@ -18,10 +18,19 @@ namespace paps {
 
 /// Parameters of similarity denoising. Zero means "choose from the data".
 struct SimilarityDenoisingParameters {
-  /// Neighbourhood radius in metres (> 0), or 0: chosen so a ball holds `target_neighbours`.
+  /// Neighbourhood radius in metres (> 0), or 0: chosen from the data, see `adapt_to_noise`.
   float radius = 0.f;
   /// Neighbour count of a typical (median) point at the automatic radius (3 to 1000). Manuscript: 30.
   int target_neighbours = 30;
+  /// With the automatic radius (radius == 0): measure the noise sigma of the input
+  /// (paps::estimateNoiseLevel at the radius r0 holding `target_neighbours`) and set the
+  /// radius, `own_weight`, `passes` and `guided_passes` from q = sigma / r0 by the rule of
+  /// noiseAdaptedParameters (measured, docs/denoising.md "Noise-adaptive defaults"); the
+  /// values of those three given here are then not used. Off, or with an explicit radius:
+  /// the radius is r0 (or the given one) and every parameter is used as given.
+  bool adapt_to_noise = true;
+  /// Noise standard deviation of the input (metres, >= 0) for `adapt_to_noise`; 0: estimated.
+  float noise_sigma = 0.f;
   /// Descriptor grid is grid_size x grid_size (1 to 16). Manuscript: 3 or 4.
   int grid_size = 4;
   /// Similarity scale in metres (> 0), or 0: sigma^2 is the median over points of the mean
@@ -72,12 +81,26 @@ struct SimilarityDenoisingParameters {
 /// What a run chose and met.
 struct SimilarityDenoisingReport {
   float radius = 0.f;              ///< radius used (metres)
+  float noise_sigma = 0.f;         ///< noise the radius was adapted to (metres; 0: no adaptation)
+  bool noise_estimated = false;    ///< noise_sigma was measured (not given)
+  float radius_scale = 1.f;        ///< radius / the target-count radius (1 without adaptation)
+  int passes = 1;                  ///< passes run
+  bool guided_passes = true;       ///< later passes were guided (else refiltered)
+  float own_weight = 0.f;          ///< own patch weight used
   float sigma = 0.f;               ///< similarity scale used (metres)
   double mean_neighbours = 0.0;    ///< mean neighbour count at that radius
   std::size_t moved = 0;           ///< points denoised
   std::size_t isolated = 0;        ///< finite points left in place: fewer than 4 neighbours
   std::size_t non_finite = 0;      ///< NaN/Inf points passed through
 };
+
+/// The noise-adaptive rule (measured on the engraved plane and the rs1 scan at 0.05% to 0.5%
+/// noise, docs/denoising.md): `params` with radius = base_radius x s(q), q = noise_sigma /
+/// base_radius, s growing linearly from 1 at q <= 0.2 to 2.5 at q >= 0.65; below q = 0.6 one
+/// pass with own_weight 1, from there two refiltering passes with own_weight 0. Every other
+/// field is kept. base_radius > 0 and noise_sigma >= 0, else InvalidParameter.
+SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingParameters& params,
+                                                     float base_radius, float noise_sigma);
 
 /// Denoises `points` (non-finite entries pass through). Only points with `movable[i]` set
 /// (all when empty) move; all finite points serve as neighbours and similar patches.
@@ -107,6 +130,10 @@ class SimilarityDenoising : public pcl::Filter<PointT> {
   /// Radius in metres; 0 chooses it from the target neighbour count.
   void setRadius(float r);
   void setTargetNeighbours(int n);
+  /// With the automatic radius, scale radius and passes to the measured noise (default on).
+  void setAdaptToNoise(bool on);
+  /// Noise standard deviation in metres for the adaptation; 0 estimates it.
+  void setNoiseSigma(float s);
   void setGridSize(int n);
   /// Similarity scale in metres; 0 chooses it from the descriptor statistics.
   void setSigma(float s);

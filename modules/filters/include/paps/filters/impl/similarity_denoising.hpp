@@ -10,6 +10,12 @@ template <typename PointT> void SimilarityDenoising<PointT>::setRadius(float r) 
 template <typename PointT> void SimilarityDenoising<PointT>::setTargetNeighbours(int n) {
   auto p = params_; p.target_neighbours = n; setParameters(p);
 }
+template <typename PointT> void SimilarityDenoising<PointT>::setAdaptToNoise(bool on) {
+  auto p = params_; p.adapt_to_noise = on; setParameters(p);
+}
+template <typename PointT> void SimilarityDenoising<PointT>::setNoiseSigma(float s) {
+  auto p = params_; p.noise_sigma = s; setParameters(p);
+}
 template <typename PointT> void SimilarityDenoising<PointT>::setGridSize(int n) {
   auto p = params_; p.grid_size = n; setParameters(p);
 }

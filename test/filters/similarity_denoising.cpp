@@ -182,12 +182,12 @@ TEST(SimilarityDenoising, NoiseAdaptedParametersFollowTheMeasuredRule) {
   const SimilarityDenoisingParameters mid = paps::noiseAdaptedParameters(base, 0.01f, 0.00425f);
   EXPECT_NEAR(mid.radius, 0.0175f, 1e-6f);
   EXPECT_EQ(mid.passes, 1);
-  // q >= 0.65: 2.5 x the radius, two refiltering passes with the non-local-means own weight.
+  // q >= 0.65: 2.5 x the radius, two refiltering passes.
   const SimilarityDenoisingParameters heavy = paps::noiseAdaptedParameters(base, 0.01f, 0.02f);
   EXPECT_FLOAT_EQ(heavy.radius, 0.025f);
   EXPECT_EQ(heavy.passes, 2);
   EXPECT_FALSE(heavy.guided_passes);
-  EXPECT_FLOAT_EQ(heavy.own_weight, 0.f);
+  EXPECT_FLOAT_EQ(heavy.own_weight, 1.f);
   EXPECT_THROW(paps::noiseAdaptedParameters(base, 0.f, 0.001f), paps::InvalidParameter);
   EXPECT_THROW(paps::noiseAdaptedParameters(base, 0.01f, -1.f), paps::InvalidParameter);
   SimilarityDenoisingParameters bad;

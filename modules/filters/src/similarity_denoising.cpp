@@ -445,21 +445,16 @@ SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingPa
     throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "a finite value >= 0");
   // Measured (docs/denoising.md, "Noise-adaptive defaults"): below q = 0.2 the detail costs
   // more than the noise and the target-count radius is best; the best radius then grows with
-  // the noise until the neighbour cap (4 x target) makes a larger ball pointless (x2.5).
-  // The own patch at half the weight wins below q = 0.6; above, the guide itself is too noisy
-  // and filtering the first output once more wins.
+  // the noise until the neighbour cap (4 x target) makes a larger ball pointless (x2.5). The
+  // own patch at half the weight wins at every noise level measured; from q = 0.6 the first
+  // output is still noisy enough that filtering it once more wins.
   const float q = noise_sigma / base_radius;
   SimilarityDenoisingParameters p = params;
   const float scale = std::clamp(1.f + (q - 0.2f) * (1.5f / 0.45f), 1.f, 2.5f);
   p.radius = base_radius * scale;
-  if (q < 0.6f) {
-    p.passes = 1;
-    p.own_weight = 1.f;
-  } else {
-    p.passes = 2;
-    p.guided_passes = false;
-    p.own_weight = 0.f;
-  }
+  p.own_weight = 1.f;
+  p.passes = q < 0.6f ? 1 : 2;
+  p.guided_passes = false;
   return p;
 }
 

@@ -96,9 +96,8 @@ struct SimilarityDenoisingReport {
 
 /// The noise-adaptive rule (measured on the engraved plane and the rs1 scan at 0.05% to 0.5%
 /// noise, docs/denoising.md): `params` with radius = base_radius x s(q), q = noise_sigma /
-/// base_radius, s growing linearly from 1 at q <= 0.2 to 2.5 at q >= 0.65; below q = 0.6 one
-/// pass with own_weight 1, from there two refiltering passes with own_weight 0. Every other
-/// field is kept. base_radius > 0 and noise_sigma >= 0, else InvalidParameter.
+/// base_radius, s growing linearly from 1 at q <= 0.2 to 2.5 at q >= 0.65; own_weight 1; one
+/// pass below q = 0.6, from there two refiltering passes. Every other field is kept. base_radius > 0 and noise_sigma >= 0, else InvalidParameter.
 SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingParameters& params,
                                                      float base_radius, float noise_sigma);
 

@@ -302,12 +302,12 @@ std::vector<Estimate> runCgal(const Positions& p, float radius, int order, doubl
 // local model, i.e. the best linear unbiased estimate on the ball of R_phi), PCL at R and at
 // R/2, and CGAL jet fitting of degree K (when built with CGAL).
 struct MethodEstimates {
-  std::vector<Estimate> ours, sel, sel2, bound, pcl, pcl_half, cgal, def;
-  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_bound = 0, t_pcl = 0, t_half = 0, t_cgal = NAN, t_def = 0;
+  std::vector<Estimate> ours, sel, sel2, bound, pcl, pcl_half, cgal, def, cgal2;
+  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_bound = 0, t_pcl = 0, t_half = 0, t_cgal = NAN, t_def = 0, t_cgal2 = NAN;
   WavejetReport def_report;
 };
 MethodEstimates runMethods(const Positions& p, float radius, int order, const Normals& tn, bool with_bound,
-                           int neighbours) {
+                           int neighbours, bool cgal_2r = false) {
   MethodEstimates m;
   m.def = runDefault(p, order, neighbours, tn, m.t_def, &m.def_report);
   m.ours = runWavejets(p, radius, order, tn, m.t_ours);
@@ -318,13 +318,17 @@ MethodEstimates runMethods(const Positions& p, float radius, int order, const No
   m.pcl_half = runPcl(p, radius / 2, m.t_half, true);
 #ifdef PAPS_HAVE_CGAL
   m.cgal = runCgal(p, radius, order, m.t_cgal);
+  // CGAL at 2 R_phi: the support the default uses under noise (--cgal-2r; slow).
+  if (cgal_2r) m.cgal2 = runCgal(p, 2 * radius, order, m.t_cgal2);
+#else
+  (void)cgal_2r;
 #endif
   return m;
 }
 
 // The errors of every method against one truth (normals of the truth orient the estimates).
 struct Comparison {
-  Errors ours, sel, sel2, bound, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal, def;
+  Errors ours, sel, sel2, bound, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal, def, cgal2;
 };
 // Scored on the points where every method has an estimate (a method that leaves the hardest
 // points out, e.g. by a larger beta, must not look better for it); `scored` gets their count.
@@ -333,7 +337,7 @@ Comparison scoreMethods(const MethodEstimates& m, float radius, const std::vecto
   std::vector<int> eval;
   for (const int i : all_eval) {
     bool ok = true;
-    for (const auto* e : {&m.ours, &m.sel, &m.sel2, &m.bound, &m.pcl, &m.pcl_half, &m.cgal, &m.def})
+    for (const auto* e : {&m.ours, &m.sel, &m.sel2, &m.bound, &m.pcl, &m.pcl_half, &m.cgal, &m.def, &m.cgal2})
       if (!e->empty()) ok = ok && std::isfinite((*e)[i].k1) && std::isfinite((*e)[i].k2) && isFinite((*e)[i].n);
     if (ok) eval.push_back(i);
   }
@@ -352,6 +356,7 @@ Comparison scoreMethods(const MethodEstimates& m, float radius, const std::vecto
   c.pcl_geom = score(geometricPcl(m.pcl, radius), truth, eval, true);
   c.pcl_half = score(calibratePcl(m.pcl_half, truth, eval), truth, eval, true);
   if (!m.cgal.empty()) c.cgal = score(oriented(m.cgal), truth, eval, false);
+  if (!m.cgal2.empty()) c.cgal2 = score(oriented(m.cgal2), truth, eval, false);
   return c;
 }
 
@@ -503,14 +508,15 @@ const char* kBenchCurvatureUsage =
     "  --speed-points N   size of the speed run (default 1000000, 0: skip)\n"
     "  --out DIR          where the PNG renders go (default .)\n"
     "  --skip LIST        parts left out, a comma list of analytic, tilt, scan, density, render, speed\n"
-    "  --noise LIST       noise levels of the analytic part, fractions of R_phi (default 0,0.0025,0.005,0.01)\n";
+    "  --noise LIST       noise levels of the analytic part, fractions of R_phi (default 0,0.0025,0.005,0.01)\n"
+    "  --cgal-2r          also CGAL jet fitting at 2 R_phi in the table of ours default (slow)\n";
 
 }  // namespace
 
 int runBenchCurvature(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"help", "cgal-2r"});
   if (a.has("help")) { std::fputs(kBenchCurvatureUsage, stdout); return 0; }
-  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "skip", "help", "noise"});
+  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "skip", "help", "noise", "cgal-2r"});
   const std::string skip = "," + a.text("skip", "") + ",";
   for (std::size_t b = 1; b < skip.size();) {
     const std::size_t e = skip.find(',', b);
@@ -560,7 +566,9 @@ int runBenchCurvature(int argc, char** argv) {
     for (std::size_t b = 0, e; (e = list.find(',', b)) != std::string::npos; b = e + 1)
       if (e > b) noise_levels.push_back(std::stod(list.substr(b, e - b)));
   }
-  double worst_def_pcl = 0, worst_def_geom = 0, worst_def_half = 0, worst_def_cgal = 0, worst_def_clean = 0;
+  double worst_def_pcl = 0, worst_def_geom = 0, worst_def_half = 0, worst_def_cgal = 0, worst_def_clean = 0,
+         worst_def_cgal2 = 0;
+  const bool cgal_2r = a.has("cgal-2r");
   std::string default_rows;
   double worst_ratio_pcl = 0, worst_ratio_cgal = 0, worst_sel_pcl = 0, worst_raw_pcl = 0;
   double worst_bound_half = 0, min_scored = 1;
@@ -584,7 +592,7 @@ int runBenchCurvature(int argc, char** argv) {
       Random rng(seed * 7919 + std::uint64_t(noise * 1e6));
       for (auto& x : p)
         x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
-      const MethodEstimates m = runMethods(p, radius, order, tn, true, neighbours);
+      const MethodEstimates m = runMethods(p, radius, order, tn, true, neighbours, cgal_2r);
       // The cap of narrowing at the automatic radius (paps curvature's defaults) on an evenly
       // sampled surface: counted, expected 0.
       analytic_narrowed += m.def_report.narrowed;
@@ -624,13 +632,17 @@ int runBenchCurvature(int argc, char** argv) {
         worst_def_half = std::max(worst_def_half, ed.curv_rel / eph.curv_rel);
         if (ec.curv_rel > 1e-3) worst_def_cgal = std::max(worst_def_cgal, ed.curv_rel / ec.curv_rel);
         if (noise == 0) worst_def_clean = std::max(worst_def_clean, ed.curv_rel);
-        char line[512];
+        char line[512], cgal2_cells[64] = "";
+        if (cgal_2r)
+          std::snprintf(cgal2_cells, sizeof cgal2_cells, " %.4f | %.3f |", c.cgal2.curv_rel, ed.curv_rel / c.cgal2.curv_rel);
         std::snprintf(line, sizeof line,
-                      "| %s | %.2f%% | %.2e | %.2e | %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3f | %.3f | %.3f | %.3f | %.2f |\n",
+                      "| %s | %.2f%% | %.2e | %.2e | %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3f | %.3f | %.3f | %.3f | %.2f |%s\n",
                       s.name.c_str(), noise * 100, dr.noise_sigma / radius, quadric_sigma / radius,
                       defaultChoice(dr).c_str(), ed.curv_rel, eo.curv_rel, es.curv_rel, es2.curv_rel, ec.curv_rel,
                       epc.curv_rel, epg.curv_rel, eph.curv_rel, ed.curv_rel / epc.curv_rel,
-                      ec.curv_rel > 1e-3 ? ed.curv_rel / ec.curv_rel : NAN, ed.normal_deg, ec.normal_deg, m.t_def);
+                      ec.curv_rel > 1e-3 ? ed.curv_rel / ec.curv_rel : NAN, ed.normal_deg, ec.normal_deg, m.t_def,
+                      cgal2_cells);
+        if (cgal_2r && c.cgal2.curv_rel > 1e-3) worst_def_cgal2 = std::max(worst_def_cgal2, ed.curv_rel / c.cgal2.curv_rel);
         default_rows += line;
       }
       std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
@@ -659,8 +671,11 @@ int runBenchCurvature(int argc, char** argv) {
               neighbours);
   std::printf("pilot = sigma of the default's order-%d residuals / the bench's R_phi; quadric = core\n"
               "estimateNoiseLevel sigma / R_phi at the bench's R_phi; choice = fixed order or selection, neighbour count\n\n", order);
-  std::printf("| surface | noise | pilot | quadric | choice | ours default curv | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL(R/2) cal. curv | default / PCL cal. | default / CGAL | ours default normal | CGAL normal | ours default s |\n");
-  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n%s", default_rows.c_str());
+  std::printf("| surface | noise | pilot | quadric | choice | ours default curv | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL(R/2) cal. curv | default / PCL cal. | default / CGAL | ours default normal | CGAL normal | ours default s |%s\n",
+              cgal_2r ? " CGAL 2R curv | default / CGAL 2R |" : "");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n%s", cgal_2r ? "---|---|" : "",
+              default_rows.c_str());
+  if (cgal_2r) std::printf("\nworst ratio of ours default / CGAL degree %d at 2 R_phi (where CGAL > 1e-3): %.3f\n", order, worst_def_cgal2);
   std::printf("\nworst ratios of ours default: / PCL cal. %.3f, / PCL geom. %.3f, / PCL(R/2) cal. %.3f, / CGAL %.3f (where "
               "CGAL > 1e-3); largest error without noise %.4f\n", worst_def_pcl, worst_def_geom, worst_def_half,
               worst_def_cgal, worst_def_clean);

@@ -28,6 +28,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/random.h>
 #include <paps/core/triangle_mesh.h>
 #include <paps/features/wavejet.h>
@@ -170,6 +171,7 @@ std::vector<Estimate> runWavejets(const Positions& p, float radius, int order, c
   WavejetParameters params;
   params.order = order;
   params.select_order = select_order;
+  params.order_policy = select_order ? WavejetParameters::OrderPolicy::select : WavejetParameters::OrderPolicy::fixed;
   if (select_order) params.beta = 3.f;
   if (initial) params.max_refits = 0;
   const auto t0 = Clock::now();
@@ -178,6 +180,27 @@ std::vector<Estimate> runWavejets(const Positions& p, float radius, int order, c
   std::vector<Estimate> out(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) out[i] = {res[i].normal, res[i].k1, res[i].k2};
   return out;
+}
+
+// What `paps curvature` does by default: automatic radius for `neighbours` (widened and
+// narrowed per point), order policy automatic (noise-aware), order K.
+std::vector<Estimate> runDefault(const Positions& p, int order, int neighbours, const Normals& hints, double& secs,
+                                 WavejetReport* report) {
+  WavejetParameters params;
+  params.order = order;
+  const auto t0 = Clock::now();
+  const auto res = estimateWavejets(p, 0.f, params, report, nullptr, nullptr, &hints, {}, neighbours);
+  secs = since(t0);
+  std::vector<Estimate> out(p.size());
+  for (std::size_t i = 0; i < p.size(); ++i) out[i] = {res[i].normal, res[i].k1, res[i].k2};
+  return out;
+}
+
+// "fixed, R x1" or "sel., R x2" for a default run.
+std::string defaultChoice(const WavejetReport& r) {
+  char b[96];
+  std::snprintf(b, sizeof b, "%s, R x%g", r.select_order ? "sel." : "fixed", r.support_scale);
+  return b;
 }
 
 // PCL: normals by NormalEstimation, curvatures by PrincipalCurvaturesEstimation (unsigned,
@@ -279,11 +302,14 @@ std::vector<Estimate> runCgal(const Positions& p, float radius, int order, doubl
 // local model, i.e. the best linear unbiased estimate on the ball of R_phi), PCL at R and at
 // R/2, and CGAL jet fitting of degree K (when built with CGAL).
 struct MethodEstimates {
-  std::vector<Estimate> ours, sel, sel2, bound, pcl, pcl_half, cgal;
-  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_bound = 0, t_pcl = 0, t_half = 0, t_cgal = NAN;
+  std::vector<Estimate> ours, sel, sel2, bound, pcl, pcl_half, cgal, def, cgal2;
+  double t_ours = 0, t_sel = 0, t_sel2 = 0, t_bound = 0, t_pcl = 0, t_half = 0, t_cgal = NAN, t_def = 0, t_cgal2 = NAN;
+  WavejetReport def_report;
 };
-MethodEstimates runMethods(const Positions& p, float radius, int order, const Normals& tn, bool with_bound) {
+MethodEstimates runMethods(const Positions& p, float radius, int order, const Normals& tn, bool with_bound,
+                           int neighbours, bool cgal_2r = false) {
   MethodEstimates m;
+  m.def = runDefault(p, order, neighbours, tn, m.t_def, &m.def_report);
   m.ours = runWavejets(p, radius, order, tn, m.t_ours);
   m.sel = runWavejets(p, radius, order, tn, m.t_sel, nullptr, true);
   m.sel2 = runWavejets(p, 2 * radius, order, tn, m.t_sel2, nullptr, true);
@@ -292,13 +318,17 @@ MethodEstimates runMethods(const Positions& p, float radius, int order, const No
   m.pcl_half = runPcl(p, radius / 2, m.t_half, true);
 #ifdef PAPS_HAVE_CGAL
   m.cgal = runCgal(p, radius, order, m.t_cgal);
+  // CGAL at 2 R_phi: the support the default uses under noise (--cgal-2r; slow).
+  if (cgal_2r) m.cgal2 = runCgal(p, 2 * radius, order, m.t_cgal2);
+#else
+  (void)cgal_2r;
 #endif
   return m;
 }
 
 // The errors of every method against one truth (normals of the truth orient the estimates).
 struct Comparison {
-  Errors ours, sel, sel2, bound, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal;
+  Errors ours, sel, sel2, bound, pcl_raw, pcl_cal, pcl_geom, pcl_half, cgal, def, cgal2;
 };
 // Scored on the points where every method has an estimate (a method that leaves the hardest
 // points out, e.g. by a larger beta, must not look better for it); `scored` gets their count.
@@ -307,7 +337,7 @@ Comparison scoreMethods(const MethodEstimates& m, float radius, const std::vecto
   std::vector<int> eval;
   for (const int i : all_eval) {
     bool ok = true;
-    for (const auto* e : {&m.ours, &m.sel, &m.sel2, &m.bound, &m.pcl, &m.pcl_half, &m.cgal})
+    for (const auto* e : {&m.ours, &m.sel, &m.sel2, &m.bound, &m.pcl, &m.pcl_half, &m.cgal, &m.def, &m.cgal2})
       if (!e->empty()) ok = ok && std::isfinite((*e)[i].k1) && std::isfinite((*e)[i].k2) && isFinite((*e)[i].n);
     if (ok) eval.push_back(i);
   }
@@ -319,12 +349,14 @@ Comparison scoreMethods(const MethodEstimates& m, float radius, const std::vecto
   c.ours = score(oriented(m.ours), truth, eval, false);
   c.sel = score(oriented(m.sel), truth, eval, false);
   c.sel2 = score(oriented(m.sel2), truth, eval, false);
+  if (!m.def.empty()) c.def = score(oriented(m.def), truth, eval, false);
   if (!m.bound.empty()) c.bound = score(oriented(m.bound), truth, eval, false);
   c.pcl_raw = score(m.pcl, truth, eval, true);
   c.pcl_cal = score(calibratePcl(m.pcl, truth, eval), truth, eval, true);
   c.pcl_geom = score(geometricPcl(m.pcl, radius), truth, eval, true);
   c.pcl_half = score(calibratePcl(m.pcl_half, truth, eval), truth, eval, true);
   if (!m.cgal.empty()) c.cgal = score(oriented(m.cgal), truth, eval, false);
+  if (!m.cgal2.empty()) c.cgal2 = score(oriented(m.cgal2), truth, eval, false);
   return c;
 }
 
@@ -475,14 +507,16 @@ const char* kBenchCurvatureUsage =
     "  --scan-step N      evaluate on every N-th scan vertex (default 4)\n"
     "  --speed-points N   size of the speed run (default 1000000, 0: skip)\n"
     "  --out DIR          where the PNG renders go (default .)\n"
-    "  --skip LIST        parts left out, a comma list of analytic, tilt, scan, density, render, speed\n";
+    "  --skip LIST        parts left out, a comma list of analytic, tilt, scan, density, render, speed\n"
+    "  --noise LIST       noise levels of the analytic part, fractions of R_phi (default 0,0.0025,0.005,0.01)\n"
+    "  --cgal-2r          also CGAL jet fitting at 2 R_phi in the table of ours default (slow)\n";
 
 }  // namespace
 
 int runBenchCurvature(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"help"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"help", "cgal-2r"});
   if (a.has("help")) { std::fputs(kBenchCurvatureUsage, stdout); return 0; }
-  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "skip", "help"});
+  a.allowOnly({"points", "neighbours", "order", "scan", "scan-step", "speed-points", "out", "skip", "help", "noise", "cgal-2r"});
   const std::string skip = "," + a.text("skip", "") + ",";
   for (std::size_t b = 1; b < skip.size();) {
     const std::size_t e = skip.find(',', b);
@@ -526,7 +560,16 @@ int runBenchCurvature(int argc, char** argv) {
               "best linear unbiased estimate on the ball of R_phi, what no local fit on that support beats on average\n\n");
   std::printf("| surface | noise | R_phi | ours curv | ours sel. curv | ours sel. 2R curv | bound curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal | ours s | ours sel. 2R s | CGAL s | PCL s |\n");
   std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
-  const double noise_levels[] = {0.0, 0.0025, 0.005, 0.01};
+  std::vector<double> noise_levels;
+  {
+    std::string list = a.text("noise", "0,0.0025,0.005,0.01") + ",";
+    for (std::size_t b = 0, e; (e = list.find(',', b)) != std::string::npos; b = e + 1)
+      if (e > b) noise_levels.push_back(std::stod(list.substr(b, e - b)));
+  }
+  double worst_def_pcl = 0, worst_def_geom = 0, worst_def_half = 0, worst_def_cgal = 0, worst_def_clean = 0,
+         worst_def_cgal2 = 0;
+  const bool cgal_2r = a.has("cgal-2r");
+  std::string default_rows;
   double worst_ratio_pcl = 0, worst_ratio_cgal = 0, worst_sel_pcl = 0, worst_raw_pcl = 0;
   double worst_bound_half = 0, min_scored = 1;
   double worst_sel2_pcl = 0, worst_sel2_geom = 0, worst_sel2_raw = 0, worst_sel_half = 0, worst_sel_cgal = 0,
@@ -549,17 +592,18 @@ int runBenchCurvature(int argc, char** argv) {
       Random rng(seed * 7919 + std::uint64_t(noise * 1e6));
       for (auto& x : p)
         x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
-      const MethodEstimates m = runMethods(p, radius, order, tn, true);
-      {
-        // The cap of narrowing at the automatic radius (paps curvature's defaults) on an evenly
-        // sampled surface: counted, expected 0.
-        WavejetParameters dp;
-        dp.order = order;
-        WavejetReport dr;
-        estimateWavejets(p, 0.f, dp, &dr, nullptr, nullptr, &tn, {}, neighbours);
-        analytic_narrowed += dr.narrowed;
-        analytic_checked += p.size();
-      }
+      const MethodEstimates m = runMethods(p, radius, order, tn, true, neighbours, cgal_2r);
+      // The cap of narrowing at the automatic radius (paps curvature's defaults) on an evenly
+      // sampled surface: counted, expected 0.
+      analytic_narrowed += m.def_report.narrowed;
+      analytic_checked += p.size();
+      // The core's quadric noise estimate on the same points, next to the pilot's order-K
+      // residual (docs/wavejets.md, "Noise-aware defaults": why the pilot uses the latter).
+      float quadric_sigma = NAN;
+      try {
+        SpatialIndex pidx(p);
+        quadric_sigma = estimateNoiseLevel(p, pidx, radius).sigma;
+      } catch (const Error&) {}
       std::size_t scored = 0;
       const Comparison c = scoreMethods(m, radius, truth, eval, &scored);
       min_scored = std::min(min_scored, double(scored) / double(eval.size()));
@@ -580,6 +624,27 @@ int runBenchCurvature(int argc, char** argv) {
       worst_sel2_geom = std::max(worst_sel2_geom, es2.curv_rel / epg.curv_rel);
       worst_sel2_raw = std::max(worst_sel2_raw, es2.curv_rel / ep.curv_rel);
       worst_sel_half = std::max(worst_sel_half, es.curv_rel / eph.curv_rel);
+      {
+        const Errors& ed = c.def;
+        const WavejetReport& dr = m.def_report;
+        worst_def_pcl = std::max(worst_def_pcl, ed.curv_rel / epc.curv_rel);
+        worst_def_geom = std::max(worst_def_geom, ed.curv_rel / epg.curv_rel);
+        worst_def_half = std::max(worst_def_half, ed.curv_rel / eph.curv_rel);
+        if (ec.curv_rel > 1e-3) worst_def_cgal = std::max(worst_def_cgal, ed.curv_rel / ec.curv_rel);
+        if (noise == 0) worst_def_clean = std::max(worst_def_clean, ed.curv_rel);
+        char line[512], cgal2_cells[64] = "";
+        if (cgal_2r)
+          std::snprintf(cgal2_cells, sizeof cgal2_cells, " %.4f | %.3f |", c.cgal2.curv_rel, ed.curv_rel / c.cgal2.curv_rel);
+        std::snprintf(line, sizeof line,
+                      "| %s | %.2f%% | %.2e | %.2e | %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3f | %.3f | %.3f | %.3f | %.2f |%s\n",
+                      s.name.c_str(), noise * 100, dr.noise_sigma / radius, quadric_sigma / radius,
+                      defaultChoice(dr).c_str(), ed.curv_rel, eo.curv_rel, es.curv_rel, es2.curv_rel, ec.curv_rel,
+                      epc.curv_rel, epg.curv_rel, eph.curv_rel, ed.curv_rel / epc.curv_rel,
+                      ec.curv_rel > 1e-3 ? ed.curv_rel / ec.curv_rel : NAN, ed.normal_deg, ec.normal_deg, m.t_def,
+                      cgal2_cells);
+        if (cgal_2r && c.cgal2.curv_rel > 1e-3) worst_def_cgal2 = std::max(worst_def_cgal2, ed.curv_rel / c.cgal2.curv_rel);
+        default_rows += line;
+      }
       std::printf("| %s | %.2f%% | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.2f | %.2f | %.2f | %.2f |\n",
                   s.name.c_str(), noise * 100, radius, eo.curv_rel, es.curv_rel, es2.curv_rel, eb.curv_rel, ec.curv_rel,
                   epc.curv_rel, epg.curv_rel, ep.curv_rel, eph.curv_rel, eo.normal_deg, es.normal_deg, es2.normal_deg, ec.normal_deg,
@@ -601,6 +666,19 @@ int runBenchCurvature(int argc, char** argv) {
               worst_sel2_cgal);
   std::printf("narrowing at the automatic radius (defaults of paps curvature, cap 4 x %d): %zu of %zu points "
               "narrowed over the table's surfaces and noise levels\n", neighbours, analytic_narrowed, analytic_checked);
+  std::printf("\n## Ours default (what paps curvature does without options: automatic radius for %d neighbours,\n"
+              "## widened/narrowed per point, noise-aware order policy), same points, same run, scored on the same points\n",
+              neighbours);
+  std::printf("pilot = sigma of the default's order-%d residuals / the bench's R_phi; quadric = core\n"
+              "estimateNoiseLevel sigma / R_phi at the bench's R_phi; choice = fixed order or selection, neighbour count\n\n", order);
+  std::printf("| surface | noise | pilot | quadric | choice | ours default curv | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL(R/2) cal. curv | default / PCL cal. | default / CGAL | ours default normal | CGAL normal | ours default s |%s\n",
+              cgal_2r ? " CGAL 2R curv | default / CGAL 2R |" : "");
+  std::printf("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|%s\n%s", cgal_2r ? "---|---|" : "",
+              default_rows.c_str());
+  if (cgal_2r) std::printf("\nworst ratio of ours default / CGAL degree %d at 2 R_phi (where CGAL > 1e-3): %.3f\n", order, worst_def_cgal2);
+  std::printf("\nworst ratios of ours default: / PCL cal. %.3f, / PCL geom. %.3f, / PCL(R/2) cal. %.3f, / CGAL %.3f (where "
+              "CGAL > 1e-3); largest error without noise %.4f\n", worst_def_pcl, worst_def_geom, worst_def_half,
+              worst_def_cgal, worst_def_clean);
 
   }
 
@@ -718,6 +796,7 @@ int runBenchCurvature(int argc, char** argv) {
       {
         WavejetParameters dp;
         dp.order = 2;
+        dp.order_policy = WavejetParameters::OrderPolicy::fixed;
         const auto dense_fit = estimateWavejets(mesh.vertices, 0.5f * radius, dp, nullptr, nullptr, nullptr, &vn);
         std::vector<Truth> t(p.size());
         for (std::size_t i = 0; i < p.size(); ++i) {
@@ -735,17 +814,19 @@ int runBenchCurvature(int argc, char** argv) {
         }
         eval.swap(keep);
       }
-      const MethodEstimates me = runMethods(p, radius, order, tn, false);
+      const MethodEstimates me = runMethods(p, radius, order, tn, false, neighbours);
       std::printf("\n## Scan %s: %zu of %zu vertices (every %d-th), %zu evaluated (border left out), R_phi %.3f;\n"
                   "## one row per reference (all from the dense mesh)\n",
                   scan.c_str(), p.size(), mesh.vertices.size(), scan_step, eval.size(), radius);
-      std::printf("| reference | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+      std::printf("ours default: %s, R_phi %.3f (automatic), pilot residual %.3g%% of it\n", defaultChoice(me.def_report).c_str(),
+                  me.def_report.radius, 100 * me.def_report.noise_relative);
+      std::printf("| reference | ours default curv | ours curv | ours sel. curv | ours sel. 2R curv | CGAL curv | PCL cal. curv | PCL geom. curv | PCL raw curv | PCL(R/2) cal. curv | ours default normal | ours normal | ours sel. normal | ours sel. 2R normal | CGAL normal | PCL normal |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
       std::size_t scored = 0;
       for (const Reference& r : refs) {
         const Comparison c = scoreMethods(me, radius, r.truth, eval, &scored);
-        std::printf("| %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f |\n",
-                    r.name.c_str(), c.ours.curv_rel, c.sel.curv_rel, c.sel2.curv_rel, c.cgal.curv_rel, c.pcl_cal.curv_rel,
-                    c.pcl_geom.curv_rel, c.pcl_raw.curv_rel, c.pcl_half.curv_rel, c.ours.normal_deg, c.sel.normal_deg,
+        std::printf("| %s | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.4f | %.3g | %.4f | %.3f | %.3f | %.3f | %.3f | %.3f | %.3f |\n",
+                    r.name.c_str(), c.def.curv_rel, c.ours.curv_rel, c.sel.curv_rel, c.sel2.curv_rel, c.cgal.curv_rel, c.pcl_cal.curv_rel,
+                    c.pcl_geom.curv_rel, c.pcl_raw.curv_rel, c.pcl_half.curv_rel, c.def.normal_deg, c.ours.normal_deg, c.sel.normal_deg,
                     c.sel2.normal_deg, c.cgal.normal_deg, c.pcl_raw.normal_deg);
       }
       std::printf("scored on the %zu points where every method has an estimate\n", scored);
@@ -757,7 +838,7 @@ int runBenchCurvature(int argc, char** argv) {
         std::vector<int> common;
         for (const int i : eval) {
           bool ok = true;
-          for (const auto* e : {&me.ours, &me.sel, &me.sel2, &me.pcl, &me.pcl_half, &me.cgal})
+          for (const auto* e : {&me.ours, &me.sel, &me.sel2, &me.pcl, &me.pcl_half, &me.cgal, &me.def})
             if (!e->empty()) ok = ok && std::isfinite((*e)[i].k1) && std::isfinite((*e)[i].k2) && isFinite((*e)[i].n);
           if (ok) common.push_back(i);
         }
@@ -795,8 +876,8 @@ int runBenchCurvature(int argc, char** argv) {
         profile("PCL geom.", geometricPcl(me.pcl, radius), true);
         profile("PCL(R/2) geom.", geometricPcl(me.pcl_half, radius / 2), true);
       }
-      std::printf("times (s, %zu points): ours %.2f, ours sel. %.2f, ours sel. 2R %.2f, CGAL %.2f, PCL %.2f, PCL(R/2) %.2f\n",
-                  p.size(), me.t_ours, me.t_sel, me.t_sel2, me.t_cgal, me.t_pcl, me.t_half);
+      std::printf("times (s, %zu points): ours default %.2f, ours %.2f, ours sel. %.2f, ours sel. 2R %.2f, CGAL %.2f, PCL %.2f, PCL(R/2) %.2f\n",
+                  p.size(), me.t_def, me.t_ours, me.t_sel, me.t_sel2, me.t_cgal, me.t_pcl, me.t_half);
 
       // Renders of the enhanced scan (full resolution): original, positions alpha0 = 2,
       // normals alpha1 = 3 and alpha1 = 3i (skewed).
@@ -805,6 +886,7 @@ int runBenchCurvature(int argc, char** argv) {
       Normals hints = vn;
       WavejetEnhancementParameters ep2;
       ep2.wavejet.order = 6;
+      ep2.wavejet.order_policy = WavejetParameters::OrderPolicy::fixed;  // as `paps enhance --order 6`
       ep2.target_neighbours = 60;
       Normals corrected;
       WavejetEnhancementReport r1, r2;
@@ -816,6 +898,7 @@ int runBenchCurvature(int argc, char** argv) {
       // Shade the moved points with normals refitted on the moved cloud.
       WavejetParameters wp;
       wp.order = 4;
+      wp.order_policy = WavejetParameters::OrderPolicy::fixed;
       const auto refit = estimateWavejets(enh, r2.radius, wp, nullptr, nullptr, nullptr, &hints);
       Normals enh_normals(enh.size());
       for (std::size_t i = 0; i < enh.size(); ++i) enh_normals[i] = refit[i].normal;
@@ -883,6 +966,7 @@ int runBenchCurvature(int argc, char** argv) {
         std::vector<int> eval, eval_wide, eval_narrow, eval_ball;
         WavejetParameters params;
         params.order = order;
+        params.order_policy = WavejetParameters::OrderPolicy::fixed;  // this part is about the supports, at the fixed order
         params.widening = WavejetParameters::Widening::never;
         WavejetReport r_fixed, r_def;
         const auto fixed = estimateWavejets(p, 0.f, params, &r_fixed, nullptr, nullptr, &tn, {}, neighbours);
@@ -975,16 +1059,41 @@ int runBenchCurvature(int argc, char** argv) {
     const float radius = benchRadius(p, index, neighbours);
     WavejetParameters params;
     params.order = order;
+    params.order_policy = WavejetParameters::OrderPolicy::fixed;
     WavejetReport rep;
     auto t0 = Clock::now();
-    const std::clock_t c0 = std::clock();
+    std::clock_t c0 = std::clock();
     estimateWavejets(p, radius, params, &rep);
     const double t_all = since(t0);
     const double cpu_all = double(std::clock() - c0) / CLOCKS_PER_SEC;
     std::printf("\n## Speed: %zu points (monkey saddle), order %d, mean %.1f neighbours, R_phi %.4f\n", p.size(), order,
                 rep.mean_neighbours, radius);
-    std::printf("ours, %d threads: %.2f s wall, %.2f s CPU over all threads (neighbour search and grid build "
+    std::printf("ours fixed order, %d threads: %.2f s wall, %.2f s CPU over all threads (neighbour search and grid build "
                 "included)\n", threads, t_all, cpu_all);
+    // The default (automatic radius, widening, noise-aware policy with its pilot), clean and
+    // at 1%% noise (the largest support growth).
+    const double noises[] = {0.0, 0.0, 0.01};
+    for (int k = 0; k < 3; ++k) {
+      // The first run: the default without its pilot (order policy fixed), what the pilot costs.
+      const double noise = noises[k];
+      const bool pilot = k > 0;
+      Positions q = p;
+      Random rng(777);
+      for (auto& x : q)
+        x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
+      WavejetParameters dp;
+      dp.order = order;
+      if (!pilot) dp.order_policy = WavejetParameters::OrderPolicy::fixed;
+      WavejetReport dr;
+      t0 = Clock::now();
+      c0 = std::clock();
+      estimateWavejets(q, 0.f, dp, &dr, nullptr, nullptr, nullptr, {}, neighbours);
+      const double tw = since(t0), tc = double(std::clock() - c0) / CLOCKS_PER_SEC;
+      std::printf("ours default%s, noise %.2f%%, %d threads: %.2f s wall, %.2f s CPU (%s, pilot residual %.3g%%, mean %.1f "
+                  "neighbours, R_phi %.4f, %zu NaN)\n", pilot ? "" : " without pilot (--order-policy fixed)", noise * 100,
+                  threads, tw, tc, defaultChoice(dr).c_str(),
+                  100 * dr.noise_relative, dr.mean_neighbours, dr.radius, dr.too_few_neighbours);
+    }
     const std::size_t sub = std::min<std::size_t>(p.size(), 100000);
     Positions ps(p.begin(), p.begin() + sub);
     SpatialIndex is(ps);
@@ -992,7 +1101,7 @@ int runBenchCurvature(int argc, char** argv) {
     omp_set_num_threads(1);
     double t1 = 0, tc = NAN, tp = 0;
     Normals none(ps.size(), Eigen::Vector3f::Constant(NAN));
-    runWavejets(ps, rs, order, none, t1);
+    runWavejets(ps, rs, order, none, t1);  // fixed order
 #ifdef PAPS_HAVE_CGAL
     runCgal(ps, rs, order, tc);
 #endif

@@ -1,5 +1,6 @@
 // paps curvature IN OUT [options]   and   paps enhance IN OUT --alpha0 A | --alpha1 RE[,IM]
 #include <chrono>
+#include <cmath>
 #include <complex>
 #include <cstdio>
 #include <cstring>
@@ -16,6 +17,7 @@
 #include <paps/features/point_types.h>
 #include <paps/features/wavejet.h>
 #include <paps/features/wavejet_estimation.h>
+#include <paps/features/wavejet_noise.h>
 #include <paps/filters/wavejet_enhancement.h>
 
 #include "cli_common.h"
@@ -40,13 +42,22 @@ const char* kCurvatureUsage =
     "                         point (default 50)\n"
     "  --max-neighbours M     the maximum per point with the automatic R_phi (default 4 N)\n"
     "  --fixed-radius         automatic R_phi without the per-point widening or narrowing\n"
-    "  --order K              Wavejet order, 1 to 20 (default 4)\n"
-    "  --beta B               order lowered until neighbours >= B (K+1)(K+2)/2 (default 1.1)\n"
+    "  --order K              Wavejet order, 1 to 20 (default 4); given, the order is fixed\n"
+    "                         (no noise-aware choice; with --select-order: the highest order)\n"
+    "  --beta B               order lowered until neighbours >= B (K+1)(K+2)/2 (default 1.1);\n"
+    "                         given, no noise-aware choice\n"
     "  --irls N               IRLS passes against noise/outliers (default 0)\n"
     "  --select-order         per point, lower the order where higher orders fit noise (BIC);\n"
     "                         under noise use it with --beta 3 and a radius holding ~200\n"
     "                         neighbours (docs/wavejets.md: 2 R_phi, the support PCL's\n"
     "                         curvature estimator sees)\n"
+    "  --order-policy P       auto (default unless --order, --beta or --select-order is given):\n"
+    "                         a pilot of order-K fits measures the noise; clean data keep the\n"
+    "                         fixed order, noisy data get --select-order and, with the automatic\n"
+    "                         radius, beta 3 and (no --neighbours) twice the radius (about 4x\n"
+    "                         the neighbours) when the residual is noise (no larger at 2 R_phi),\n"
+    "                         not relief; fixed: the manuscript's fixed order; select: as\n"
+    "                         --select-order\n"
     "  --refits N             plane corrections with refit, at most (default 4)\n"
     "  --refit-angle D        refit while the tilt exceeds D degrees (default 45)\n"
     "  --orient M             normal orientation: input (input normals, default when present),\n"
@@ -68,6 +79,8 @@ const char* kEnhanceUsage =
     "  --fixed-radius         automatic R_phi without the per-point widening or narrowing\n"
     "  --order K              Wavejet order (default 4; the manuscript uses 6 to 9)\n"
     "  --beta B, --irls N, --select-order   as for paps curvature\n"
+    "  --order-policy P       fixed (default here: the filters scale the higher orders, which the\n"
+    "                         order selection drops under noise), auto or select (paps curvature)\n"
     "  --max-motion F         motion clamp as a fraction of R_phi (default 0.5)\n"
     "  --orient M             input, propagate or viewpoint (as for paps curvature)\n"
     "  --quiet, --timings\n"
@@ -118,7 +131,7 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
   return true;
 }
 
-WavejetParameters wavejetParameters(const Arguments& a) {
+WavejetParameters wavejetParameters(const Arguments& a, const char* default_policy) {
   WavejetParameters w;
   w.order = static_cast<int>(a.number("order", w.order));
   w.beta = static_cast<float>(a.number("beta", w.beta));
@@ -126,6 +139,17 @@ WavejetParameters wavejetParameters(const Arguments& a) {
   w.max_refits = static_cast<int>(a.number("refits", w.max_refits));
   w.refit_angle = static_cast<float>(a.number("refit-angle", w.refit_angle));
   w.select_order = a.has("select-order");
+  // The noise-aware policy decides unless the user set the order, beta or the policy.
+  const std::string policy =
+      a.text("order-policy", a.has("select-order") ? "select" : a.has("order") || a.has("beta") ? "fixed" : default_policy);
+  if (policy == "auto") w.order_policy = WavejetParameters::OrderPolicy::automatic;
+  else if (policy == "fixed") w.order_policy = WavejetParameters::OrderPolicy::fixed;
+  else if (policy == "select") w.order_policy = WavejetParameters::OrderPolicy::select;
+  else throw InvalidParameter("order-policy", policy, "auto, fixed or select");
+  if (policy == "fixed" && w.select_order)
+    throw InvalidParameter("order-policy", policy, "auto or select with --select-order");
+  // An explicit --neighbours is kept as given (no growth with the noise).
+  w.adapt_support = !a.has("neighbours");
   // Widening with the automatic radius (the library's default: an explicit --radius is kept
   // as given); --fixed-radius turns it off (docs/wavejets.md, "Real scans").
   w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
@@ -189,15 +213,36 @@ void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float
     std::printf("narrowed: none (no ball holds more than %d distinct positions)\n", narrow_to);
 }
 
+// One line on the order policy: what the pilot measured and what was chosen.
+void printOrderPolicy(const WavejetParameters& asked, const WavejetReport& r, int neighbours, float radius) {
+  if (!r.noise_measured) {
+    std::printf("order policy: %s (as given): %s, beta %g\n",
+                asked.order_policy == WavejetParameters::OrderPolicy::automatic ? "automatic" : "explicit",
+                r.select_order ? "order selected per point in [2, K] (BIC)" : "fixed order", r.beta);
+    return;
+  }
+  std::printf("order policy: automatic: residual of order-%d fits %.3g%% of R_phi (sigma %g m) -> %s, beta %g", asked.order,
+              100 * r.noise_relative, r.noise_sigma,
+              r.select_order ? "noisy: order selected per point in [2, K] (BIC)" : "clean: fixed order", r.beta);
+  if (radius > 0) std::printf(", radius as given\n");
+  else if (r.support_scale > 1)
+    std::printf(", automatic R_phi x%g (about %gx the neighbours; residual at 2 R_phi / at R_phi %.2f: noise)\n",
+                r.support_scale, r.support_scale * r.support_scale, r.noise_scale_ratio);
+  else if (!std::isnan(r.noise_scale_ratio))
+    std::printf(", automatic R_phi kept (residual at 2 R_phi / at R_phi %.2f > %.2f: relief, not only noise)\n",
+                r.noise_scale_ratio, kWavejetNoiseScaleRatio);
+  else std::printf("\n");
+}
+
 }  // namespace
 
 int runCurvature(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kCurvatureUsage, stdout); return 0; }
   a.allowOnly({"radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle", "orient", "quiet",
-               "timings", "select-order", "fixed-radius", "max-neighbours"});
+               "timings", "select-order", "fixed-radius", "max-neighbours", "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
-  const WavejetParameters params = wavejetParameters(a);
+  const WavejetParameters params = wavejetParameters(a, "auto");
   const float radius = static_cast<float>(a.number("radius", 0));
   const int neighbours = static_cast<int>(a.number("neighbours", 50));
   const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0]);
@@ -211,11 +256,17 @@ int runCurvature(int argc, char** argv) {
   const auto res = estimateWavejets(p, radius, params, &r, nullptr, nullptr, have_hints ? &hints : nullptr,
                                     progress, neighbours);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  printOrderPolicy(params, r, neighbours, radius);
+  const int used = neighbours;
   std::printf("wavejets: order %d, R_phi %g m%s (mean %.1f neighbours), %.2f s\n", params.order, r.radius,
-              radius > 0 ? "" : " (chosen from --neighbours over the distinct positions)", r.mean_neighbours, secs);
+              radius > 0 ? "" : " (chosen from the neighbour count over the distinct positions)", r.mean_neighbours, secs);
+  WavejetParameters run = params;
+  run.beta = r.beta;
+  if (r.support_scale > 1 && run.narrowed_neighbours == 0)
+    run.narrowed_neighbours = static_cast<int>(r.support_scale * r.support_scale) * wavejetNarrowedNeighbours(params, neighbours);
   printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
-                           wavejetWidenedNeighbours(params, neighbours), r.narrowed, r.narrowed_radius_median,
-                           wavejetNarrowedNeighbours(params, neighbours),
+                           wavejetWidenedNeighbours(run, used), r.narrowed, r.narrowed_radius_median,
+                           wavejetNarrowedNeighbours(run, used),
                            params.widening == WavejetParameters::Widening::never || radius > 0);
   std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
               "noise (plane kept) at %zu\n", r.fitted, r.lowered, r.not_converged, r.tilt_within_noise);
@@ -247,12 +298,14 @@ int runEnhance(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kEnhanceUsage, stdout); return 0; }
   a.allowOnly({"alpha0", "alpha1", "radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle",
-               "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius", "max-neighbours"});
+               "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius", "max-neighbours",
+               "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   if (a.has("alpha0") == a.has("alpha1"))
     throw InvalidParameter("alpha0/alpha1", "both or neither", "exactly one of --alpha0 A or --alpha1 RE[,IM]");
   WavejetEnhancementParameters params;
-  params.wavejet = wavejetParameters(a);
+  // Enhancement keeps the fixed order unless asked (WavejetEnhancementParameters::wavejet).
+  params.wavejet = wavejetParameters(a, "fixed");
   params.radius = static_cast<float>(a.number("radius", 0));
   params.target_neighbours = static_cast<int>(a.number("neighbours", params.target_neighbours));
   params.max_motion = static_cast<float>(a.number("max-motion", params.max_motion));
@@ -289,9 +342,16 @@ int runEnhance(int argc, char** argv) {
                 params.alpha1.real(), params.alpha1.imag(), params.wavejet.order, r.radius,
                 params.radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.changed);
   }
+  printOrderPolicy(params.wavejet, r.wavejet, params.target_neighbours, params.radius);
+  WavejetParameters run = params.wavejet;
+  run.beta = r.wavejet.beta;
+  const int used = params.target_neighbours;
+  if (r.wavejet.support_scale > 1 && run.narrowed_neighbours == 0)
+    run.narrowed_neighbours =
+        static_cast<int>(r.wavejet.support_scale * r.wavejet.support_scale) * wavejetNarrowedNeighbours(params.wavejet, used);
   printNeighbourhoodChoice(r.duplicates, r.widened, r.widened_radius_median,
-                           wavejetWidenedNeighbours(params.wavejet, params.target_neighbours), r.narrowed,
-                           r.narrowed_radius_median, wavejetNarrowedNeighbours(params.wavejet, params.target_neighbours),
+                           wavejetWidenedNeighbours(run, used), r.narrowed,
+                           r.narrowed_radius_median, wavejetNarrowedNeighbours(run, used),
                            params.wavejet.widening == WavejetParameters::Widening::never || params.radius > 0);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);
   if (r.unfitted) std::fprintf(stderr, "warning: %zu points have too few neighbours: left in place, normal NaN\n", r.unfitted);

@@ -306,6 +306,8 @@ TEST(WavejetEstimation, DeterministicAcrossThreadCounts) {
     paps::WavejetParameters params;
     params.irls_iterations = irls;
     params.select_order = irls == 0;
+    params.order_policy = irls == 0 ? paps::WavejetParameters::OrderPolicy::select
+                                    : paps::WavejetParameters::OrderPolicy::fixed;  // the fixed order on QR
     const int threads = omp_get_max_threads();
     omp_set_num_threads(1);
     const auto a = paps::estimateWavejets(p, 0.12f, params);

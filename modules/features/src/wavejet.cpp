@@ -11,6 +11,7 @@
 #include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/features/wavejet_noise.h>
 
 namespace paps {
 
@@ -115,6 +116,7 @@ struct WavejetWorkspace {
   double tilt_cov[3] = {0, 0, 0};
   bool tilt_cov_valid = false;
   int tilt_dof = 0;  // residual degrees of freedom of that fit
+  double residual_variance = -1;  // rss / (rows - m) of that fit, unit-disk units (-1: none)
   std::vector<double> cov_u;
   // Per-point scratch of fitWavejet and the Corollary 2 product.
   std::vector<std::complex<double>> phi, mono_f, mono_d, mono_prod;
@@ -231,6 +233,7 @@ double selectionCriterion(double rss, double btb, int rows, int unknowns) {
 template <class Factor>
 void tiltCovariance(WavejetWorkspace& ws, const Factor& r, int m, double rss, int rows) {
   ws.tilt_cov_valid = false;
+  ws.residual_variance = rows > m ? std::max(rss, 0.0) / (rows - m) : -1;
   if (rows <= m || m < 3) return;
   ws.cov_u.assign(std::size_t(2) * m, 0.0);
   for (int a = 0; a < 2; ++a) {
@@ -520,7 +523,8 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
       ws.local[j] = {d.dot(t1), d.dot(t2), d.dot(n)};
     }
     ++res.fits;
-    while (!solve(ws, order, params.irls_iterations, params.select_order)) {
+    while (!solve(ws, order, params.irls_iterations,
+                  params.select_order || params.order_policy == WavejetParameters::OrderPolicy::select)) {
       if (--order < 2) { res = WavejetResult(); return res; }
     }
     unpack(ws.x, order, phi);
@@ -585,6 +589,7 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   res.mean_curvature = static_cast<float>(mean);
   res.gaussian_curvature = static_cast<float>(gauss);
   res.offset = static_cast<float>(phi[0].real() * cos_tilt * radius);
+  res.residual = ws.residual_variance >= 0 ? static_cast<float>(std::sqrt(ws.residual_variance) * radius) : kNaN;
   WavejetCoefficients& c = coefficients ? *coefficients : ws.coefficients;
   c.order = order;
   c.radius = radius;
@@ -627,13 +632,13 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
                                             std::vector<WavejetCoefficients>* coefficients,
                                             const Normals* initial_normals, const Normals* orientation,
                                             const ProgressCallback& progress, int target_neighbours,
-                                            std::vector<int>& neighbour_count, std::vector<std::uint8_t>& support) {
+                                            std::vector<int>& neighbour_count, std::vector<std::uint8_t>& support,
+                                            std::unique_ptr<SpatialIndex> index, float radius_scale) {
   const bool automatic = radius == 0;
   const bool widen = params.widening == WavejetParameters::Widening::always ||
                      (params.widening == WavejetParameters::Widening::automatic && automatic);
-  std::unique_ptr<SpatialIndex> index;
-  if (automatic || widen) index = std::make_unique<SpatialIndex>(points);
-  if (automatic) radius = radiusForNeighbourCount(points, *index, target_neighbours);
+  if (!index && (automatic || widen)) index = std::make_unique<SpatialIndex>(points);
+  if (automatic) radius = radius_scale * radiusForNeighbourCount(points, *index, target_neighbours);
   const int need = wavejetNeededNeighbours(params);
   const int widen_to = wavejetWidenedNeighbours(params, target_neighbours);
   const int narrow_to = wavejetNarrowedNeighbours(params, target_neighbours);
@@ -765,6 +770,7 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (orientation && orientation->size() != points.size())
     throw InvalidParameter("orientation", detail::toString(orientation->size()), "one per point");
   if (countFinite(points) == 0) throw InvalidInput("no finite point");
+  const bool target_was_automatic = radius == 0;
   // Exact duplicates: each position is fitted once and counted once as a neighbour (a copy
   // adds no geometry, only weight, and would fake the neighbour count that sets the order);
   // every copy then gets its position's output. Without duplicates nothing is copied.
@@ -787,15 +793,60 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       if (rep[i] >= 0) slot[i] = slot[rep[i]];
   }
   const bool copy = duplicates > 0;
+  const Positions& fitted = copy ? distinct : points;
+  // Order policy (WavejetParameters::order_policy): automatic measures the noise with a
+  // pilot of fixed-order fits and chooses (wavejet_noise.h); the index is shared with the run.
+  const bool widens = params.widening == WavejetParameters::Widening::always ||
+                      (params.widening == WavejetParameters::Widening::automatic && radius == 0);
+  WavejetParameters run = params;
+  float radius_scale = 1.f;
+  std::unique_ptr<SpatialIndex> index;
+  bool measured = false;
+  WavejetNoise noise;
+  float scale_ratio = NAN;
+  if (params.order_policy == WavejetParameters::OrderPolicy::select) run.select_order = true;
+  if (params.order_policy == WavejetParameters::OrderPolicy::automatic && !params.select_order) {
+    index = std::make_unique<SpatialIndex>(fitted);
+    try {
+      const float r0 = radius > 0 ? radius : radiusForNeighbourCount(fitted, *index, target_neighbours);
+      const int widen_to = wavejetWidenedNeighbours(params, target_neighbours);
+      noise = wavejetResidualNoise(fitted, *index, r0, params, widen_to);
+      measured = true;
+      const bool may_grow = radius == 0 && params.adapt_support && wavejetSupportGrowth(noise.relative) > 1.f;
+      if (may_grow) {
+        // Noise or relief? The same pilot at twice the radius (four times the count).
+        const WavejetNoise wide = wavejetResidualNoise(fitted, *index, 2 * r0, params, 4 * widen_to);
+        scale_ratio = noise.sigma > 0 ? wide.sigma / noise.sigma : NAN;
+      }
+      const WavejetNoisePolicy policy = wavejetNoisePolicy(params, noise.relative, target_neighbours, may_grow,
+                                                           std::isnan(scale_ratio) ? 1.f : scale_ratio);
+      run = policy.params;
+      // Beta 3 only where every ball is widened to the count it needs; with a fixed ball
+      // it would turn the sparse points (7 to 17 neighbours) into NaN outputs.
+      if (!widens) run.beta = params.beta;
+      if (policy.neighbours > target_neighbours) {
+        // The grown support: the radius of `target_neighbours` scaled by the square root of
+        // the growth (x2), sparse balls still widened to the same count (growing that count
+        // too would fit a sparse region on a patch 2x wider than its own spacing needs: the
+        // enhancement test of a sphere with a dense cap lost its projection that way), the
+        // cap of narrowing raised with the count.
+        radius_scale = std::sqrt(float(policy.neighbours) / float(target_neighbours));
+        if (params.narrowed_neighbours == 0)
+          run.narrowed_neighbours = policy.neighbours / target_neighbours * wavejetNarrowedNeighbours(params, target_neighbours);
+      }
+    } catch (const InvalidInput&) {
+      // Too few points for any fit: nothing to measure, the outputs are NaN either way.
+      run.order_policy = WavejetParameters::OrderPolicy::fixed;
+    }
+  }
   std::vector<int> d_count;
   std::vector<std::uint8_t> d_support;
   std::vector<WavejetCoefficients> d_coefficients;
   std::vector<WavejetResult> d_out =
-      estimateDistinct(copy ? distinct : points, radius, params,
-                       coefficients ? (copy ? &d_coefficients : coefficients) : nullptr,
+      estimateDistinct(fitted, radius, run, coefficients ? (copy ? &d_coefficients : coefficients) : nullptr,
                        initial_normals ? (copy ? &d_initial : initial_normals) : nullptr,
                        orientation ? (copy ? &d_orientation : orientation) : nullptr, progress,
-                       target_neighbours, d_count, d_support);
+                       target_neighbours, d_count, d_support, std::move(index), radius_scale);
   std::vector<WavejetResult> out;
   std::vector<int> neighbour_count;
   std::vector<std::uint8_t> support;
@@ -819,6 +870,13 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (report) {
     *report = WavejetReport();
     report->radius = radius;
+    report->noise_measured = measured;
+    report->noise_sigma = measured ? noise.sigma : NAN;
+    report->noise_relative = measured ? noise.relative : NAN;
+    report->noise_scale_ratio = scale_ratio;
+    report->select_order = run.select_order;
+    report->beta = run.beta;
+    report->support_scale = target_was_automatic ? radius_scale : 1.f;
     report->duplicates = duplicates;
     double sum = 0;
     std::vector<float> widened_radii, narrowed_radii;

@@ -43,6 +43,7 @@ std::vector<WavejetResult> fitAll(const Positions& points, const WavejetEnhancem
     report->widened_radius_median = wr.widened_radius_median;
     report->narrowed = wr.narrowed;
     report->narrowed_radius_median = wr.narrowed_radius_median;
+    report->wavejet = wr;
   }
   return res;
 }

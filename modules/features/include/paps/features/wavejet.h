@@ -46,6 +46,25 @@ struct WavejetParameters {
   /// Under noise, pair it with beta = 3 (no order 4 below 45 neighbours) and a radius
   /// holding about 200 neighbours: measured in docs/wavejets.md.
   bool select_order = false;
+  /// Who decides between the fixed order and the order selection:
+  ///  * automatic (default): the data. A pilot of order-`order` fits on a sample measures
+  ///    the residual noise (wavejet_noise.h); on clean data the fixed order is kept (the
+  ///    manuscript's method, ~1e-4 curvature error on the bench surfaces), under noise the
+  ///    order is selected (select_order; beta raised to at least 3 where the balls are
+  ///    widened, see `widening`) and, with the automatic radius and `adapt_support`, the
+  ///    automatic radius doubles (about 4x the neighbours) where the residual is noise rather
+  ///    than relief. Measured in docs/wavejets.md ("Noise-aware
+  ///    defaults"). fitWavejet alone runs no pilot: automatic is fixed there.
+  ///  * fixed: the order as given (select_order decides, false: the manuscript's).
+  ///  * select: order selection as given (the same as select_order = true).
+  /// select_order = true always means selection. WavejetEstimation::setOrder, setBeta and
+  /// setSelectOrder make the policy explicit (fixed or select).
+  enum class OrderPolicy { automatic, fixed, select };
+  OrderPolicy order_policy = OrderPolicy::automatic;
+  /// With order_policy automatic and the automatic radius (estimateWavejets radius 0): let
+  /// the neighbour count of the radius grow with the measured noise (false: the count as
+  /// given, e.g. an explicit `--neighbours`).
+  bool adapt_support = true;
   /// While the fitted tangent is tilted by more than `refit_angle` degrees from the
   /// parameterization plane, the plane is rotated into it (Corollary 1) and the fit redone,
   /// at most `max_refits` times (0 to 50). Below it, the first-order corrections of
@@ -146,6 +165,10 @@ struct WavejetResult {
   float radius = NAN;                     ///< R_phi used at this point (metres): the
                                           ///< search radius, or larger where widened
   int fits = 0;                           ///< least-squares fits done (1 + refits)
+  /// Root of the unbiased residual variance RSS / (L - M) of the last fit along its plane
+  /// normal (metres; NaN without residual degree of freedom): the noise plus what the order
+  /// used cannot follow.
+  float residual = NAN;
   bool converged = false;                 ///< the tilt fell below refit_angle
   /// The tilt stayed above refit_angle but is not distinguishable from zero given the fit's
   /// own residuals (F test at level 3e-4, 4 standard errors with many neighbours): a tilt
@@ -175,6 +198,19 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
 
 /// What a whole-cloud run met.
 struct WavejetReport {
+  /// The order policy (WavejetParameters::order_policy): what the run used and why.
+  bool noise_measured = false;       ///< automatic policy: the pilot ran
+  float noise_sigma = NAN;           ///< residual noise of the pilot's fits (metres)
+  float noise_relative = NAN;        ///< noise_sigma / the pilot's R_phi
+  /// sigma of a second pilot at 2 R_phi over sigma at R_phi (NaN when not run: clean data
+  /// or no growth allowed): near 1 for noise, larger for relief the ball does not resolve;
+  /// the support grows only for noise (kWavejetNoiseScaleRatio).
+  float noise_scale_ratio = NAN;
+  bool select_order = false;         ///< the run selected the order per point (BIC)
+  float beta = NAN;                  ///< beta used
+  /// The automatic radius over the radius of the target count: 1, or 2 where the policy grew
+  /// the support (balls of about 4x the count; sparse balls still widened to the count).
+  float support_scale = 1.f;
   float radius = 0.f;                ///< R_phi used (metres)
   double mean_neighbours = 0;        ///< mean neighbour count of the fitted points
   std::size_t fitted = 0;            ///< points with valid outputs

@@ -37,10 +37,22 @@ class WavejetEstimation : public pcl::Feature<PointInT, PointOutT> {
 
   void setParameters(const WavejetParameters& p) { p.validate(); params_ = p; }
   const WavejetParameters& getParameters() const { return params_; }
-  /// Wavejet order K (1 to 20, default 4).
-  void setOrder(int k) { auto p = params_; p.order = k; setParameters(p); }
-  /// Order lowering rate beta in [1, 100] (default 1.1).
-  void setBeta(float b) { auto p = params_; p.beta = b; setParameters(p); }
+  /// Wavejet order K (1 to 20, default 4). Makes the order policy explicit: the order is
+  /// kept fixed (unless setSelectOrder(true)), whatever the noise.
+  void setOrder(int k) { auto p = params_; p.order = k; explicitPolicy(p); setParameters(p); }
+  /// Order lowering rate beta in [1, 100] (default 1.1). Makes the order policy explicit.
+  void setBeta(float b) { auto p = params_; p.beta = b; explicitPolicy(p); setParameters(p); }
+  /// Per-point order selection by BIC (WavejetParameters::select_order), explicitly on or off.
+  void setSelectOrder(bool on) {
+    auto p = params_;
+    p.select_order = on;
+    p.order_policy = on ? WavejetParameters::OrderPolicy::select : WavejetParameters::OrderPolicy::fixed;
+    setParameters(p);
+  }
+  /// Default automatic: a pilot at the search radius measures the noise and keeps the fixed
+  /// order on clean data, selects the order (beta >= 3) under noise (wavejet_noise.h). The
+  /// radius is the search radius either way (no support growth here).
+  void setOrderPolicy(WavejetParameters::OrderPolicy policy) { auto p = params_; p.order_policy = policy; setParameters(p); }
   /// IRLS passes against noise and outliers (0 to 100, default 0).
   void setIrlsIterations(int n) { auto p = params_; p.irls_iterations = n; setParameters(p); }
   /// Plane correction: refit while the tilt exceeds `angle_degrees`, at most `max_refits`.
@@ -66,6 +78,10 @@ class WavejetEstimation : public pcl::Feature<PointInT, PointOutT> {
   void computeFeature(PointCloudOut& output) override;
 
  private:
+  static void explicitPolicy(WavejetParameters& p) {
+    if (p.order_policy == WavejetParameters::OrderPolicy::automatic)
+      p.order_policy = p.select_order ? WavejetParameters::OrderPolicy::select : WavejetParameters::OrderPolicy::fixed;
+  }
   WavejetParameters params_;
   std::shared_ptr<const Normals> initial_normals_, orientation_;
   bool keep_coefficients_ = false;

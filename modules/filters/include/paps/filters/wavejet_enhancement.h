@@ -28,6 +28,13 @@
 
 namespace paps {
 
+/// WavejetParameters with the order policy fixed (the manuscript's fixed order).
+inline WavejetParameters fixedOrderWavejet() {
+  WavejetParameters w;
+  w.order_policy = WavejetParameters::OrderPolicy::fixed;
+  return w;
+}
+
 /// Parameters of Wavejet enhancement. Zero radius means "choose from the data".
 struct WavejetEnhancementParameters {
   /// R_phi = s in metres (> 0), or 0: the radius holding `target_neighbours` on average
@@ -37,7 +44,11 @@ struct WavejetEnhancementParameters {
   /// Mean neighbour count that sets the radius (3 to 100000). Default 50.
   int target_neighbours = 50;
   /// The Wavejet fit (order, beta, IRLS, plane correction, viewpoint for orientation).
-  WavejetParameters wavejet;
+  /// The order policy defaults to fixed here, not automatic as for curvatures: the filters
+  /// scale the coefficients of the orders above 1, which the order selection drops under
+  /// noise (a normal gain then changes nothing: measured in the PCL filter test); set
+  /// automatic to have the noise decide.
+  WavejetParameters wavejet = fixedOrderWavejet();
   /// Position gain alpha_0 (finite). 1: projection on the Wavejet surface.
   float alpha0 = 2.f;
   /// Normal gain alpha_1 (finite, complex). 1: the corrected normal unchanged.
@@ -61,6 +72,9 @@ struct WavejetEnhancementReport {
   float widened_radius_median = 0.f;  ///< median R_phi of those (metres)
   std::size_t narrowed = 0;      ///< fitted with R_phi narrowed (more than the cap in the ball)
   float narrowed_radius_median = 0.f; ///< median R_phi of those (metres)
+  /// The whole report of the Wavejet fits, with the order policy chosen (noise measured,
+  /// order selection, beta, neighbour count).
+  WavejetReport wavejet;
 };
 
 /// Position filter (2.21) of `points`; only points with movable[i] (all when empty) move.

@@ -4,7 +4,9 @@
 #include <cstdint>
 
 #include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/features/wavejet_estimation.h>
+#include <paps/features/wavejet_noise.h>
 
 namespace paps {
 
@@ -39,15 +41,35 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   std::vector<WavejetResult> results(indices.size());
   std::vector<int> neighbour_count(indices.size(), 0);
   const bool by_radius = this->k_ == 0;
+  // The order policy: automatic runs the pilot over the search surface at the search radius
+  // (for a k search, the radius holding k on average), no support growth.
+  WavejetParameters run = params_;
+  bool measured = false;
+  WavejetNoise noise;
+  if (run.order_policy == WavejetParameters::OrderPolicy::select) run.select_order = true;
+  if (run.order_policy == WavejetParameters::OrderPolicy::automatic && !run.select_order) {
+    SpatialIndex index(surface);
+    try {
+      const int k = by_radius ? 50 : this->k_;
+      const float r0 = by_radius ? static_cast<float>(this->search_radius_) : radiusForNeighbourCount(surface, index, k);
+      noise = wavejetResidualNoise(surface, index, r0, params_, wavejetWidenedNeighbours(params_, k));
+      measured = true;
+      run = wavejetNoisePolicy(params_, noise.relative, k, false).params;
+      // Beta 3 only where every ball is widened to the count it needs (as estimateWavejets).
+      if (!(by_radius && run.widening == WavejetParameters::Widening::always)) run.beta = params_.beta;
+    } catch (const InvalidInput&) {
+      run.order_policy = WavejetParameters::OrderPolicy::fixed;
+    }
+  }
   // Widening (WavejetParameters::widening): the radius here is always explicit, so only
   // Widening::always widens, to the `widen_to` nearest points of the search surface (exact
   // duplicates are not merged here: they count as neighbours).
-  const bool widen = by_radius && params_.widening == WavejetParameters::Widening::always;
-  const int need = wavejetNeededNeighbours(params_);
-  const int widen_to = wavejetWidenedNeighbours(params_, 50);
+  const bool widen = by_radius && run.widening == WavejetParameters::Widening::always;
+  const int need = wavejetNeededNeighbours(run);
+  const int widen_to = wavejetWidenedNeighbours(run, 50);
   // Narrowing under the same rule: a ball with more than `narrow_to` points keeps its
   // `narrow_to` nearest (ties by index), at their radius.
-  const int narrow_to = wavejetNarrowedNeighbours(params_, 50);
+  const int narrow_to = wavejetNarrowedNeighbours(run, 50);
   std::vector<std::uint8_t> widened(indices.size(), 0), narrowed(indices.size(), 0);
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(NAN);
   ProgressReporter reporter(progress_, "wavejets", indices.size());
@@ -90,7 +112,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
         }
         nn_int.assign(nn.begin(), nn.end());
         neighbour_count[i] = static_cast<int>(nn_int.size());
-        results[i] = fitWavejet(surface, nn_int.data(), static_cast<int>(nn_int.size()), p, radius, params_, *ws,
+        results[i] = fitWavejet(surface, nn_int.data(), static_cast<int>(nn_int.size()), p, radius, run, *ws,
                                 initial_normals_ ? (*initial_normals_)[idx] : nan3,
                                 orientation_ ? (*orientation_)[idx] : nan3,
                                 keep_coefficients_ ? &coefficients_[i] : nullptr);
@@ -102,6 +124,11 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   reporter.finish();
   report_ = WavejetReport();
   report_.radius = static_cast<float>(this->search_radius_);
+  report_.noise_measured = measured;
+  report_.noise_sigma = measured ? noise.sigma : NAN;
+  report_.noise_relative = measured ? noise.relative : NAN;
+  report_.select_order = run.select_order;
+  report_.beta = run.beta;
   double sum = 0;
   bool dense = true;
   for (std::int64_t i = 0; i < count; ++i) {
@@ -110,7 +137,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
     if (!results[i].valid()) { ++report_.too_few_neighbours; dense = false; continue; }
     ++report_.fitted;
     sum += neighbour_count[i];
-    report_.lowered += results[i].order < params_.order;
+    report_.lowered += results[i].order < run.order;
     report_.not_converged += !results[i].converged && !results[i].tilt_within_noise;
     report_.tilt_within_noise += results[i].tilt_within_noise;
     report_.max_radius = std::max(report_.max_radius, results[i].radius);

@@ -31,7 +31,10 @@ const char* kBenchUsage =
     "                   ~/.cache/paps/samples)\n"
     "  --points N       points sampled on each test shape (default 200000)\n"
     "  --large N        points of the large speed test (default 1000000, 0 to skip)\n"
-    "  --quick          one noise level, shorter sweeps (a smoke run)\n";
+    "  --quick          one noise level, shorter sweeps (a smoke run)\n"
+    "  --shapes LIST    comma-separated test shapes (default engraved-plane,rs1-scan-mesh); also\n"
+    "                   engraved-plane-1cm (10 cm wavelength, 1 cm relief: detail above the\n"
+    "                   noise), engraved-cylinder (3 cm, 2 mm, as engraved-plane), fandisk\n";
 
 struct Row {
   std::string dataset, noise, method, setting;
@@ -87,7 +90,7 @@ std::vector<Method> sweep(float r, bool quick) {
 int runBenchDenoise(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
   if (a.has("help")) { std::fputs(kBenchUsage, stdout); return 0; }
-  a.allowOnly({"out", "samples", "points", "large", "quick"});
+  a.allowOnly({"out", "samples", "points", "large", "quick", "shapes"});
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // rows appear as they are measured
   const std::string out_dir = a.text("out", "bench_out");
   const std::string samples = a.text("samples", samplesDir());
@@ -101,9 +104,22 @@ int runBenchDenoise(int argc, char** argv) {
   std::vector<Dataset> datasets;
   // Repeated engraved detail at the scale of the neighbourhood (Fig. 2.18): a sinusoid relief
   // of wavelength 3 cm and amplitude 2 mm on a 1 m square.
-  datasets.push_back({"engraved-plane", synthetic::engravedPlane(1.f, 0.03f, 0.002f, 600)});
-  if (std::filesystem::exists(rs1)) datasets.push_back({"rs1-scan-mesh", loadTriangleMesh(rs1)});
-  else std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): real-scan rows skipped\n", rs1.c_str());
+  for (const std::string& shape : splitList(a.text("shapes", "engraved-plane,rs1-scan-mesh"))) {
+    if (shape == "engraved-plane") {
+      datasets.push_back({shape, synthetic::engravedPlane(1.f, 0.03f, 0.002f, 600)});
+    } else if (shape == "engraved-plane-1cm") {
+      datasets.push_back({shape, synthetic::engravedPlane(1.f, 0.1f, 0.01f, 400)});
+    } else if (shape == "engraved-cylinder") {
+      datasets.push_back({shape, synthetic::engravedCylinder(0.3f, 1.f, 0.03f, 0.002f, 600)});
+    } else if (shape == "fandisk") {
+      datasets.push_back({shape, synthetic::fandiskBlock(128)});
+    } else if (shape == "rs1-scan-mesh") {
+      if (std::filesystem::exists(rs1)) datasets.push_back({shape, loadTriangleMesh(rs1)});
+      else std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): real-scan rows skipped\n", rs1.c_str());
+    } else {
+      throw InvalidParameter("shapes", shape, "engraved-plane, rs1-scan-mesh, engraved-plane-1cm, engraved-cylinder, fandisk");
+    }
+  }
 
   std::vector<Row> rows;
   const std::vector<double> noises = quick ? std::vector<double>{0.0025} : std::vector<double>{0.0025, 0.005};
@@ -214,8 +230,9 @@ int runBenchDenoise(int argc, char** argv) {
   };
   if (std::filesystem::exists(table)) speed("table_scene_lms400", loadPositions(table));
   else std::fprintf(stderr, "warning: %s missing: real-scan speed rows skipped\n", table.c_str());
-  if (n_large > 0 && datasets.size() > 1) {
-    Positions big = synthetic::sampleMesh(datasets[1].mesh, n_large, 5);
+  const auto rs1_ds = std::find_if(datasets.begin(), datasets.end(), [](const Dataset& d) { return d.name == "rs1-scan-mesh"; });
+  if (n_large > 0 && rs1_ds != datasets.end()) {
+    Positions big = synthetic::sampleMesh(rs1_ds->mesh, n_large, 5);
     synthetic::addGaussianNoise(big, 0.0025f, 6);
     speed("rs1 " + std::to_string(n_large) + " pts, 0.25% noise", big);
   }

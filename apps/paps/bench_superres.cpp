@@ -58,14 +58,6 @@ const char* kUsage =
     "                   pcl-mls-random, pcl-mls-voxel, simden+mls (also filters the speed test)\n"
     "                   (-refit: fit at every seed; -wide: seed discs as wide as QSR's)\n";
 
-std::vector<std::string> splitList(const std::string& s) {
-  std::vector<std::string> out;
-  std::stringstream ss(s);
-  std::string item;
-  while (std::getline(ss, item, ',')) if (!item.empty()) out.push_back(item);
-  return out;
-}
-
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
 using SrResult = WorkerResult;
 

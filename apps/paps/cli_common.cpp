@@ -50,6 +50,17 @@ void Arguments::allowOnly(const std::vector<std::string>& known) const {
       throw InvalidParameter(name, value, "a known option (see paps --help)");
 }
 
+std::vector<std::string> splitList(const std::string& s) {
+  std::vector<std::string> out;
+  std::size_t start = 0;
+  while (start <= s.size()) {
+    const std::size_t end = std::min(s.find(',', start), s.size());
+    if (end > start) out.push_back(s.substr(start, end - start));
+    start = end + 1;
+  }
+  return out;
+}
+
 std::string samplesDir() {
   if (const char* e = std::getenv("PAPS_SAMPLES")) return e;
   const char* home = std::getenv("HOME");

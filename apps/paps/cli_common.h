@@ -22,6 +22,9 @@ struct Arguments {
   void allowOnly(const std::vector<std::string>& known) const;
 };
 
+/// "a,b,,c" -> {"a", "b", "c"}.
+std::vector<std::string> splitList(const std::string& s);
+
 /// Where scripts/fetch_samples.sh caches the sample scans: $PAPS_SAMPLES, else
 /// ~/.cache/paps/samples.
 std::string samplesDir();

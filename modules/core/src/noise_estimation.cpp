@@ -58,13 +58,10 @@ NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& in
   if (!(radius > 0) || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "a finite value > 0");
   requirePositive("samples", samples);
-  std::vector<int> finite;
-  for (std::size_t i = 0; i < points.size(); ++i)
-    if (isFinite(points[i])) finite.push_back(static_cast<int>(i));
-  if (finite.size() < static_cast<std::size_t>(kMinFitPoints))
+  if (countFinite(points) < static_cast<std::size_t>(kMinFitPoints))
     throw InvalidInput("fewer than 10 finite points: cannot estimate the noise");
-  const std::size_t m = std::min<std::size_t>(samples, finite.size());
-  const double stride = static_cast<double>(finite.size()) / m;  // deterministic, spread out
+  const std::vector<int> sample = spreadSample(points, static_cast<std::size_t>(samples));
+  const std::size_t m = sample.size();
 
   NoiseEstimate est;
   est.radius = radius;
@@ -77,8 +74,7 @@ NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& in
       std::vector<float> d2;
 #pragma omp for schedule(dynamic, 16)
       for (std::int64_t s = 0; s < mm; ++s) {
-        const int i = finite[static_cast<std::size_t>(s * stride)];
-        const int count = index.radiusSearch(points[i], est.radius, idx, d2, kMaxBallPoints);
+        const int count = index.radiusSearch(points[sample[s]], est.radius, idx, d2, kMaxBallPoints);
         fits[s] = fitBall(points, idx, count);
       }
     }

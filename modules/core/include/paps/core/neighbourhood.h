@@ -91,6 +91,10 @@ enum class NeighbourCountStatistic {
   Mean,
 };
 
+/// A deterministic sample of at most `samples` finite points spread over the array (every
+/// (finite count / samples)-th finite point, in array order): indices into `points`.
+std::vector<int> spreadSample(const Positions& points, std::size_t samples);
+
 /// Radius (metres) at which a ball holds `target_count` points (self included), measured on
 /// a deterministic sample of at most `samples` points: Median, the median of their distances
 /// to the target_count-th nearest point; Mean, from there the surface law count ~ r^2 until

@@ -30,17 +30,23 @@ const char* kSuperresUsage =
     "                         median distance of patches to their most similar patch)\n"
     "  --grid-lr N, --grid-sr N  QSR bins per side (default: from the data)\n"
     "  --patches K            QSR similar patches kept per patch (default 16)\n"
-    "  --kernel F             QSR aggregation kernel scale (default 0.7)\n"
+    "  --kernel F             QSR aggregation kernel scale (default: from the noise, 0.7 to 1.4;\n"
+    "                         0.7 with --no-adapt)\n"
+    "  --similarity-scale F   QSR multiplier of the automatic similarity radius (default 1)\n"
+    "  --irls N               QSR IRLS passes, 0 to 10 (default 2)\n"
+    "  --noise S              QSR noise standard deviation of IN in metres (default: measured)\n"
+    "  --no-adapt             QSR: kernel scale 0.7 whatever the noise\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
 }  // namespace
 
 int runSuperres(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "no-adapt"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
-               "patches", "kernel", "quiet", "timings", "refit"});
+               "patches", "kernel", "similarity-scale", "irls", "noise", "no-adapt", "quiet", "timings",
+               "refit"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   const std::string method = a.text("method", "qsr");
@@ -68,6 +74,10 @@ int runSuperres(int argc, char** argv) {
     p.grid_sr = static_cast<int>(a.number("grid-sr", 0));
     p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
     p.kernel_scale = static_cast<float>(a.number("kernel", p.kernel_scale));
+    p.similarity_scale = static_cast<float>(a.number("similarity-scale", p.similarity_scale));
+    p.irls_iterations = static_cast<int>(a.number("irls", p.irls_iterations));
+    p.noise_sigma = static_cast<float>(a.number("noise", 0));
+    p.adapt_to_noise = !a.has("no-adapt");
     QuadricSuperResolutionReport r;
     out = superResolveQuadric(scans, p, &r, progress);
     std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
@@ -76,6 +86,12 @@ int runSuperres(int argc, char** argv) {
     std::printf("QSR: bins %dx%d low resolution%s, %dx%d super-resolution%s (mean similar weight K-1 = %.2f)\n",
                 r.grid_lr, r.grid_lr, p.grid_lr ? "" : " (chosen)", r.grid_sr, r.grid_sr, p.grid_sr ? "" : " (chosen)",
                 r.mean_similar_weight);
+    if (r.noise_sigma > 0)
+      std::printf("QSR: noise %.3g m%s, q = noise / patch radius = %.3f\n", r.noise_sigma,
+                  r.noise_estimated ? " (measured)" : " (given)", r.noise_sigma / r.patch_radius);
+    std::printf("QSR: kernel scale %.3g%s, similarity scale %.3g, %d IRLS passes\n", r.kernel_scale,
+                p.kernel_scale > 0 ? "" : (p.adapt_to_noise ? " (chosen from the noise)" : " (fixed default)"),
+                p.similarity_scale, p.irls_iterations);
     std::printf("QSR: %zu patches over %zu scan(s); %zu plane fallbacks; %zu patches without a similar patch\n",
                 r.patches, scans.size(), r.plane_fallbacks, r.without_similar);
     if (r.unprojected) std::fprintf(stderr, "warning: %zu output points had no patch nearby and were not projected\n", r.unprojected);

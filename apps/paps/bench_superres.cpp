@@ -55,11 +55,11 @@ const char* kUsage =
     "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n"
     "  --shapes LIST    comma-separated subset of engraved-plane,rs1 (default both)\n"
     "  --noises LIST    comma-separated noise fractions of the diagonal (default 0.0001,0.001,0.005)\n"
-    "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-fixed, qsr-4scans, apss,\n"
+    "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-adapt, qsr-4scans, apss,\n"
     "                   apss-refit, apss-wide, rimls, rimls-refit, rimls-wide, pcl-mls-plane,\n"
     "                   pcl-mls-random, pcl-mls-voxel, simden+mls (also filters the speed test)\n"
     "                   (-refit: fit at every seed; -wide: seed discs as wide as QSR's;\n"
-    "                   qsr-fixed: QSR without the noise adaptation, the fixed defaults)\n";
+    "                   qsr-adapt: QSR with the opt-in noise-adaptive kernel)\n";
 
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
 using SrResult = WorkerResult;
@@ -180,10 +180,10 @@ int runSuperresWorker(int argc, char** argv) {
     timespec c0{};
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     Positions out;
-    if (method == "qsr" || method == "qsr-fixed") {
+    if (method == "qsr" || method == "qsr-adapt") {
       QuadricSuperResolutionParameters q;
       q.output_count = target;
-      q.adapt_to_noise = method == "qsr";
+      q.adapt_to_noise = method == "qsr-adapt";
       QuadricSuperResolutionReport r;
       out = superResolveQuadric(scans, q, &r);
       lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"
@@ -205,7 +205,7 @@ int runSuperresWorker(int argc, char** argv) {
       const Positions den = denoiseBySimilarity(scans[0], q);
       out = pclMlsUpsample(den, "plane", get("radius", 0), target);
     } else {
-      throw InvalidParameter("method", method, "qsr[-fixed], apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
+      throw InvalidParameter("method", method, "qsr[-adapt], apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     timespec c1{};
@@ -235,13 +235,13 @@ int runBenchSuperres(int argc, char** argv) {
   const std::size_t n_speed = static_cast<std::size_t>(a.number("speed", quick ? 30000 : 100000));
   if (n_dense < 1000) throw InvalidParameter("points", std::to_string(n_dense), "at least 1000");
   std::filesystem::create_directories(out_dir);
-  const std::vector<std::string> all_methods = {"qsr",           "qsr-fixed",      "qsr-4scans",     "apss",           "apss-refit",
+  const std::vector<std::string> all_methods = {"qsr",           "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",
                                                 "apss-wide",     "rimls",          "rimls-refit",    "rimls-wide",
                                                 "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls"};
   const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", "")) : all_methods;
   for (const auto& m : methods)
     if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
-      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-fixed, qsr-4scans, apss, apss-refit, apss-wide, "
+      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-adapt, qsr-4scans, apss, apss-refit, apss-wide, "
                                            "rimls, rimls-refit, rimls-wide, pcl-mls-plane, pcl-mls-random, "
                                            "pcl-mls-voxel, simden+mls");
   const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1"));
@@ -301,7 +301,7 @@ int runBenchSuperres(int argc, char** argv) {
           << "," << e_in << "," << s_in << "\n";
       std::map<std::string, double> best_peer;
       std::map<std::string, Positions> outputs;
-      double e_qsr = NAN, e_fixed = NAN;
+      double e_qsr = NAN, e_adapt = NAN;
       for (const auto& m : methods) {
         if (m == "qsr-4scans" && !ds.multi) continue;
         std::vector<Positions> in = m == "qsr-4scans" ? scans : std::vector<Positions>{scans[0]};
@@ -319,7 +319,7 @@ int runBenchSuperres(int argc, char** argv) {
         csv << ds.name << "," << n_dense << "," << scans[0].size() << "," << noise << "," << m << ",1," << w.seconds
             << "," << w.peak_mb << "," << w.output.size() << "," << e << "," << e_surf << "\n";
         if (m == "qsr") e_qsr = e;
-        if (m == "qsr-fixed") e_fixed = e;
+        if (m == "qsr-adapt") e_adapt = e;
         if (m.rfind("apss", 0) == 0 || m.rfind("rimls", 0) == 0 || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
         if (noise == 0.0001 && m.find("-refit") == std::string::npos && m.find("-wide") == std::string::npos)
           outputs[m] = w.output;
@@ -328,7 +328,7 @@ int runBenchSuperres(int argc, char** argv) {
       std::string best_name;
       for (const auto& [k, v] : best_peer) if (v < best) { best = v; best_name = k; }
       std::printf("  -> QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f\n", best_name.c_str(), e_qsr / best);
-      if (!std::isnan(e_fixed)) std::printf("  -> QSR-fixed (no noise adaptation) / best = %.3f\n", e_fixed / best);
+      if (!std::isnan(e_adapt)) std::printf("  -> QSR-adapt (noise-adaptive kernel) / best = %.3f\n", e_adapt / best);
       if (noise == 0.0001 && n_dense >= 50000) {  // render.cpp needs enough points per view
         // Close-ups: a square of 6% of the extent around the centre of the dense cloud.
         Eigen::Vector3f c = Eigen::Vector3f::Zero();
@@ -380,7 +380,7 @@ int runBenchSuperres(int argc, char** argv) {
     std::vector<std::string> order;
     for (int round = 0; round < speed_repeat; ++round) {
       std::map<std::string, double> wall_of;
-      for (const std::string m : {"qsr", "qsr-fixed", "apss", "apss-refit", "apss-wide", "rimls", "rimls-refit", "rimls-wide",
+      for (const std::string m : {"qsr", "qsr-adapt", "apss", "apss-refit", "apss-wide", "rimls", "rimls-refit", "rimls-wide",
                                   "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel"}) {
         if (std::find(methods.begin(), methods.end(), m) == methods.end()) continue;
         if (round == 0) order.push_back(m);

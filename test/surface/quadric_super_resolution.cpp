@@ -134,8 +134,10 @@ TEST(QuadricSuperResolution, BadInput) {
 // The rule (measured, docs/superresolution.md "Noise-adaptive kernel"): 0.7 up to
 // q = sigma / R = 0.05, linear to 1.4 at q = 0.25, then 1.4.
 TEST(QuadricSuperResolution, NoiseAdaptedKernelFollowsTheMeasuredRule) {
-  const QuadricSuperResolutionParameters automatic;
+  QuadricSuperResolutionParameters automatic;
   EXPECT_EQ(automatic.kernel_scale, 0.f);
+  EXPECT_FALSE(automatic.adapt_to_noise);  // opt-in
+  automatic.adapt_to_noise = true;
   const float R = 0.02f;
   for (float q : {0.f, 0.03f, 0.05f}) EXPECT_FLOAT_EQ(noiseAdaptedParameters(automatic, R, q * R).kernel_scale, 0.7f);
   EXPECT_NEAR(noiseAdaptedParameters(automatic, R, 0.15f * R).kernel_scale, 1.05f, 1e-5f);
@@ -161,6 +163,7 @@ TEST(QuadricSuperResolution, GivenNoiseIsUsedAndExplicitKernelKept) {
   const TriangleMesh mesh = synthetic::engravedPlane(0.5f, 0.1f, 0.006f, 150);
   const Positions in = synthetic::sampleMesh(mesh, 3000, 5);  // noise-free: measured q is small
   QuadricSuperResolutionParameters p;
+  p.adapt_to_noise = true;
   p.factor = 1;
   p.noise_sigma = 0.02f;  // given: q = 0.02 / R > 0.25 whatever R here (about 0.03 m)
   QuadricSuperResolutionReport r;
@@ -187,15 +190,16 @@ TEST(QuadricSuperResolution, GivenNoiseIsUsedAndExplicitKernelKept) {
   EXPECT_EQ(r.noise_sigma, 0.f);
 }
 
-// The adaptive default against the old fixed kernel (0.7) on the 12K engraved plane, error to
+// The noise-adaptive kernel (opt-in) against the fixed default kernel (0.7) on the 12K engraved plane, error to
 // the true surface (interior). Measured: at 0.5% noise (measured q = 0.223, kernel 1.30)
 // 2.957e-3 against 3.242e-3 (0.91); at 0.05% (q = 0.036, kernel 0.7: the same run) 4.391e-4
 // for both. Margins: 0.95 and 1.01.
-TEST(QuadricSuperResolution, NoiseAdaptiveDefaultBeatsFixedKernelAtHighNoise) {
+TEST(QuadricSuperResolution, NoiseAdaptiveKernelBeatsFixedKernelAtHighNoise) {
   for (float noise : {0.0005f, 0.005f}) {
     Case c;
     synthetic::addGaussianNoise(c.sparse, noise, 9);
     QuadricSuperResolutionParameters p;
+    p.adapt_to_noise = true;
     QuadricSuperResolutionReport ra, rf;
     const double adaptive = surfaceError(superResolveQuadric({c.sparse}, p, &ra), c.mesh);
     p.adapt_to_noise = false;
@@ -218,6 +222,7 @@ TEST(QuadricSuperResolution, NoiseAdaptiveRunIsThreadCountIndependent) {
   Positions in = synthetic::sampleMesh(mesh, 3000, 5);
   synthetic::addGaussianNoise(in, 0.01f, 3);  // loud: the kernel is adapted
   QuadricSuperResolutionParameters p;
+  p.adapt_to_noise = true;
   p.factor = 2;
   const int threads = omp_get_max_threads();
   QuadricSuperResolutionReport r1, r2;

@@ -34,28 +34,27 @@ Positions unitSphere(std::size_t count, std::uint64_t seed, Normals& out) {
   return p;
 }
 
-// `count` points of z = 0.5 x^2 + 0.25 y^2 over [-1, 1]^2 (true k at the apex: 1, 0.5).
-Positions paraboloid(std::size_t count, std::uint64_t seed, Normals& up) {
+// `count` points of the height field z = f(x, y) over [-1, 1]^2, normals hint +z.
+template <typename F>
+Positions heightField(std::size_t count, std::uint64_t seed, Normals& up, F f) {
   paps::Random rng(seed);
   Positions p;
   up.assign(count, Eigen::Vector3f::UnitZ());
   while (p.size() < count) {
     const double x = rng.uniform(-1, 1), y = rng.uniform(-1, 1);
-    p.emplace_back(float(x), float(y), float(0.5 * x * x + 0.25 * y * y));
+    p.emplace_back(float(x), float(y), float(f(x, y)));
   }
   return p;
 }
 
-// z = x^3 - 3 x y^2 (monkey saddle) over [-1, 1]^2: cubic terms a quadric cannot follow.
+// z = 0.5 x^2 + 0.25 y^2 (true k at the apex: 1, 0.5).
+Positions paraboloid(std::size_t count, std::uint64_t seed, Normals& up) {
+  return heightField(count, seed, up, [](double x, double y) { return 0.5 * x * x + 0.25 * y * y; });
+}
+
+// z = x^3 - 3 x y^2 (monkey saddle, scaled by 0.3): cubic terms a quadric cannot follow.
 Positions monkeySaddle(std::size_t count, std::uint64_t seed, Normals& up) {
-  paps::Random rng(seed);
-  Positions p;
-  up.assign(count, Eigen::Vector3f::UnitZ());
-  while (p.size() < count) {
-    const double x = rng.uniform(-1, 1), y = rng.uniform(-1, 1);
-    p.emplace_back(float(x), float(y), float(0.3 * (x * x * x - 3 * x * y * y)));
-  }
-  return p;
+  return heightField(count, seed, up, [](double x, double y) { return 0.3 * (x * x * x - 3 * x * y * y); });
 }
 
 // Isotropic Gaussian noise of `sigma` (metres).

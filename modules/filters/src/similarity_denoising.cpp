@@ -22,8 +22,7 @@ void SimilarityDenoisingParameters::validate() const {
   if (!(radius >= 0) || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   requireInRange("target_neighbours", target_neighbours, 3, 1000);
-  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma))
-    throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "0 (estimated) or a finite value > 0");
+  requireNonNegative("noise_sigma", noise_sigma, "estimated");
   requireInRange("grid_size", grid_size, 1, 16);
   if (!(sigma >= 0) || !std::isfinite(sigma))
     throw InvalidParameter("sigma", detail::toString(sigma), "0 (automatic) or a finite value > 0");
@@ -441,8 +440,7 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
 SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingParameters& params,
                                                      float base_radius, float noise_sigma) {
   requirePositive("base_radius", base_radius);
-  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma))
-    throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "a finite value >= 0");
+  requireNonNegative("noise_sigma", noise_sigma);
   // Measured (docs/denoising.md, "Noise-adaptive defaults"): below q = 0.2 the detail costs
   // more than the noise and the target-count radius is best; the best radius then grows with
   // the noise until the neighbour cap (4 x target) makes a larger ball pointless (x2.5). The

@@ -34,8 +34,7 @@ void QuadricSuperResolutionParameters::validate() const {
   requireInRange("irls_iterations", irls_iterations, 0, 10);
   if (!(kernel_scale >= 0) || !std::isfinite(kernel_scale))
     throw InvalidParameter("kernel_scale", detail::toString(kernel_scale), "0 (automatic) or a finite value > 0");
-  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma))
-    throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "0 (estimated) or a finite value > 0");
+  requireNonNegative("noise_sigma", noise_sigma, "estimated");
 }
 
 namespace {
@@ -46,8 +45,7 @@ constexpr float kQuietNoise = 0.05f, kLoudNoise = 0.25f;
 QuadricSuperResolutionParameters noiseAdaptedParameters(const QuadricSuperResolutionParameters& params,
                                                         float patch_radius, float noise_sigma) {
   requirePositive("patch_radius", patch_radius);
-  if (!(noise_sigma >= 0) || !std::isfinite(noise_sigma))
-    throw InvalidParameter("noise_sigma", detail::toString(noise_sigma), "a finite value >= 0");
+  requireNonNegative("noise_sigma", noise_sigma);
   QuadricSuperResolutionParameters p = params;
   // Measured (docs/superresolution.md, "Noise-adaptive kernel: measurements"), on the distance from the
   // output to the true surface: under light noise the kernel of 0.7 keeps the detail; as the

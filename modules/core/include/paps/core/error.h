@@ -1,6 +1,7 @@
 #pragma once
 // The PAPS error hierarchy. Every failure a caller can act on is an exception
 // that says what was wrong and, where there is one, the offending value.
+#include <cmath>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -57,6 +58,14 @@ template <typename T>
 void requirePositive(const char* name, T value) {
   const double v = static_cast<double>(value);  // no T(1e30) overflow for integer T; NaN fails
   if (!(v > 0) || !(v < 1e30)) throw InvalidParameter(name, detail::toString(value), "a finite value > 0");
+}
+
+/// Throws InvalidParameter unless value >= 0 and finite; `zero` says what 0 means ("automatic",
+/// "estimated", ...), or is empty when 0 is just a value.
+inline void requireNonNegative(const char* name, double value, const char* zero = "") {
+  if (!(value >= 0) || !std::isfinite(value))
+    throw InvalidParameter(name, detail::toString(value),
+                           *zero ? std::string("0 (") + zero + ") or a finite value > 0" : "a finite value >= 0");
 }
 
 /// Throws InvalidParameter unless lo <= value <= hi.

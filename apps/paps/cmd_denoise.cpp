@@ -101,8 +101,15 @@ int runDenoise(int argc, char** argv) {
       const SpatialIndex index(in);
       const float r0 = radiusForNeighbourCount(in, index, p.target_neighbours);
       const float noise = p.noise_sigma > 0 ? p.noise_sigma : estimateNoiseLevel(in, index, r0).sigma;
-      p.radius = noiseAdaptedParameters(p, r0, noise).radius;
-      p.adapt_to_noise = false;
+      // The rule's choice, then what was given on the command line over it.
+      SimilarityDenoisingParameters ruled = noiseAdaptedParameters(p, r0, noise);
+      if (a.has("passes") || a.has("refilter")) {
+        ruled.passes = p.passes;
+        ruled.guided_passes = p.guided_passes;
+      }
+      if (a.has("own-weight")) ruled.own_weight = p.own_weight;
+      ruled.adapt_to_noise = false;
+      p = ruled;
       adapted = adaptedNote(noise, !a.has("noise"), p.radius / r0);
     }
     SimilarityDenoisingReport r;

@@ -171,6 +171,10 @@ int runBenchDenoise(int argc, char** argv) {
           Eigen::Vector3f c = Eigen::Vector3f::Zero();
           for (const auto& p : clean) c += p;
           c /= static_cast<float>(clean.size());
+          // On the surface nearest to the centroid (a cylinder's centroid is on its axis).
+          c = *std::min_element(clean.begin(), clean.end(), [&](const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+            return (a - c).squaredNorm() < (b - c).squaredNorm();
+          });
           const float half = 0.1f * ds.mesh.boundingBoxDiagonal();
           auto inside = [&](const Eigen::Vector3f& p) { return ((p - c).cwiseAbs().array() < half).all(); };
           for (const auto& p : noisy) if (inside(p)) crop.push_back(p);

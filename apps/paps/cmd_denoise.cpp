@@ -3,8 +3,6 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
-#include <paps/core/neighbourhood.h>
-#include <paps/core/noise_estimation.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
 
@@ -94,30 +92,22 @@ int runDenoise(int argc, char** argv) {
     p.noise_sigma = static_cast<float>(a.number("noise", 0));
     p.adapt_to_noise = !a.has("no-adapt");
     p.validate();
-    // Explicit schedule options keep their values: only the radius then follows the noise.
-    const bool explicit_schedule = a.has("passes") || a.has("refilter") || a.has("own-weight");
-    std::string adapted;
-    if (p.radius == 0 && p.adapt_to_noise && explicit_schedule) {
-      const SpatialIndex index(in);
-      const float r0 = radiusForNeighbourCount(in, index, p.target_neighbours);
-      const float noise = p.noise_sigma > 0 ? p.noise_sigma : estimateNoiseLevel(in, index, r0).sigma;
-      // The rule's choice, then what was given on the command line over it.
-      SimilarityDenoisingParameters ruled = noiseAdaptedParameters(p, r0, noise);
+    // Schedule options given on the command line go over the noise rule's choice.
+    SimilarityDenoisingReport choice, r;
+    SimilarityDenoisingParameters run = p;
+    if (a.has("passes") || a.has("refilter") || a.has("own-weight")) {
+      run = noiseResolvedParameters(in, p, &choice);
       if (a.has("passes") || a.has("refilter")) {
-        ruled.passes = p.passes;
-        ruled.guided_passes = p.guided_passes;
+        run.passes = p.passes;
+        run.guided_passes = p.guided_passes;
       }
-      if (a.has("own-weight")) ruled.own_weight = p.own_weight;
-      ruled.adapt_to_noise = false;
-      p = ruled;
-      adapted = adaptedNote(noise, !a.has("noise"), p.radius / r0);
+      if (a.has("own-weight")) run.own_weight = p.own_weight;
     }
-    SimilarityDenoisingReport r;
-    out = denoiseBySimilarity(in, p, &r, {}, progress);
-    if (r.noise_sigma > 0 || (p.adapt_to_noise && p.radius == 0))
-      adapted = adaptedNote(r.noise_sigma, r.noise_estimated, r.radius_scale);
-    else if (adapted.empty() && a.number("radius", 0) == 0)
-      adapted = " (chosen from the neighbour count)";
+    out = denoiseBySimilarity(in, run, &r, {}, progress);
+    if (run.adapt_to_noise) choice = r;  // resolved inside the run
+    const std::string adapted =
+        p.radius > 0 ? "" : !p.adapt_to_noise ? " (chosen from the neighbour count)"
+                                               : adaptedNote(choice.noise_sigma, choice.noise_estimated, choice.radius_scale);
     std::printf("similarity denoising: radius %g m%s (mean %.1f neighbours), grid %dx%d, sigma %g m%s, "
                 "%d smoothing iterations, %d similar patches, %d pass%s%s, own weight %g\n",
                 r.radius, adapted.c_str(), r.mean_neighbours, p.grid_size, p.grid_size,

@@ -244,11 +244,12 @@ namespace paps {
 
 RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
                                              int target_neighbours, int max_count,
-                                             const ProgressCallback& progress) {
+                                             const ProgressCallback& progress,
+                                             std::unique_ptr<SpatialIndex> index) {
   if (radius < 0 || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   RadiusNeighbourhood nb;
-  nb.index = std::make_unique<SpatialIndex>(points);
+  nb.index = index ? std::move(index) : std::make_unique<SpatialIndex>(points);
   if (nb.index->size() == 0) throw InvalidInput("no finite point in the cloud");
   if (nb.index->size() < 2) throw InvalidInput("only one finite point: no neighbourhood exists");
   nb.radius = radius > 0 ? radius : radiusForNeighbourCount(points, *nb.index, target_neighbours);

@@ -188,7 +188,8 @@ std::vector<PatchMoments<float>> patchMoments(const Positions& points, const Pos
 namespace {
 Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParameters& params,
                       SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
-                      const ProgressCallback& progress, const Positions* estimate = nullptr) {
+                      const ProgressCallback& progress, const Positions* estimate = nullptr,
+                      std::unique_ptr<SpatialIndex> spatial_index = nullptr) {
   SimilarityDenoisingReport report;
   const std::size_t n = points.size();
   const std::size_t finite = checkMovableInput(points, movable);
@@ -202,7 +203,7 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
   // 1. Neighbourhoods, capped so that a too large radius cannot explode the cost.
   const int cap = std::max(64, 4 * params.target_neighbours);
   RadiusNeighbourhood nb =
-      buildRadiusNeighbourhood(points, params.radius, params.target_neighbours, cap, progress);
+      buildRadiusNeighbourhood(points, params.radius, params.target_neighbours, cap, progress, std::move(spatial_index));
   report.radius = nb.radius;
   report.mean_neighbours = nb.graph.meanCount();
   const NeighbourGraph& graph = nb.graph;
@@ -456,29 +457,49 @@ SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingPa
   return p;
 }
 
+namespace {
+// noiseResolvedParameters, handing over the kd-tree it built (null when it built none).
+SimilarityDenoisingParameters resolveNoise(const Positions& points, const SimilarityDenoisingParameters& params,
+                                           SimilarityDenoisingReport* report, std::unique_ptr<SpatialIndex>* index_out) {
+  params.validate();
+  if (params.radius > 0 || !params.adapt_to_noise || countFinite(points) < 10) return params;
+  auto index = std::make_unique<SpatialIndex>(points);
+  const float r0 = radiusForNeighbourCount(points, *index, params.target_neighbours);
+  float noise = params.noise_sigma;
+  bool estimated = false;
+  if (noise == 0) {
+    try {
+      noise = estimateNoiseLevel(points, *index, r0).sigma;
+      estimated = true;
+    } catch (const InvalidInput&) {
+      noise = 0;  // no ball holds enough points for a fit: nothing to adapt to
+    }
+  }
+  SimilarityDenoisingParameters run = noiseAdaptedParameters(params, r0, noise);
+  run.adapt_to_noise = false;
+  if (report) {
+    report->noise_sigma = noise;
+    report->noise_estimated = estimated;
+    report->radius_scale = run.radius / r0;
+  }
+  if (index_out) *index_out = std::move(index);
+  return run;
+}
+}  // namespace
+
+SimilarityDenoisingParameters noiseResolvedParameters(const Positions& points,
+                                                      const SimilarityDenoisingParameters& params,
+                                                      SimilarityDenoisingReport* report) {
+  return resolveNoise(points, params, report, nullptr);
+}
+
 Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
                               SimilarityDenoisingReport* report_out,
                               const std::vector<std::uint8_t>& movable,
                               const ProgressCallback& progress) {
-  params.validate();
-  SimilarityDenoisingParameters run = params;
-  float noise = 0.f, scale = 1.f;
-  bool estimated = false;
-  if (params.radius == 0 && params.adapt_to_noise && countFinite(points) >= 10) {
-    const SpatialIndex index(points);
-    const float r0 = radiusForNeighbourCount(points, index, params.target_neighbours);
-    noise = params.noise_sigma;
-    if (noise == 0) {
-      try {
-        noise = estimateNoiseLevel(points, index, r0).sigma;
-        estimated = true;
-      } catch (const InvalidInput&) {
-        noise = 0;  // no ball holds enough points for a fit: nothing to adapt to
-      }
-    }
-    run = noiseAdaptedParameters(params, r0, noise);
-    scale = run.radius / r0;
-  }
+  SimilarityDenoisingReport choice;
+  std::unique_ptr<SpatialIndex> index;  // built on `points` by the noise measurement, reused by pass 1
+  const SimilarityDenoisingParameters run = resolveNoise(points, params, &choice, &index);
   Positions cur = points;
   SimilarityDenoisingReport report;
   for (int pass = 0; pass < run.passes; ++pass) {
@@ -486,11 +507,11 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
     SimilarityDenoisingParameters p = run;
     if (pass > 0) p.radius = report.radius;
     if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, p, &report, movable, progress, &cur);
-    else cur = denoiseOnce(cur, p, &report, movable, progress);
+    else cur = denoiseOnce(cur, p, &report, movable, progress, nullptr, pass == 0 ? std::move(index) : nullptr);
   }
-  report.noise_sigma = noise;
-  report.noise_estimated = estimated;
-  report.radius_scale = scale;
+  report.noise_sigma = choice.noise_sigma;
+  report.noise_estimated = choice.noise_estimated;
+  report.radius_scale = choice.radius_scale;
   report.passes = run.passes;
   report.guided_passes = run.guided_passes;
   report.own_weight = run.own_weight;

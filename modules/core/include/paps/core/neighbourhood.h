@@ -127,8 +127,10 @@ struct RadiusNeighbourhood {
 /// holding `target_neighbours` around a typical point (radiusForNeighbourCount). At most
 /// `max_count` neighbours per point (0: all).
 /// Throws InvalidInput when fewer than 2 points are finite.
+/// `index`, when given, must have been built on `points`; it is used instead of a new one.
 RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
                                              int target_neighbours, int max_count = 0,
-                                             const ProgressCallback& progress = {});
+                                             const ProgressCallback& progress = {},
+                                             std::unique_ptr<SpatialIndex> index = nullptr);
 
 }  // namespace paps

@@ -101,6 +101,16 @@ struct SimilarityDenoisingReport {
 SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingParameters& params,
                                                      float base_radius, float noise_sigma);
 
+/// The parameters denoiseBySimilarity runs `params` with on `points`: with the automatic
+/// radius and adapt_to_noise, noiseAdaptedParameters at the given noise_sigma or the noise
+/// measured at the target-count radius (paps::estimateNoiseLevel), with that radius filled in
+/// and adapt_to_noise off; otherwise `params` unchanged. `report`, when given, receives
+/// noise_sigma, noise_estimated and radius_scale. For callers that override part of the
+/// choice (e.g. an explicit pass count) before running.
+SimilarityDenoisingParameters noiseResolvedParameters(const Positions& points,
+                                                      const SimilarityDenoisingParameters& params,
+                                                      SimilarityDenoisingReport* report = nullptr);
+
 /// Denoises `points` (non-finite entries pass through). Only points with `movable[i]` set
 /// (all when empty) move; all finite points serve as neighbours and similar patches.
 /// Deterministic for any thread count. Throws InvalidInput when no point is finite.

@@ -43,7 +43,8 @@ const char* kBenchCompressUsage =
     "  --out DIR          CSV and PNG plots (default bench_compress)\n"
     "  --draco-bits LIST  Draco position quantization bits (default 8,9,10,11,12,14,16)\n"
     "  --ours LIST        our rates: patch points per patch, each optionally xS for a seed spacing of\n"
-    "                     S x R (default 64,100,160,256,400,700,1000,1600,2400)\n"
+    "                     S x R and/or bN for N_bins N, e.g. 256x1b12\n"
+    "                     (default 64,100,160,256,400,700,1000,1600,2400)\n"
     "  --seed-spacing S   seed spacing of the rates without xS, as a fraction of R (default 1.25)\n"
     "  --save-inputs DIR  write the inputs (DIR/rs1-clean.pcd, ...) as binary PCD and stop; for timing\n"
     "                     and measuring the memory of 'paps compress' on the same clouds\n";
@@ -230,8 +231,13 @@ int runBenchCompress(int argc, char** argv) {
   const double noise = a.number("noise", 0.3);
   const std::string out = a.text("out", "bench_compress");
   const std::vector<int> draco_bits = parseList(a.text("draco-bits", "8,9,10,11,12,14,16"));
-  // Our rates: "PP" or "PPxS" (patch points, seed spacing S x R).
-  std::vector<std::pair<int, float>> ours;
+  // Our rates: "PP", "PPxS" (seed spacing S x R) and/or "PPbN" (N_bins N), e.g. 256x1b12.
+  struct OurRate {
+    int patch_points;
+    float seed_spacing;
+    int bins;  // 0: the preset's
+  };
+  std::vector<OurRate> ours;
   {
     const float default_spacing = float(a.number("seed-spacing", 1.25));
     requireInRange("seed-spacing", default_spacing, 0.25f, 2.f);
@@ -239,8 +245,22 @@ int runBenchCompress(int argc, char** argv) {
     std::string item;
     while (std::getline(ss, item, ','))
       if (!item.empty()) {
-        const auto x = item.find('x');
-        ours.push_back({std::stoi(item.substr(0, x)), x == std::string::npos ? default_spacing : std::stof(item.substr(x + 1))});
+        OurRate r{0, default_spacing, 0};
+        std::size_t used = 0;
+        try {
+          r.patch_points = std::stoi(item, &used);
+          while (used < item.size()) {
+            const char tag = item[used];
+            std::size_t more = 0;
+            if (tag == 'x') r.seed_spacing = std::stof(item.substr(used + 1), &more);
+            else if (tag == 'b') r.bins = std::stoi(item.substr(used + 1), &more);
+            else throw std::invalid_argument(item);
+            used += 1 + more;
+          }
+        } catch (const std::logic_error&) {
+          throw InvalidParameter("ours", item, "PP, PPxS or PPbN (patch points, seed spacing, N_bins)");
+        }
+        ours.push_back(r);
       }
   }
   std::filesystem::create_directories(out);
@@ -305,7 +325,7 @@ int runBenchCompress(int argc, char** argv) {
     if (t) std::printf("  input to true surface RMSE %.3e\n", pointToMeshError(d.points, truth).rmse);
     std::vector<Result> rs;
     Positions ours_mid;
-    for (const auto& [pp, seed_spacing] : ours) {
+    for (const auto& [pp, seed_spacing, bins] : ours) {
       Result r;
       r.codec = "ours";
       compression::CompressionParameters p = pp >= 400 ? compression::compressionPreset("compact")
@@ -317,6 +337,7 @@ int runBenchCompress(int argc, char** argv) {
       // 3-7% more D2 (table scan at 256: 69.4 KB, D2 1.114e-3 m against 99.7 KB, 1.075e-3 m).
       p.seed_spacing = seed_spacing;
       if (pp < 100) p.bins = 12;  // a pattern finer than the points only costs mask bits
+      if (bins > 0) p.bins = bins;
       // 12-bit seeds (the presets compact and fine use them; balanced keeps the manuscript's
       // 16): 10% fewer bytes at patch_points=256 for 1% more D2 error. From 400 points per
       // patch (R >= 11 spacings), 10-bit seeds and 6-bit frame angles: both sides use the
@@ -333,6 +354,7 @@ int runBenchCompress(int argc, char** argv) {
         std::snprintf(buf, sizeof buf, " seeds %.3gR", seed_spacing);
         r.setting += buf;
       }
+      if (bins > 0) r.setting += " N_bins " + std::to_string(bins);
       auto t0 = Clock::now();
       const auto bytes = compression::compressPositions(d.points, p);
       r.enc_s = since(t0);

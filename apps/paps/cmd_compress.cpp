@@ -26,12 +26,14 @@ const char* kCompressUsage =
     "  --preset P              compact, balanced (default) or fine\n"
     "  --radius R              patch radius R in metres (default: from --patch-points)\n"
     "  --patch-points N        mean input points per patch when R is automatic (default 256)\n"
-    "  --bins N                N_bins, radial pattern of N^2+1 samples, even in [4, 32] (default 16)\n"
+    "  --bins N                N_bins, radial pattern of N^2+1 samples, even in [4, 32] (default 16,\n"
+    "                          compact: 12)\n"
     "  --atoms N               dictionary atoms in [1, 256] (default 24)\n"
     "  --sparsity T            non-zero coefficients per patch, T0 (default 4)\n"
     "  --seed-bits B           seed coordinate quantization in [4, 21] (default 16)\n"
     "  --coefficient-bits B    coefficient quantization in [2, 12] (default 8)\n"
     "  --angle-bits B          frame angle quantization in [3, 12] (default 8)\n"
+    "  --dictionary-bits B     dictionary atom quantization in [3, 8] (default 6)\n"
     "  --seed-spacing S        seeds at least S x R apart, in [0.25, 2] (default 1, the manuscript's;\n"
     "                          1.25: about 30% fewer bytes for 3-7% more D2 error, see docs/compression.md)\n"
     "  --ksvd-iterations N     K-SVD rounds (default 10)\n"
@@ -195,7 +197,7 @@ int runCompress(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "error"});
   if (a.has("help")) { std::fputs(kCompressUsage, stdout); return 0; }
   a.allowOnly({"preset", "radius", "patch-points", "bins", "atoms", "sparsity", "seed-bits", "coefficient-bits",
-               "angle-bits", "seed-spacing", "ksvd-iterations", "spacing", "error", "quiet", "timings"});
+               "angle-bits", "dictionary-bits", "seed-spacing", "ksvd-iterations", "spacing", "error", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT.paps");
   using namespace paps::compression;
   CompressionParameters p = compressionPreset(a.text("preset", "balanced"));
@@ -207,6 +209,7 @@ int runCompress(int argc, char** argv) {
   p.seed_bits = int(a.number("seed-bits", p.seed_bits));
   p.coefficient_bits = int(a.number("coefficient-bits", p.coefficient_bits));
   p.angle_bits = int(a.number("angle-bits", p.angle_bits));
+  p.dictionary_bits = int(a.number("dictionary-bits", p.dictionary_bits));
   p.seed_spacing = float(a.number("seed-spacing", p.seed_spacing));
   p.ksvd_iterations = int(a.number("ksvd-iterations", p.ksvd_iterations));
   p.output_spacing = float(a.number("spacing", p.output_spacing));

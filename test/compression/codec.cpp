@@ -189,3 +189,39 @@ TEST(SelfSimilarityCodec, UnevenDensityAndDuplicatesStillCoverTheSurface) {
   EXPECT_GT(covered, sparse.size() * 95 / 100);
   EXPECT_GT(out.size(), sparse.size() / 2);
 }
+
+// Format 2 codes a mask sample only in the patch that owns that part of the surface and
+// copies it into the overlapping patches: on a plane with a square hole the copies must
+// neither fill the hole nor open holes in the data.
+TEST(SelfSimilarityCodec, SharedMasksKeepTheHoleAndTheCoverage) {
+  Random rng(9);
+  Positions in;
+  while (in.size() < 40000) {
+    const float x = rng.uniform(), y = rng.uniform();
+    if (x > 0.4f && x < 0.6f && y > 0.4f && y < 0.6f) continue;
+    in.emplace_back(x, y, 0.01f * std::sin(20.f * x));
+  }
+  CompressionParameters p;
+  p.seed_spacing = 1.25f;
+  EncodeReport rep;
+  const auto bytes = compressPositions(in, p, &rep);
+  ASSERT_GT(bytes.size(), 12u);
+  EXPECT_EQ(bytes[8], kFormatVersion);
+  const Positions out = decompressPositions(bytes.data(), bytes.size());
+  const float spacing = 1.f / 200.f;  // sqrt(area / points)
+  // Inside the hole, farther than 3 spacings from its edge (large patches reach past the
+  // data by up to about 2 spacings at this patch size, see docs/compression.md).
+  std::size_t in_hole = 0;
+  for (const auto& q : out)
+    in_hole += q.x() > 0.4f + 3 * spacing && q.x() < 0.6f - 3 * spacing && q.y() > 0.4f + 3 * spacing &&
+               q.y() < 0.6f - 3 * spacing;
+  const SpatialIndex index(out);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  std::size_t covered = 0;
+  for (const auto& q : in) covered += index.nearestK(q, 1, idx, d2) == 1 && d2[0] <= 4 * spacing * spacing;
+  std::printf("plane with a hole: %zu bytes (masks %.0f bits), %zu decoded, %zu inside the hole, %.2f%% covered\n",
+              bytes.size(), rep.bits_masks, out.size(), in_hole, 100.0 * covered / in.size());
+  EXPECT_EQ(in_hole, 0u);
+  EXPECT_GT(covered, in.size() * 99 / 100);
+}

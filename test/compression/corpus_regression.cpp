@@ -31,3 +31,18 @@ TEST(CompressionCorpus, EveryFileDecodesOrFailsCleanly) {
   EXPECT_GT(files, 0);
   EXPECT_GT(decoded, 0);  // the seed streams are valid
 }
+
+// Format 1 (masks coded in full, 8-bit atoms as plain deltas) is still read: the corpus's
+// unit sphere, written by the format-1 encoder, decodes onto the sphere.
+TEST(CompressionCorpus, FormatOneStreamStillDecodesOntoItsSphere) {
+  std::ifstream f(std::string(PAPS_COMPRESSION_CORPUS_DIR) + "/sphere-balanced.paps", std::ios::binary);
+  const std::vector<std::uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  ASSERT_GT(b.size(), 12u);
+  EXPECT_EQ(b[8], 1) << "the file is meant to be a format-1 stream";
+  const auto p = paps::compression::decompressPositions(b.data(), b.size());
+  EXPECT_GT(p.size(), 1000u);  // 1,345 at the time of writing, from 1,500 input points
+  for (const auto& x : p) {
+    ASSERT_GT(x.norm(), 0.95f);
+    ASSERT_LT(x.norm(), 1.05f);
+  }
+}

@@ -102,15 +102,16 @@ std::vector<std::uint8_t> writeContainer(const std::vector<Section>& sections) {
   return w.bytes;
 }
 
-std::vector<Section> readContainer(const std::uint8_t* data, std::size_t size) {
+std::vector<Section> readContainer(const std::uint8_t* data, std::size_t size, std::uint32_t* version_out) {
   if (size < 8 || std::memcmp(data, kMagic, 8) != 0)
     throw CorruptStream("not a PAPS compressed point cloud (bad magic bytes)");
   ByteReader r(data, size, "container");
   r.take(8);
   const std::uint32_t version = r.u32();
-  if (version != kFormatVersion)
+  if (version < kOldestReadableVersion || version > kFormatVersion)
     throw CorruptStream("format version " + std::to_string(version) + " is not supported (this build reads " +
-                        std::to_string(kFormatVersion) + ")");
+                        std::to_string(kOldestReadableVersion) + " to " + std::to_string(kFormatVersion) + ")");
+  if (version_out) *version_out = version;
   const std::uint32_t n = r.u32();
   if (n < 1 || n > kMaxSections)
     throw CorruptStream("section count " + std::to_string(n) + " is out of [1, " + std::to_string(kMaxSections) + "]");

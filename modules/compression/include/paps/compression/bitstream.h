@@ -20,7 +20,10 @@
 
 namespace paps::compression {
 
-constexpr std::uint32_t kFormatVersion = 1;
+/// Version 2 codes each patch's validity mask only where the patch owns the surface (see
+/// self_similarity_codec.cpp); version 1 streams are still read.
+constexpr std::uint32_t kFormatVersion = 2;
+constexpr std::uint32_t kOldestReadableVersion = 1;
 
 /// The compressed data is truncated, corrupted, foreign or of an unsupported version.
 class CorruptStream : public paps::Error {
@@ -78,8 +81,9 @@ constexpr std::uint32_t sectionTag(const char (&s)[5]) {
 std::string tagName(std::uint32_t tag);
 
 std::vector<std::uint8_t> writeContainer(const std::vector<Section>& sections);
-/// Parses and validates a container; throws CorruptStream with the reason.
-std::vector<Section> readContainer(const std::uint8_t* data, std::size_t size);
+/// Parses and validates a container; throws CorruptStream with the reason. `version`, when
+/// given, receives the stream's format version (kOldestReadableVersion..kFormatVersion).
+std::vector<Section> readContainer(const std::uint8_t* data, std::size_t size, std::uint32_t* version = nullptr);
 
 /// Back end that stores a symbol stream.
 enum class EntropyMethod : std::uint8_t { kRange = 0, kZstd = 1, kLzma = 2 };

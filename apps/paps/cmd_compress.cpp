@@ -12,7 +12,9 @@
 
 #include <paps/compression/rate_distortion.h>
 #include <paps/compression/self_similarity_codec.h>
+#ifndef PAPS_CODEC_LEAN
 #include <paps/core/cloud_io.h>
+#endif
 #include <paps/core/error.h>
 
 #include "cli_common.h"
@@ -81,9 +83,41 @@ void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b
   }
 }
 
-// Binary PCD with float x y z (any other fields are skipped): read straight into Positions,
-// without PCL's whole-file buffer, so the peak memory of `compress` stays near the cloud's
-// own 12 bytes per point. Returns false for any other file (the caller then uses PCL).
+// LZF decompression (the format of PCD's binary_compressed data): control bytes below 32 start
+// a literal run of ctrl + 1 bytes; others copy (ctrl >> 5) + 2 bytes (7 means a length byte
+// follows) from ((ctrl & 31) << 8) + next byte + 1 bytes back. Every read and write is checked.
+void lzfDecompress(const std::uint8_t* in, std::size_t in_size, std::uint8_t* out, std::size_t out_size,
+                   const std::string& path) {
+  auto bad = [&] { return IoError("cannot read '" + path + "': corrupt binary_compressed data"); };
+  std::size_t ip = 0, op = 0;
+  while (ip < in_size) {
+    const unsigned ctrl = in[ip++];
+    if (ctrl < 32) {
+      const std::size_t len = ctrl + 1;
+      if (ip + len > in_size || op + len > out_size) throw bad();
+      std::memcpy(out + op, in + ip, len);
+      ip += len;
+      op += len;
+    } else {
+      std::size_t len = ctrl >> 5;
+      if (len == 7) {
+        if (ip >= in_size) throw bad();
+        len += in[ip++];
+      }
+      len += 2;
+      if (ip >= in_size) throw bad();
+      const std::size_t back = ((std::size_t(ctrl) & 31u) << 8) + in[ip++] + 1;
+      if (back > op || op + len > out_size) throw bad();
+      for (std::size_t i = 0; i < len; ++i, ++op) out[op] = out[op - back];  // may overlap
+    }
+  }
+  if (op != out_size) throw bad();
+}
+
+// Reads the x y z of a binary or binary_compressed PCD file whose x, y and z are float
+// fields, without PCL's whole-cloud copies, so the peak memory of `compress` stays near the
+// cloud's own 12 bytes per point (binary_compressed needs its unpacked data once more).
+// Returns false for any other file (the caller then uses PCL, or paps-codec says why not).
 bool readBinaryPcdXyz(const std::string& path, Positions& out) {
   if (std::filesystem::path(path).extension() != ".pcd") return false;
   std::ifstream f(path, std::ios::binary);
@@ -107,28 +141,49 @@ bool readBinaryPcdXyz(const std::string& path, Positions& out) {
     else if (key == "POINTS") { long long c = -1; ss >> c; if (c < 0) return false; points = std::size_t(c); have_points = true; }
     else if (key == "DATA") {
       ss >> v;
-      if (v != "binary" || !have_points || fields.empty() || sizes.size() != fields.size() || types.size() != fields.size())
+      const bool packed = v == "binary_compressed";
+      if ((v != "binary" && !packed) || !have_points || fields.empty() || sizes.size() != fields.size() ||
+          types.size() != fields.size())
         return false;
       if (counts.empty()) counts.assign(fields.size(), 1);
       if (counts.size() != fields.size()) return false;
-      int step = 0, off[3] = {-1, -1, -1};
+      // off: byte offset of x, y, z inside a point (binary) or of their column (packed).
+      std::size_t step = 0, off[3] = {0, 0, 0};
+      bool found[3] = {false, false, false};
       for (std::size_t i = 0; i < fields.size(); ++i) {
         const char* xyz[3] = {"x", "y", "z"};
+        if (sizes[i] <= 0 || sizes[i] > 8 || counts[i] <= 0 || counts[i] > 1 << 20) return false;
         for (int a = 0; a < 3; ++a)
           if (fields[i] == xyz[a]) {
             if (types[i] != 'F' || sizes[i] != 4 || counts[i] != 1) return false;
-            off[a] = step;
+            off[a] = packed ? step * points : step;
+            found[a] = true;
           }
-        if (sizes[i] <= 0 || counts[i] <= 0) return false;
-        step += sizes[i] * counts[i];
+        step += std::size_t(sizes[i]) * std::size_t(counts[i]);
       }
-      if (off[0] < 0 || off[1] < 0 || off[2] < 0) return false;
+      if (!found[0] || !found[1] || !found[2]) return false;
       const std::streampos data = f.tellg();
       f.seekg(0, std::ios::end);
       const std::uint64_t left = std::uint64_t(f.tellg() - data);
-      if (left < std::uint64_t(points) * step) throw IoError("cannot read '" + path + "': truncated data");
       f.seekg(data);
       out.clear();
+      if (packed) {
+        std::uint32_t sz[2];
+        if (left < 8 || !f.read(reinterpret_cast<char*>(sz), 8)) throw IoError("cannot read '" + path + "': truncated data");
+        if (sz[0] > left - 8) throw IoError("cannot read '" + path + "': truncated data");
+        if (std::uint64_t(sz[1]) != std::uint64_t(points) * step)
+          throw IoError("cannot read '" + path + "': binary_compressed size does not match POINTS");
+        std::vector<std::uint8_t> packed_bytes(sz[0]), raw(sz[1]);
+        if (!f.read(reinterpret_cast<char*>(packed_bytes.data()), std::streamsize(sz[0])))
+          throw IoError("cannot read '" + path + "': truncated data");
+        lzfDecompress(packed_bytes.data(), packed_bytes.size(), raw.data(), raw.size(), path);
+        packed_bytes = {};
+        out.resize(points);
+        for (std::size_t i = 0; i < points; ++i)
+          for (int a = 0; a < 3; ++a) std::memcpy(&out[i][a], raw.data() + off[a] + 4 * i, 4);
+        return true;
+      }
+      if (left < std::uint64_t(points) * step) throw IoError("cannot read '" + path + "': truncated data");
       out.reserve(points);
       std::vector<char> buf;
       const std::size_t chunk = 65536;
@@ -216,7 +271,14 @@ int runCompress(int argc, char** argv) {
   p.validate();
 
   Positions in;
-  if (!readBinaryPcdXyz(a.positional[0], in)) in = loadPositions(a.positional[0]);
+  if (!readBinaryPcdXyz(a.positional[0], in)) {
+#ifdef PAPS_CODEC_LEAN
+    throw InvalidInput(a.positional[0] + ": paps-codec reads binary or binary_compressed PCD files with float x y z "
+                       "fields; 'paps compress' reads any PCD or PLY");
+#else
+    in = loadPositions(a.positional[0]);
+#endif
+  }
   std::printf("read %s: %zu points (%zu finite)\n", a.positional[0].c_str(), in.size(), countFinite(in));
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   EncodeReport r;

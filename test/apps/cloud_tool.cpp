@@ -1,6 +1,6 @@
 // Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
 // its input (same number of points, same fields in the same order, only x y z moved).
-//   paps_test_cloud_tool write OUT.pcd COUNT
+//   paps_test_cloud_tool write OUT.pcd COUNT [binary|compressed|ascii]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
 #include <cmath>
@@ -24,7 +24,7 @@ int fail(const std::string& what) {
 
 // A gently curved, noisy surface with an intensity per point: enough for the denoiser to
 // find neighbours and move points.
-int write(const std::string& path, int count) {
+int write(const std::string& path, int count, const std::string& format) {
   pcl::PointCloud<pcl::PointXYZI> cloud;
   const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(count))));
   unsigned state = 7u;
@@ -40,7 +40,10 @@ int write(const std::string& path, int count) {
     p.intensity = static_cast<float>(k);
     cloud.push_back(p);
   }
-  if (pcl::io::savePCDFileBinary(path, cloud) != 0) return fail("cannot write " + path);
+  const int rc = format == "compressed" ? pcl::io::savePCDFileBinaryCompressed(path, cloud)
+                 : format == "ascii"    ? pcl::io::savePCDFileASCII(path, cloud)
+                                        : pcl::io::savePCDFileBinary(path, cloud);
+  if (rc != 0) return fail("cannot write " + path);
   return 0;
 }
 
@@ -79,7 +82,7 @@ int check(const std::string& in_path, const std::string& out_path) {
 
 int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
-  if (mode == "write" && argc == 4) return write(argv[2], std::atoi(argv[3]));
+  if (mode == "write" && (argc == 4 || argc == 5)) return write(argv[2], std::atoi(argv[3]), argc == 5 ? argv[4] : "binary");
   if (mode == "check" && argc == 4) return check(argv[2], argv[3]);
-  return fail("usage: paps_test_cloud_tool write OUT COUNT | check IN OUT");
+  return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

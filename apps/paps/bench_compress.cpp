@@ -44,7 +44,7 @@ const char* kBenchCompressUsage =
     "  --draco-bits LIST  Draco position quantization bits (default 8,9,10,11,12,14,16)\n"
     "  --ours LIST        our rates: patch points per patch, each optionally xS for a seed spacing of\n"
     "                     S x R and/or bN for N_bins N, e.g. 256x1b12\n"
-    "                     (default 64,100,160,256,400,700,1000,1600,2400)\n"
+    "                     (default 40b10,48,64,100,160,256,400,700,1000,1300,1600,2400,100b12,160b12,256b12)\n"
     "  --seed-spacing S   seed spacing of the rates without xS, as a fraction of R (default 1.25)\n"
     "  --save-inputs DIR  write the inputs (DIR/rs1-clean.pcd, ...) as binary PCD and stop; for timing\n"
     "                     and measuring the memory of 'paps compress' on the same clouds\n";
@@ -241,7 +241,7 @@ int runBenchCompress(int argc, char** argv) {
   {
     const float default_spacing = float(a.number("seed-spacing", 1.25));
     requireInRange("seed-spacing", default_spacing, 0.25f, 2.f);
-    std::stringstream ss(a.text("ours", "64,100,160,256,400,700,1000,1600,2400"));
+    std::stringstream ss(a.text("ours", "40b10,48,64,100,160,256,400,700,1000,1300,1600,2400,100b12,160b12,256b12"));
     std::string item;
     while (std::getline(ss, item, ','))
       if (!item.empty()) {

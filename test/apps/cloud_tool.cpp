@@ -2,6 +2,7 @@
 // its input (same number of points, same fields in the same order, only x y z moved).
 //   paps_test_cloud_tool write OUT.pcd COUNT [binary|compressed|ascii]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
+//   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
 #include <cmath>
 #include <cstdio>
@@ -78,11 +79,28 @@ int check(const std::string& in_path, const std::string& out_path) {
   return 0;
 }
 
+int unhex(const std::string& in_path, const std::string& out_path) {
+  std::FILE* in = std::fopen(in_path.c_str(), "rb");
+  if (!in) return fail("cannot read " + in_path);
+  std::string text;
+  for (int c; (c = std::fgetc(in)) != EOF;) text.push_back(static_cast<char>(c));
+  std::fclose(in);
+  std::FILE* out = std::fopen(out_path.c_str(), "wb");
+  if (!out) return fail("cannot write " + out_path);
+  for (std::size_t i = 0; i + 1 < text.size(); i += 2) {
+    const int byte = std::stoi(text.substr(i, 2), nullptr, 16);
+    std::fputc(byte, out);
+  }
+  std::fclose(out);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   const std::string mode = argc > 1 ? argv[1] : "";
   if (mode == "write" && (argc == 4 || argc == 5)) return write(argv[2], std::atoi(argv[3]), argc == 5 ? argv[4] : "binary");
   if (mode == "check" && argc == 4) return check(argv[2], argv[3]);
+  if (mode == "unhex" && argc == 4) return unhex(argv[2], argv[3]);
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

@@ -225,3 +225,23 @@ TEST(SelfSimilarityCodec, SharedMasksKeepTheHoleAndTheCoverage) {
   EXPECT_EQ(in_hole, 0u);
   EXPECT_GT(covered, in.size() * 99 / 100);
 }
+
+// A volume of points (not a surface) with seeds a quarter of R apart puts over a thousand seeds
+// within 2 R of each other; the decoder would reject such a stream (its work would grow with
+// the square of the seed count), so the encoder refuses it with a clear error.
+TEST(SelfSimilarityCodec, AVolumeOfSeedsIsRefused) {
+  Random rng(4);
+  Positions cube;
+  for (int i = 0; i < 60000; ++i) cube.emplace_back(4 * rng.uniform(), 4 * rng.uniform(), 4 * rng.uniform());
+  CompressionParameters p;
+  p.patch_radius = 1.f;
+  p.seed_spacing = 0.25f;
+  p.max_training_patches = 64;
+  p.ksvd_iterations = 1;
+  try {
+    compressPositions(cube, p);
+    FAIL() << "a volume was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("volume"), std::string::npos) << e.what();
+  }
+}

@@ -31,6 +31,15 @@ constexpr std::uint32_t kTagDict = sectionTag("DICT");
 constexpr std::uint32_t kTagPtch = sectionTag("PTCH");
 constexpr int kPredictionNeighbours = 10;
 constexpr float kValidSpacings = 1.5f;  // a pattern sample has data within this many spacings
+// Seeds within 2.05 R of a seed, at most. Seeds of a surface at least 0.25 R apart (the
+// smallest seed_spacing) number about 270 there; a stream with more is crafted, and would make
+// the decoder's work grow with the square of its seed count, so it is rejected (and the encoder
+// refuses inputs, such as dense volumes, that would produce one).
+constexpr int kMaxSeedNeighbours = 512;
+[[noreturn]] void tooManySeedNeighbours() {
+  throw CorruptStream("a seed has more than " + std::to_string(kMaxSeedNeighbours) +
+                      " other seeds within 2 R (a volume of seeds, not a surface)");
+}
 
 // ---------------------------------------------------------------------------------------
 // What encoder and decoder share: the header, frame prediction, angle dequantization and the
@@ -214,18 +223,20 @@ class SharedMasks {
         R_(h.radius), k_(h.samples()), rings_(h.rings()), sectors_(h.sectors()), dr_(1.f / (h.rings() + 0.5f)),
         words_((std::size_t(h.samples()) + 63) / 64), owned_(words_ * seeds.size(), 0) {
     const long n = long(seeds.size());
+    bool too_many = false;
 #pragma omp parallel
     {
       std::vector<int> nb;
       std::vector<float> d2;
-#pragma omp for schedule(dynamic, 64)
+#pragma omp for schedule(dynamic, 64) reduction(|| : too_many)
       for (long i = 0; i < n; ++i) {
-        neighbours(std::size_t(i), nb, d2);
+        if (!neighbours(std::size_t(i), nb, d2)) { too_many = true; continue; }
         std::uint64_t* w = owned_.data() + std::size_t(i) * words_;
         for (int s = 0; s < k_; ++s)
           if (owner(std::size_t(i), s, nb) == int(i)) w[s / 64] |= std::uint64_t(1) << (s % 64);
       }
     }
+    if (too_many) tooManySeedNeighbours();  // every seed was checked: later searches stay within the bound
   }
   int samples() const { return k_; }
   int sectors() const { return sectors_; }
@@ -244,9 +255,12 @@ class SharedMasks {
   }
 
  private:
-  void neighbours(std::size_t i, std::vector<int>& nb, std::vector<float>& d2) const {
-    index_.radiusSearch(seeds_[i], 2.05f * R_, nb, d2);
+  // False when the seed has too many neighbours (the list is then cut).
+  bool neighbours(std::size_t i, std::vector<int>& nb, std::vector<float>& d2) const {
+    const int cnt = index_.radiusSearch(seeds_[i], 2.05f * R_, nb, d2, kMaxSeedNeighbours + 1);
+    nb.resize(std::size_t(std::min(cnt, kMaxSeedNeighbours)));
     if (std::find(nb.begin(), nb.end(), int(i)) == nb.end()) nb.push_back(int(i));
+    return cnt <= kMaxSeedNeighbours;
   }
   Eigen::Vector3f samplePosition(std::size_t i, int s) const {
     const Eigen::Vector2f& q = pattern_.samples[std::size_t(s)];
@@ -898,7 +912,15 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   LocalFrames frames(n);
   for (std::size_t i = 0; i < n; ++i) frames[i] = correctedFrame(pred[i], qangles[i][0], qangles[i][1], qangles[i][2], L);
   const SpatialIndex seed_index(seeds);
-  const SharedMasks shared(h, seeds, frames, seed_index);
+  std::unique_ptr<SharedMasks> shared_ptr;
+  try {
+    shared_ptr = std::make_unique<SharedMasks>(h, seeds, frames, seed_index);
+  } catch (const CorruptStream&) {
+    throw InvalidInput("more than " + std::to_string(kMaxSeedNeighbours) +
+                       " seeds lie within 2 R of one seed: the points fill a volume, not a surface "
+                       "(a larger seed_spacing or patch radius may help)");
+  }
+  const SharedMasks& shared = *shared_ptr;
   std::vector<long> src;
   std::vector<int> snb;
   std::vector<float> sd2;
@@ -1126,9 +1148,10 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
   std::size_t generated = 0;
   constexpr long kBlock = 512;  // 1.2 MB of unthinned points on rs1 1M (1024: 2.5 MB)
   std::vector<Positions> per_seed(std::min<std::size_t>(n, kBlock));
+  bool too_many = false;
   for (long b0 = 0; b0 < long(n); b0 += kBlock) {
     const long bn = std::min<long>(kBlock, long(n) - b0);
-#pragma omp parallel
+#pragma omp parallel reduction(|| : too_many)
     {
       std::vector<int> nb, close;
       std::vector<float> d2;
@@ -1141,7 +1164,12 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
         const std::int16_t* yi = heights.data() + std::size_t(i) * k;
         const std::uint8_t* vi = valid.data() + std::size_t(i) * k;
         const LocalFrame& fi = frames[i];
-        const int cnt = seed_index.radiusSearch(seeds[i], 2.05f * R, nb, d2);
+        const int cnt = seed_index.radiusSearch(seeds[i], 2.05f * R, nb, d2, kMaxSeedNeighbours + 1);
+        if (cnt > kMaxSeedNeighbours) {
+          // Thrown outside the parallel region: flag and stop this thread's work.
+          too_many = true;
+          continue;
+        }
         for (int gy = -G; gy < G; ++gy)
           for (int gx = -G; gx < G; ++gx) {
             const float u = (gx + 0.5f) * s, v = (gy + 0.5f) * s;
@@ -1190,6 +1218,7 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
       }
     }
     prog.throwIfCancelled();
+    if (too_many) tooManySeedNeighbours();
     for (long bi = 0; bi < bn; ++bi) {
       generated += per_seed[bi].size();
       if (generated > o.max_points) throw CorruptStream("decoded point count exceeds the limit");

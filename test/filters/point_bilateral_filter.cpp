@@ -233,26 +233,13 @@ TEST(PointBilateralFilter, MovesAlongTheNormalOnly) {
 
 TEST(PointBilateralFilter, EmptyAndAllNaNAreInvalidInput) {
   PointBilateralFilter<pcl::PointXYZ> f;
-  pcl::PointCloud<pcl::PointXYZ> out;
-  f.setInputCloud(pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>());
-  EXPECT_THROW(f.filter(out), paps::InvalidInput);
-  f.setInputCloud(toCloud<pcl::PointXYZ>(Positions(10, Eigen::Vector3f::Constant(payloadNaN()))));
-  EXPECT_THROW(f.filter(out), paps::InvalidInput);
+  expectEmptyAndAllNaNAreInvalidInput(f);
   EXPECT_THROW(paps::bilateralFilterPositions(Positions{}, {}), paps::InvalidInput);
 }
 
 TEST(PointBilateralFilter, SinglePointUnchanged) {
   PointBilateralFilter<pcl::PointXYZ> f;
-  const Positions one = {{0.3f, -0.2f, 1.5f}};
-  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(one));
-  ASSERT_EQ(out.size(), 1u);
-  EXPECT_TRUE(sameBits(out[0].getVector3fMap(), one[0]));
-  EXPECT_TRUE(out.is_dense);
-  EXPECT_EQ(f.getReport().isolated, 1u);
-  const Positions mixed = {{payloadNaN(), 0, 0}, {1, 2, 3}, {0, payloadNaN(), 0}};
-  const auto out2 = runFilter(f, toCloud<pcl::PointXYZ>(mixed));
-  for (std::size_t i = 0; i < 3; ++i) EXPECT_TRUE(sameBits(out2[i].getVector3fMap(), mixed[i]));
-  EXPECT_FALSE(out2.is_dense);
+  expectSinglePointUnchanged(f);
 }
 
 TEST(PointBilateralFilter, DuplicatePointsGiveFiniteOutput) {
@@ -269,30 +256,14 @@ TEST(PointBilateralFilter, DuplicatePointsGiveFiniteOutput) {
 }
 
 TEST(PointBilateralFilter, AllIdenticalPointsDoNotCrash) {
-  const Positions same(200, Eigen::Vector3f(1.f, 2.f, 3.f));
-  PointBilateralParameters params;
-  params.radius = 0.1f;
-  PointBilateralReport report;
-  const Positions out = paps::bilateralFilterPositions(same, params, &report);
-  for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(sameBits(out[i], same[i])) << i;
-  EXPECT_EQ(report.isolated, same.size());
-  params.radius = 0.f;
-  EXPECT_THROW(paps::bilateralFilterPositions(same, params), paps::InvalidInput);
+  expectAllIdenticalPointsDoNotCrash<PointBilateralParameters, PointBilateralReport>(
+      [](const Positions& p, const PointBilateralParameters& params, PointBilateralReport* r) {
+        return paps::bilateralFilterPositions(p, params, r);
+      });
 }
 
 TEST(PointBilateralFilter, TinyCloudsGiveFiniteOutput) {
-  // Fewer points than the target neighbour count and than the similar patches asked for.
-  paps::Random rng(77);
-  for (int n : {2, 3, 4, 5, 8, 20, 60}) {
-    Positions p;
-    for (int i = 0; i < n; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.01 * rng.gaussian());
-    const Positions out = paps::bilateralFilterPositions(p, {});
-    ASSERT_EQ(out.size(), p.size());
-    for (int i = 0; i < n; ++i) {
-      EXPECT_TRUE(paps::isFinite(out[i])) << n << " points, point " << i;
-      EXPECT_LT((out[i] - p[i]).norm(), 0.5f) << n << " points, point " << i;
-    }
-  }
+  expectTinyCloudsGiveFiniteOutput([](const Positions& p) { return paps::bilateralFilterPositions(p, {}); });
 }
 
 TEST(PointBilateralFilter, TinyRadiusLeavesPointsIsolated) {

@@ -393,27 +393,13 @@ TEST(SimilarityDenoising, ClassMatchesFunctionAndInPlace) {
 
 TEST(SimilarityDenoising, EmptyAndAllNaNAreInvalidInput) {
   SimilarityDenoising<pcl::PointXYZ> f;
-  pcl::PointCloud<pcl::PointXYZ> out;
-  f.setInputCloud(pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>());
-  EXPECT_THROW(f.filter(out), paps::InvalidInput);
-  f.setInputCloud(toCloud<pcl::PointXYZ>(Positions(10, Eigen::Vector3f::Constant(payloadNaN()))));
-  EXPECT_THROW(f.filter(out), paps::InvalidInput);
+  expectEmptyAndAllNaNAreInvalidInput(f);
   EXPECT_THROW(paps::denoiseBySimilarity(Positions{}, {}), paps::InvalidInput);
 }
 
 TEST(SimilarityDenoising, SinglePointUnchanged) {
   SimilarityDenoising<pcl::PointXYZ> f;
-  const Positions one = {{0.3f, -0.2f, 1.5f}};
-  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(one));
-  ASSERT_EQ(out.size(), 1u);
-  EXPECT_TRUE(sameBits(out[0].getVector3fMap(), one[0]));
-  EXPECT_TRUE(out.is_dense);
-  EXPECT_EQ(f.getReport().isolated, 1u);
-  // One finite point among NaNs.
-  const Positions mixed = {{payloadNaN(), 0, 0}, {1, 2, 3}, {0, payloadNaN(), 0}};
-  const auto out2 = runFilter(f, toCloud<pcl::PointXYZ>(mixed));
-  for (std::size_t i = 0; i < 3; ++i) EXPECT_TRUE(sameBits(out2[i].getVector3fMap(), mixed[i]));
-  EXPECT_FALSE(out2.is_dense);
+  expectSinglePointUnchanged(f);
 }
 
 TEST(SimilarityDenoising, DuplicatePointsGiveFiniteOutput) {
@@ -455,31 +441,14 @@ TEST(SimilarityDenoising, DuplicatedScanKeepsItsSimilarityScale) {
 }
 
 TEST(SimilarityDenoising, AllIdenticalPointsDoNotCrash) {
-  const Positions same(200, Eigen::Vector3f(1.f, 2.f, 3.f));
-  SimilarityDenoisingParameters params;
-  params.radius = 0.1f;  // given: every point is every other's neighbour, no normal exists
-  SimilarityDenoisingReport report;
-  const Positions out = paps::denoiseBySimilarity(same, params, &report);
-  for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(sameBits(out[i], same[i])) << i;
-  EXPECT_EQ(report.isolated, same.size());
-  // Automatic radius: there is no scale to choose; a clear InvalidInput is the contract.
-  params.radius = 0.f;
-  EXPECT_THROW(paps::denoiseBySimilarity(same, params), paps::InvalidInput);
+  expectAllIdenticalPointsDoNotCrash<SimilarityDenoisingParameters, SimilarityDenoisingReport>(
+      [](const Positions& p, const SimilarityDenoisingParameters& params, SimilarityDenoisingReport* r) {
+        return paps::denoiseBySimilarity(p, params, r);
+      });
 }
 
 TEST(SimilarityDenoising, TinyCloudsGiveFiniteOutput) {
-  // Fewer points than the target neighbour count and than the similar patches asked for.
-  paps::Random rng(77);
-  for (int n : {2, 3, 4, 5, 8, 20, 60}) {
-    Positions p;
-    for (int i = 0; i < n; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.01 * rng.gaussian());
-    const Positions out = paps::denoiseBySimilarity(p, {});
-    ASSERT_EQ(out.size(), p.size());
-    for (int i = 0; i < n; ++i) {
-      EXPECT_TRUE(paps::isFinite(out[i])) << n << " points, point " << i;
-      EXPECT_LT((out[i] - p[i]).norm(), 0.5f) << n << " points, point " << i;
-    }
-  }
+  expectTinyCloudsGiveFiniteOutput([](const Positions& p) { return paps::denoiseBySimilarity(p, {}); });
 }
 
 TEST(SimilarityDenoising, TinyRadiusLeavesPointsIsolated) {

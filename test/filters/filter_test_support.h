@@ -2,7 +2,11 @@
 // Helpers shared by the tests of point-moving filters.
 #include <cstdint>
 #include <cstring>
+#include <limits>
 #include <string>
+#include <vector>
+
+#include <pcl/point_types.h>
 
 #include <gtest/gtest.h>
 #include <pcl/point_cloud.h>
@@ -117,6 +121,109 @@ void expectAllIdenticalPointsDoNotCrash(FilterFn filter) {
   EXPECT_EQ(report.isolated, same.size());
   params.radius = 0.f;
   EXPECT_THROW(filter(same, params, nullptr), InvalidInput);
+}
+
+/// NaN and infinite points pass through bit for bit and are counted, the other fields
+/// (intensity) and the cloud's shape are kept, and the finite points move. `p`: a noisy
+/// surface of at least 3,000 points.
+template <template <typename> class Filter>
+void expectNaNPassThroughAndOtherFieldsKept(Positions p) {
+  const float nan = payloadNaN();
+  const std::vector<std::size_t> holes = {0, 7, 500, 1234, 2999};
+  for (std::size_t i : holes) p[i] = Eigen::Vector3f(nan, i == 7 ? 0.5f : nan, nan);
+  p[42].x() = std::numeric_limits<float>::infinity();
+  auto in = toCloud<pcl::PointXYZI>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) (*in)[i].intensity = 0.25f * static_cast<float>(i);
+  ASSERT_FALSE(in->is_dense);
+  Filter<pcl::PointXYZI> f;
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), in->size());
+  EXPECT_EQ(out.width, in->width);
+  EXPECT_EQ(out.height, in->height);
+  EXPECT_FALSE(out.is_dense);
+  std::size_t moved = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(bitsOf(out[i].intensity), bitsOf((*in)[i].intensity)) << i;
+    if (!isFinite(p[i])) {
+      EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << "non-finite point " << i << " changed";
+    } else {
+      EXPECT_TRUE(isFinite(out[i].getVector3fMap())) << i;
+      moved += out[i].getVector3fMap() != p[i];
+    }
+  }
+  EXPECT_GT(moved, 0.9 * (p.size() - holes.size() - 1));
+  EXPECT_EQ(f.getReport().non_finite, holes.size() + 1);
+}
+
+/// A dense cloud stays dense, colours and the header are kept.
+template <template <typename> class Filter>
+void expectDenseStaysDenseAndColoursKept(const Positions& p) {
+  auto in = toCloud<pcl::PointXYZRGB>(p);
+  for (std::size_t i = 0; i < in->size(); ++i) {
+    (*in)[i].r = static_cast<std::uint8_t>(i);
+    (*in)[i].g = static_cast<std::uint8_t>(i / 7);
+    (*in)[i].b = static_cast<std::uint8_t>(255 - i % 256);
+  }
+  in->header.frame_id = "scanner";
+  Filter<pcl::PointXYZRGB> f;
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), in->size());
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_EQ(out.header.frame_id, "scanner");
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].rgba, (*in)[i].rgba) << i;
+    EXPECT_TRUE(isFinite(out[i].getVector3fMap()));
+  }
+}
+
+/// With setIndices, the output keeps every point; only the listed ones move.
+template <template <typename> class Filter>
+void expectOnlyIndexedPointsMove(const Positions& p) {
+  auto indices = pcl::make_shared<pcl::Indices>();
+  std::vector<bool> listed(p.size(), false);
+  for (std::size_t i = 1; i < p.size() * 2 / 3; i += 3) {
+    indices->push_back(static_cast<int>(i));
+    listed[i] = true;
+  }
+  Filter<pcl::PointXYZ> f;
+  f.setIndices(indices);
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  ASSERT_EQ(out.size(), p.size()) << "the output keeps every point, indexed or not";
+  std::size_t moved_listed = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (listed[i]) moved_listed += out[i].getVector3fMap() != p[i];
+    else EXPECT_TRUE(sameBits(out[i].getVector3fMap(), p[i])) << "unlisted point " << i << " moved";
+  }
+  EXPECT_GT(moved_listed, 0.9 * indices->size());
+  EXPECT_EQ(f.getReport().moved, indices->size());
+}
+
+/// An index outside the cloud is a paps::Error (it once wrote outside a vector).
+template <template <typename> class Filter>
+void expectIndexOutOfRangeIsRejected(const Positions& p) {
+  const int n = static_cast<int>(p.size());
+  for (int bad : {-1, n, 100000}) {
+    Filter<pcl::PointXYZ> f;
+    f.setIndices(pcl::make_shared<pcl::Indices>(pcl::Indices{0, 1, bad}));
+    f.setInputCloud(toCloud<pcl::PointXYZ>(p));
+    pcl::PointCloud<pcl::PointXYZ> out;
+    EXPECT_THROW(f.filter(out), Error) << "index " << bad;
+  }
+}
+
+/// The pcl::Filter class gives what its function gives, also in place (input = output).
+template <template <typename> class Filter, typename Params, typename FilterFn>
+void expectClassMatchesFunctionAndInPlace(const Positions& p, const Params& params, FilterFn filter) {
+  const Positions expected = filter(p, params);
+  Filter<pcl::PointXYZ> f;
+  f.setParameters(params);
+  auto cloud = toCloud<pcl::PointXYZ>(p);
+  const auto out = runFilter(f, cloud);
+  f.filter(*cloud);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    EXPECT_TRUE(sameBits(out[i].getVector3fMap(), expected[i])) << i;
+    EXPECT_TRUE(sameBits((*cloud)[i].getVector3fMap(), expected[i])) << i;
+  }
 }
 
 }  // namespace paps::test

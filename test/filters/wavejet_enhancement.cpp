@@ -8,6 +8,8 @@
 #include <paps/core/random.h>
 #include <paps/filters/wavejet_enhancement.h>
 
+#include "filter_test_support.h"
+
 namespace {
 
 using paps::Positions;
@@ -197,3 +199,27 @@ TEST(WavejetEnhancement, BadParameters) {
 }
 
 }  // namespace
+
+// The bad-input contract shared with the other position filters (filter_test_support.h), on
+// the default stage (projection on the Wavejet surface, automatic radius).
+namespace {
+using namespace paps::test;
+Positions noisyBumps(int count) { return bumps(count, 0.02, 12, 0.002); }
+}  // namespace
+
+TEST(WavejetEnhancement, EmptyAndAllNaNAreInvalidInput) {
+  paps::WavejetEnhancement<pcl::PointXYZ> f;
+  expectEmptyAndAllNaNAreInvalidInput(f);
+}
+
+TEST(WavejetEnhancement, NaNPassThroughAndOtherFieldsKept) {
+  expectNaNPassThroughAndOtherFieldsKept<paps::WavejetEnhancement>(noisyBumps(4000));
+}
+
+TEST(WavejetEnhancement, DenseStaysDenseAndColoursKept) {
+  expectDenseStaysDenseAndColoursKept<paps::WavejetEnhancement>(noisyBumps(3000));
+}
+
+TEST(WavejetEnhancement, IndexOutOfRangeIsRejected) {
+  expectIndexOutOfRangeIsRejected<paps::WavejetEnhancement>(noisyBumps(500));
+}

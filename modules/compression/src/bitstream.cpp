@@ -156,45 +156,44 @@ std::vector<std::uint8_t> SymbolWriter::finish(EntropyMethod* chosen, std::size_
   // zstd and lzma with windows of at most 512 KB: the symbol streams are a few MB at most and
   // the range coder wins on every measured input, so the comparison need not cost the 40-50 MB
   // of lzma's default match finder (the decoder reads any window size).
-  // The two general-purpose coders run side by side (each is deterministic on its own).
-  std::vector<std::uint8_t> z, x;
+  // The two general-purpose coders run one after the other, each result dropped as soon as it
+  // has lost: side by side they held both match finders and both outputs at once (the
+  // encoder's peak memory on 1M points).
+  const std::size_t rsize = best.size();
   std::size_t zsize = 0, xsize = 0;
-#pragma omp parallel sections num_threads(2)
   {
-#pragma omp section
-    {
-      z.resize(ZSTD_compressBound(raw_.size()));
-      ZSTD_CCtx* cctx = ZSTD_createCCtx();
-      if (cctx) {
-        ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, 9);
-        ZSTD_CCtx_setParameter(cctx, ZSTD_c_windowLog, 19);
-        ZSTD_CCtx_setParameter(cctx, ZSTD_c_hashLog, 17);
-        ZSTD_CCtx_setParameter(cctx, ZSTD_c_chainLog, 17);
-        const std::size_t zn = ZSTD_compress2(cctx, z.data(), z.size(), raw_.data(), raw_.size());
-        ZSTD_freeCCtx(cctx);
-        if (!ZSTD_isError(zn)) { zsize = zn; z.resize(zn); }
-      }
-    }
-#pragma omp section
-    {
-      x.resize(raw_.size() + raw_.size() / 2 + 1024);
-      std::size_t xpos = 0;
-      lzma_options_lzma opt;
-      lzma_lzma_preset(&opt, 4);
-      std::uint32_t dict = LZMA_DICT_SIZE_MIN;
-      while (dict < raw_.size() && dict < (1u << 19)) dict <<= 1;
-      opt.dict_size = dict;
-      lzma_filter filters[2] = {{LZMA_FILTER_LZMA2, &opt}, {LZMA_VLI_UNKNOWN, nullptr}};
-      if (lzma_stream_buffer_encode(filters, LZMA_CHECK_NONE, nullptr, raw_.data(), raw_.size(), x.data(), &xpos,
-                                    x.size()) == LZMA_OK) {
-        xsize = xpos;
-        x.resize(xpos);
+    std::vector<std::uint8_t> z(ZSTD_compressBound(raw_.size()));
+    ZSTD_CCtx* cctx = ZSTD_createCCtx();
+    if (cctx) {
+      ZSTD_CCtx_setParameter(cctx, ZSTD_c_compressionLevel, 9);
+      ZSTD_CCtx_setParameter(cctx, ZSTD_c_windowLog, 19);
+      ZSTD_CCtx_setParameter(cctx, ZSTD_c_hashLog, 17);
+      ZSTD_CCtx_setParameter(cctx, ZSTD_c_chainLog, 17);
+      const std::size_t zn = ZSTD_compress2(cctx, z.data(), z.size(), raw_.data(), raw_.size());
+      ZSTD_freeCCtx(cctx);
+      if (!ZSTD_isError(zn)) {
+        zsize = zn;
+        z.resize(zn);
+        if (zsize < best.size()) { best.swap(z); m = EntropyMethod::kZstd; }
       }
     }
   }
-  const std::size_t rsize = best.size();
-  if (zsize && zsize < best.size()) { best.swap(z); m = EntropyMethod::kZstd; }
-  if (xsize && xsize < best.size()) { best.swap(x); m = EntropyMethod::kLzma; }
+  {
+    std::vector<std::uint8_t> x(raw_.size() + raw_.size() / 2 + 1024);
+    std::size_t xpos = 0;
+    lzma_options_lzma opt;
+    lzma_lzma_preset(&opt, 4);
+    std::uint32_t dict = LZMA_DICT_SIZE_MIN;
+    while (dict < raw_.size() && dict < (1u << 19)) dict <<= 1;
+    opt.dict_size = dict;
+    lzma_filter filters[2] = {{LZMA_FILTER_LZMA2, &opt}, {LZMA_VLI_UNKNOWN, nullptr}};
+    if (lzma_stream_buffer_encode(filters, LZMA_CHECK_NONE, nullptr, raw_.data(), raw_.size(), x.data(), &xpos,
+                                  x.size()) == LZMA_OK) {
+      xsize = xpos;
+      x.resize(xpos);
+      if (xsize < best.size()) { best.swap(x); m = EntropyMethod::kLzma; }
+    }
+  }
   if (sizes) { sizes[0] = rsize; sizes[1] = zsize; sizes[2] = xsize; }
   if (chosen) *chosen = m;
   std::vector<std::uint8_t> out;

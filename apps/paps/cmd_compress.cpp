@@ -204,6 +204,111 @@ bool readBinaryPcdXyz(const std::string& path, Positions& out) {
   return false;
 }
 
+// Reads the vertex x y z of an ascii or binary_little_endian PLY file whose first element is
+// the vertices (as scanners and mesh tools write them) and whose x, y, z are float or double;
+// other vertex properties are skipped and later elements (faces) are not read. Returns false
+// for any other file (the caller then uses PCL, or paps-codec says why not).
+bool readPlyXyz(const std::string& path, Positions& out) {
+  if (std::filesystem::path(path).extension() != ".ply") return false;
+  std::ifstream f(path, std::ios::binary);
+  if (!f) return false;
+  std::string line, format;
+  std::getline(f, line);
+  if (line != "ply" && line != "ply\r") return false;
+  std::size_t vertices = 0;
+  bool in_vertex = false, vertex_seen = false;
+  struct Property { int size; char kind; int axis; };  // kind: 'i' signed, 'u' unsigned, 'f' float
+  std::vector<Property> props;
+  auto typeOf = [](const std::string& t, int& size, char& kind) {
+    static const struct { const char* name; int size; char kind; } types[] = {
+        {"char", 1, 'i'}, {"int8", 1, 'i'}, {"uchar", 1, 'u'}, {"uint8", 1, 'u'}, {"short", 2, 'i'},
+        {"int16", 2, 'i'}, {"ushort", 2, 'u'}, {"uint16", 2, 'u'}, {"int", 4, 'i'}, {"int32", 4, 'i'},
+        {"uint", 4, 'u'}, {"uint32", 4, 'u'}, {"float", 4, 'f'}, {"float32", 4, 'f'}, {"double", 8, 'f'},
+        {"float64", 8, 'f'}};
+    for (const auto& x : types)
+      if (t == x.name) { size = x.size; kind = x.kind; return true; }
+    return false;
+  };
+  for (int lines = 0; lines < 200 && std::getline(f, line); ++lines) {
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    std::istringstream ss(line);
+    std::string key;
+    ss >> key;
+    if (key == "format") ss >> format;
+    else if (key == "element") {
+      std::string name;
+      long long count = -1;
+      ss >> name >> count;
+      if (vertex_seen || name != "vertex" || count < 0) { if (!vertex_seen) return false; in_vertex = false; continue; }
+      vertices = std::size_t(count);
+      in_vertex = vertex_seen = true;
+    } else if (key == "property" && in_vertex) {
+      std::string type, name;
+      ss >> type >> name;
+      Property pr{0, '?', -1};
+      if (type == "list" || !typeOf(type, pr.size, pr.kind)) return false;
+      if (name == "x") pr.axis = 0;
+      if (name == "y") pr.axis = 1;
+      if (name == "z") pr.axis = 2;
+      if (pr.axis >= 0 && pr.kind != 'f') return false;
+      props.push_back(pr);
+    } else if (key == "end_header") {
+      bool found[3] = {false, false, false};
+      for (const auto& pr : props)
+        if (pr.axis >= 0) found[pr.axis] = true;
+      if (!vertex_seen || !found[0] || !found[1] || !found[2]) return false;
+      auto bad = [&](const char* what) { return IoError("cannot read '" + path + "': " + what); };
+      out.clear();
+      if (format == "ascii") {
+        out.reserve(vertices);
+        for (std::size_t v = 0; v < vertices; ++v) {
+          if (!std::getline(f, line)) throw bad("truncated vertex list");
+          std::istringstream vs(line);
+          Eigen::Vector3f p;
+          for (const auto& pr : props) {
+            double value;
+            if (!(vs >> value)) throw bad("a vertex line has too few values");
+            if (pr.axis >= 0) p[pr.axis] = float(value);
+          }
+          out.push_back(p);
+        }
+        return true;
+      }
+      if (format != "binary_little_endian") return false;
+      std::size_t step = 0;
+      for (const auto& pr : props) step += std::size_t(pr.size);
+      const std::streampos data = f.tellg();
+      f.seekg(0, std::ios::end);
+      const std::uint64_t left = std::uint64_t(f.tellg() - data);
+      f.seekg(data);
+      if (left < std::uint64_t(vertices) * step) throw bad("truncated data");
+      out.reserve(vertices);
+      std::vector<char> buf;
+      const std::size_t chunk = 65536;
+      for (std::size_t done = 0; done < vertices;) {
+        const std::size_t m = std::min(chunk, vertices - done);
+        buf.resize(m * step);
+        if (!f.read(buf.data(), std::streamsize(buf.size()))) throw bad("truncated data");
+        for (std::size_t i = 0; i < m; ++i) {
+          Eigen::Vector3f p;
+          std::size_t off = i * step;
+          for (const auto& pr : props) {
+            if (pr.axis >= 0) {
+              if (pr.size == 4) { float v; std::memcpy(&v, buf.data() + off, 4); p[pr.axis] = v; }
+              else { double v; std::memcpy(&v, buf.data() + off, 8); p[pr.axis] = float(v); }
+            }
+            off += std::size_t(pr.size);
+          }
+          out.push_back(p);
+        }
+        done += m;
+      }
+      return true;
+    }
+  }
+  return false;
+}
+
 // Writes float x y z as binary PCD or PLY straight from Positions (no PCL copies of the
 // cloud), atomically: a temporary file renamed at the end, removed on failure.
 void writeXyzAtomic(const std::string& path, const Positions& pts) {
@@ -271,10 +376,11 @@ int runCompress(int argc, char** argv) {
   p.validate();
 
   Positions in;
-  if (!readBinaryPcdXyz(a.positional[0], in)) {
+  if (!readBinaryPcdXyz(a.positional[0], in) && !readPlyXyz(a.positional[0], in)) {
 #ifdef PAPS_CODEC_LEAN
     throw InvalidInput(a.positional[0] + ": paps-codec reads binary or binary_compressed PCD files with float x y z "
-                       "fields; 'paps compress' reads any PCD or PLY");
+                       "fields and ascii or binary_little_endian PLY files whose first element is the vertices; "
+                       "'paps compress' reads any PCD or PLY");
 #else
     in = loadPositions(a.positional[0]);
 #endif

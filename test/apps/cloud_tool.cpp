@@ -1,6 +1,6 @@
 // Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
 // its input (same number of points, same fields in the same order, only x y z moved).
-//   paps_test_cloud_tool write OUT.pcd COUNT [binary|compressed|ascii]
+//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
@@ -13,6 +13,7 @@
 #include <pcl/PCLPointCloud2.h>
 #include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
+#include <pcl/io/ply_io.h>
 #include <pcl/point_cloud.h>
 #include <pcl/point_types.h>
 
@@ -41,9 +42,11 @@ int write(const std::string& path, int count, const std::string& format) {
     p.intensity = static_cast<float>(k);
     cloud.push_back(p);
   }
-  const int rc = format == "compressed" ? pcl::io::savePCDFileBinaryCompressed(path, cloud)
-                 : format == "ascii"    ? pcl::io::savePCDFileASCII(path, cloud)
-                                        : pcl::io::savePCDFileBinary(path, cloud);
+  const bool ply = path.size() > 4 && path.compare(path.size() - 4, 4, ".ply") == 0;
+  const int rc = ply ? (format == "ascii" ? pcl::io::savePLYFileASCII(path, cloud) : pcl::io::savePLYFileBinary(path, cloud))
+                 : format == "compressed" ? pcl::io::savePCDFileBinaryCompressed(path, cloud)
+                 : format == "ascii"      ? pcl::io::savePCDFileASCII(path, cloud)
+                                          : pcl::io::savePCDFileBinary(path, cloud);
   if (rc != 0) return fail("cannot write " + path);
   return 0;
 }

@@ -214,8 +214,9 @@ struct RadialLayout {
 // only where it owns the surface: where the sample's tangent-plane position is nearer to its
 // seed than to any other seed (the nearest seed's patch always covers it, since that seed is
 // within R). Elsewhere the sample copies the owner's nearest owned sample. Encoder and decoder
-// compute this from the decoded seeds and frames alone; on the LMS400 scan it leaves about
-// 40% of the samples to code.
+// compute this from the decoded seeds and frames alone. On the LMS400 scan at 1600 points a
+// patch 86% of the samples are still owned (its seeds are sparse next to its many borders):
+// sharing alone cut the masks by 11%, with the contexts below by 16%.
 class SharedMasks {
  public:
   SharedMasks(const Header& h, const Positions& seeds, const LocalFrames& frames, const SpatialIndex& seed_index)

@@ -173,6 +173,10 @@ bool readBinaryPcdXyz(const std::string& path, Positions& out) {
         if (sz[0] > left - 8) throw IoError("cannot read '" + path + "': truncated data");
         if (std::uint64_t(sz[1]) != std::uint64_t(points) * step)
           throw IoError("cannot read '" + path + "': binary_compressed size does not match POINTS");
+        // LZF turns 3 bytes into at most 264: a larger claim is a corrupt header, not a reason
+        // to allocate gigabytes.
+        if (std::uint64_t(sz[1]) > std::uint64_t(sz[0]) * 88 + 1024)
+          throw IoError("cannot read '" + path + "': corrupt binary_compressed data");
         std::vector<std::uint8_t> packed_bytes(sz[0]), raw(sz[1]);
         if (!f.read(reinterpret_cast<char*>(packed_bytes.data()), std::streamsize(sz[0])))
           throw IoError("cannot read '" + path + "': truncated data");
@@ -260,7 +264,13 @@ bool readPlyXyz(const std::string& path, Positions& out) {
       auto bad = [&](const char* what) { return IoError("cannot read '" + path + "': " + what); };
       out.clear();
       if (format == "ascii") {
-        out.reserve(vertices);
+        // A vertex line holds at least 6 characters ("0 0 0\n"): the header's count cannot
+        // make us reserve more than the file could hold.
+        const std::streampos body = f.tellg();
+        f.seekg(0, std::ios::end);
+        const std::uint64_t body_bytes = std::uint64_t(f.tellg() - body);
+        f.seekg(body);
+        out.reserve(std::size_t(std::min<std::uint64_t>(vertices, body_bytes / 6)));
         for (std::size_t v = 0; v < vertices; ++v) {
           if (!std::getline(f, line)) throw bad("truncated vertex list");
           std::istringstream vs(line);

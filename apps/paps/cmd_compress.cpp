@@ -83,6 +83,31 @@ void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b
   }
 }
 
+// Bytes from the stream's position to its end (the position is kept).
+std::uint64_t bytesLeft(std::ifstream& f) {
+  const std::streampos here = f.tellg();
+  f.seekg(0, std::ios::end);
+  const std::uint64_t left = std::uint64_t(f.tellg() - here);
+  f.seekg(here);
+  return left;
+}
+
+// Reads `count` fixed-size binary records of `step` bytes by chunks (no whole-file buffer),
+// appending fn(record) to `out`; the caller has checked that the file holds them.
+template <typename Fn>
+void readRecords(std::ifstream& f, std::size_t count, std::size_t step, const std::string& path, Positions& out, Fn fn) {
+  out.reserve(out.size() + count);
+  std::vector<char> buf;
+  const std::size_t chunk = 65536;
+  for (std::size_t done = 0; done < count;) {
+    const std::size_t m = std::min(chunk, count - done);
+    buf.resize(m * step);
+    if (!f.read(buf.data(), std::streamsize(buf.size()))) throw IoError("cannot read '" + path + "': truncated data");
+    for (std::size_t i = 0; i < m; ++i) out.push_back(fn(buf.data() + i * step));
+    done += m;
+  }
+}
+
 // LZF decompression (the format of PCD's binary_compressed data): control bytes below 32 start
 // a literal run of ctrl + 1 bytes; others copy (ctrl >> 5) + 2 bytes (7 means a length byte
 // follows) from ((ctrl & 31) << 8) + next byte + 1 bytes back. Every read and write is checked.
@@ -162,10 +187,7 @@ bool readBinaryPcdXyz(const std::string& path, Positions& out) {
         step += std::size_t(sizes[i]) * std::size_t(counts[i]);
       }
       if (!found[0] || !found[1] || !found[2]) return false;
-      const std::streampos data = f.tellg();
-      f.seekg(0, std::ios::end);
-      const std::uint64_t left = std::uint64_t(f.tellg() - data);
-      f.seekg(data);
+      const std::uint64_t left = bytesLeft(f);
       out.clear();
       if (packed) {
         std::uint32_t sz[2];
@@ -188,20 +210,11 @@ bool readBinaryPcdXyz(const std::string& path, Positions& out) {
         return true;
       }
       if (left < std::uint64_t(points) * step) throw IoError("cannot read '" + path + "': truncated data");
-      out.reserve(points);
-      std::vector<char> buf;
-      const std::size_t chunk = 65536;
-      for (std::size_t done = 0; done < points;) {
-        const std::size_t m = std::min(chunk, points - done);
-        buf.resize(m * step);
-        if (!f.read(buf.data(), std::streamsize(buf.size()))) throw IoError("cannot read '" + path + "': truncated data");
-        for (std::size_t i = 0; i < m; ++i) {
-          Eigen::Vector3f p;
-          for (int a = 0; a < 3; ++a) std::memcpy(&p[a], buf.data() + i * step + off[a], 4);
-          out.push_back(p);
-        }
-        done += m;
-      }
+      readRecords(f, points, step, path, out, [&](const char* rec) {
+        Eigen::Vector3f p;
+        for (int a = 0; a < 3; ++a) std::memcpy(&p[a], rec + off[a], 4);
+        return p;
+      });
       return true;
     }
   }
@@ -266,11 +279,7 @@ bool readPlyXyz(const std::string& path, Positions& out) {
       if (format == "ascii") {
         // A vertex line holds at least 6 characters ("0 0 0\n"): the header's count cannot
         // make us reserve more than the file could hold.
-        const std::streampos body = f.tellg();
-        f.seekg(0, std::ios::end);
-        const std::uint64_t body_bytes = std::uint64_t(f.tellg() - body);
-        f.seekg(body);
-        out.reserve(std::size_t(std::min<std::uint64_t>(vertices, body_bytes / 6)));
+        out.reserve(std::size_t(std::min<std::uint64_t>(vertices, bytesLeft(f) / 6)));
         for (std::size_t v = 0; v < vertices; ++v) {
           if (!std::getline(f, line)) throw bad("truncated vertex list");
           std::istringstream vs(line);
@@ -287,32 +296,18 @@ bool readPlyXyz(const std::string& path, Positions& out) {
       if (format != "binary_little_endian") return false;
       std::size_t step = 0;
       for (const auto& pr : props) step += std::size_t(pr.size);
-      const std::streampos data = f.tellg();
-      f.seekg(0, std::ios::end);
-      const std::uint64_t left = std::uint64_t(f.tellg() - data);
-      f.seekg(data);
-      if (left < std::uint64_t(vertices) * step) throw bad("truncated data");
-      out.reserve(vertices);
-      std::vector<char> buf;
-      const std::size_t chunk = 65536;
-      for (std::size_t done = 0; done < vertices;) {
-        const std::size_t m = std::min(chunk, vertices - done);
-        buf.resize(m * step);
-        if (!f.read(buf.data(), std::streamsize(buf.size()))) throw bad("truncated data");
-        for (std::size_t i = 0; i < m; ++i) {
-          Eigen::Vector3f p;
-          std::size_t off = i * step;
-          for (const auto& pr : props) {
-            if (pr.axis >= 0) {
-              if (pr.size == 4) { float v; std::memcpy(&v, buf.data() + off, 4); p[pr.axis] = v; }
-              else { double v; std::memcpy(&v, buf.data() + off, 8); p[pr.axis] = float(v); }
-            }
-            off += std::size_t(pr.size);
+      if (bytesLeft(f) < std::uint64_t(vertices) * step) throw bad("truncated data");
+      readRecords(f, vertices, step, path, out, [&](const char* rec) {
+        Eigen::Vector3f p;
+        for (const auto& pr : props) {
+          if (pr.axis >= 0) {
+            if (pr.size == 4) { float v; std::memcpy(&v, rec, 4); p[pr.axis] = v; }
+            else { double v; std::memcpy(&v, rec, 8); p[pr.axis] = float(v); }
           }
-          out.push_back(p);
+          rec += pr.size;
         }
-        done += m;
-      }
+        return p;
+      });
       return true;
     }
   }

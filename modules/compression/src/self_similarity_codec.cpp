@@ -5,6 +5,7 @@
 #include <cmath>
 #include <memory>
 #include <numeric>
+#include <utility>
 
 #include <Eigen/Eigenvalues>
 
@@ -237,10 +238,11 @@ class SharedMasks {
           if (owner(std::size_t(i), s, nb) == int(i)) w[s / 64] |= std::uint64_t(1) << (s % 64);
       }
     }
-    if (too_many) tooManySeedNeighbours();  // every seed was checked: later searches stay within the bound
+    crowded_ = too_many;
   }
-  int samples() const { return k_; }
-  int sectors() const { return sectors_; }
+  // True when some seed has more than kMaxSeedNeighbours seeds within 2.05 R (every seed was
+  // checked, so later searches stay within the bound). The caller says what that means.
+  bool crowded() const { return crowded_; }
   // For patch i: src[s] = -1 where sample s is coded, else the flat index j * k + s' of the
   // owned sample it copies. Thread-safe.
   void sources(std::size_t i, std::vector<long>& src, std::vector<int>& nb, std::vector<float>& d2) const {
@@ -315,7 +317,16 @@ class SharedMasks {
   float dr_;
   std::size_t words_;
   std::vector<std::uint64_t> owned_;
+  bool crowded_ = false;
 };
+
+// Flat indices of the two samples of ring r - 1 (r >= 2) on either side of the angle of sample
+// k of ring r: odd rings sit half a sector ahead of even ones.
+std::pair<int, int> innerNeighbours(int r, int k, int sectors) {
+  const int base = 1 + (r - 2) * sectors;
+  const int behind = r % 2 ? k : (k + sectors - 1) % sectors;
+  return {base + behind, base + (behind + 1) % sectors};
+}
 
 // Context of a format-2 mask bit: the previous sample on the ring and the two samples of the
 // ring inside it on either side of its angle (rings alternate a half-sector offset), each
@@ -327,11 +338,9 @@ int sharedMaskContext(const std::uint8_t* known, int s, int sectors) {
   const int prev = k > 0 ? known[s - 1] : known[0];
   int a = known[0], b = known[0];
   if (r > 1) {
-    const int base = 1 + (r - 2) * sectors;
-    // Odd rings sit half a sector ahead of even ones.
-    const int behind = r % 2 ? k : (k + sectors - 1) % sectors;
-    a = known[base + behind];
-    b = known[base + (behind + 1) % sectors];
+    const auto [behind, ahead] = innerNeighbours(r, k, sectors);
+    a = known[behind];
+    b = known[ahead];
   }
   return prev * 9 + a * 3 + b;
 }
@@ -368,9 +377,8 @@ int atomPrediction(const int* q, int s, int sectors, int levels) {
   const int r = (s - 1) / sectors + 1, k = (s - 1) % sectors;
   auto inner = [&](int kk) {
     if (r == 1) return q[0];
-    const int base = 1 + (r - 2) * sectors;
-    const int behind = r % 2 ? kk : (kk + sectors - 1) % sectors;
-    return (q[base + behind] + q[base + (behind + 1) % sectors]) / 2;
+    const auto [behind, ahead] = innerNeighbours(r, kk, sectors);
+    return (q[behind] + q[ahead]) / 2;
   };
   // Planar prediction; measured on the LMS400 scan, it beats the previous sample alone and the
   // mean of the previous and inner samples by 6% and 4% of the dictionary bytes.
@@ -837,7 +845,7 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
       for (int s = 0; s < k; ++s) {
         q[s] = std::clamp(int(std::lround(ks.dictionary(s, j) / scale * L_dict)), -L_dict,
                           L_dict);
-        coder.put(dw, q[s] - atomPrediction(q.data(), s, h.sectors(), h.dictionaryLevels()));
+        coder.put(dw, q[s] - atomPrediction(q.data(), s, h.sectors(), L_dict));
         D(s, j) = float(q[s]) * scale / L_dict;
       }
     }
@@ -913,15 +921,11 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   LocalFrames frames(n);
   for (std::size_t i = 0; i < n; ++i) frames[i] = correctedFrame(pred[i], qangles[i][0], qangles[i][1], qangles[i][2], L);
   const SpatialIndex seed_index(seeds);
-  std::unique_ptr<SharedMasks> shared_ptr;
-  try {
-    shared_ptr = std::make_unique<SharedMasks>(h, seeds, frames, seed_index);
-  } catch (const CorruptStream&) {
+  const SharedMasks shared(h, seeds, frames, seed_index);
+  if (shared.crowded())
     throw InvalidInput("more than " + std::to_string(kMaxSeedNeighbours) +
                        " seeds lie within 2 R of one seed: the points fill a volume, not a surface "
                        "(a larger seed_spacing or patch radius may help)");
-  }
-  const SharedMasks& shared = *shared_ptr;
   std::vector<long> src;
   std::vector<int> snb;
   std::vector<float> sd2;
@@ -1039,7 +1043,7 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
       std::vector<int> q(k);
       for (int j = 0; j < h.atoms; ++j)
         for (int s = 0; s < k; ++s) {
-          q[s] = atomPrediction(q.data(), s, h.sectors(), h.dictionaryLevels()) + coder.get(dr);
+          q[s] = atomPrediction(q.data(), s, h.sectors(), L_dict) + coder.get(dr);
           if (q[s] < -L_dict || q[s] > L_dict) throw CorruptStream("dictionary value out of range");
           D(s, j) = float(q[s]) * scale[j] / L_dict;
         }
@@ -1069,7 +1073,10 @@ Positions decompressPositions(const std::uint8_t* data, std::size_t size, const 
     const int qlim = (1 << (h.coefficient_bits - 1)) - 1;
     Eigen::VectorXf y(k);
     std::unique_ptr<SharedMasks> shared;
-    if (h.version >= 2) shared = std::make_unique<SharedMasks>(h, seeds, frames, seed_index);
+    if (h.version >= 2) {
+      shared = std::make_unique<SharedMasks>(h, seeds, frames, seed_index);
+      if (shared->crowded()) tooManySeedNeighbours();
+    }
     std::vector<long> src;
     std::vector<int> snb;
     std::vector<float> sd2;

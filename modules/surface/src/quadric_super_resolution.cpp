@@ -387,9 +387,15 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
     pr.finish();
   }
 
-  // 5. Output: Poisson-regularised seeds projected on the SR surface (2.6, robust).
+  // 5. Output: Poisson-regularised seeds projected on the SR surface (2.6, robust). Every
+  // point with a fitted frame seeds and anchors the output, also those whose descriptor has too
+  // few valid bins to be compared (borders, sparse rims): their patch has no SR heights and
+  // acts as its quadric alone (a local interpolation). Seeding only from comparable patches
+  // left the rims of a scan uncovered.
+  std::vector<std::uint8_t> anchor(n0, 0);
   Normals n0s(n0, Eigen::Vector3f::Constant(NAN));
-  for (std::size_t i = 0; i < n0; ++i) if (usable[i]) n0s[i] = fits[i].frame.n;
+  for (std::size_t i = 0; i < n0; ++i)
+    if (fits[i].frame.valid()) { anchor[i] = 1; n0s[i] = fits[i].frame.n; }
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite0));
   Positions out = upsamplingSeeds(P0, n0s, count, 1.2f * s0, params.seed);
@@ -417,7 +423,7 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
         pw.clear();
         for (std::size_t k = 0; k < idx.size(); ++k) {
           const int a = idx[k];
-          if (!usable[a]) continue;
+          if (!anchor[a]) continue;
           const QuadricFit& f = fits[a];
           const Eigen::Vector3f l = f.frame.toLocal(x - f.origin);
           const float u_raw = arcLength(0.5f * f.k1, l.x()) / d_sr + half;
@@ -441,7 +447,7 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
           pw.push_back(std::exp(-d2[k] * inv_2sig2) + 1e-12f);
         }
         if (proj.empty()) {  // no anchor close enough: the tangent plane of the nearest one
-          if (round == 0 && !idx.empty() && usable[idx[0]]) {
+          if (round == 0 && !idx.empty() && anchor[idx[0]]) {
             const QuadricFit& f = fits[idx[0]];
             est = x - (x - f.origin).dot(f.frame.n) * f.frame.n;
             any = true;

@@ -25,6 +25,7 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/metrics.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
@@ -57,9 +58,10 @@ const char* kUsage =
     "  --noises LIST    comma-separated noise fractions of the diagonal (default 0.0001,0.001,0.005)\n"
     "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-adapt, qsr-4scans, apss,\n"
     "                   apss-refit, apss-wide, rimls, rimls-refit, rimls-wide, pcl-mls-plane,\n"
-    "                   pcl-mls-random, pcl-mls-voxel, simden+mls (also filters the speed test)\n"
-    "                   (-refit: fit at every seed; -wide: seed discs as wide as QSR's;\n"
-    "                   qsr-adapt: QSR with the opt-in noise-adaptive kernel)\n";
+    "                   pcl-mls-random, pcl-mls-voxel, simden+mls, seeds-only (also filters the speed\n"
+    "                   test) (-refit: fit at every seed; -wide: seed discs as wide as QSR's;\n"
+    "                   qsr-adapt: QSR with the opt-in noise-adaptive kernel; seeds-only: a control,\n"
+    "                   the seeds on the noisy input's tangent discs, projected on no surface)\n";
 
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
 using SrResult = WorkerResult;
@@ -197,6 +199,14 @@ int runSuperresWorker(int argc, char** argv) {
       // -wide: seeds spread over discs as wide as QSR's (1.2 mean spacings).
       if (method.find("-wide") != std::string::npos) q.disc_scale = 1.7724539f;
       out = upsampleMls(scans[0], method.rfind("apss", 0) == 0 ? MlsSurface::Apss : MlsSurface::Rimls, q);
+    } else if (method == "seeds-only") {
+      // Control, not a method: the Poisson-disk seeds over the noisy input's tangent discs
+      // (QSR's disc radius, 1.2 mean spacings), projected on no surface at all. Where this
+      // row scores as well as the methods, the protocol's error does not see the denoising.
+      const RadiusNeighbourhood nh = buildRadiusNeighbourhood(scans[0], 0.f, 36, 4 * 36);
+      const Normals normals = estimateNormals(scans[0], nh.graph);
+      const float s0 = nh.radius * std::sqrt(3.14159265f / static_cast<float>(std::max(1.0, nh.graph.meanCount())));
+      out = upsamplingSeeds(scans[0], normals, target, 1.2f * s0, 1);
     } else if (method.rfind("pcl-mls-", 0) == 0) {
       out = pclMlsUpsample(scans[0], method.substr(8), get("radius", 0), target);
     } else if (method == "simden+mls") {
@@ -237,13 +247,14 @@ int runBenchSuperres(int argc, char** argv) {
   std::filesystem::create_directories(out_dir);
   const std::vector<std::string> all_methods = {"qsr",           "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",
                                                 "apss-wide",     "rimls",          "rimls-refit",    "rimls-wide",
-                                                "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls"};
+                                                "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls",
+                                                "seeds-only"};
   const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", "")) : all_methods;
   for (const auto& m : methods)
     if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
       throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-adapt, qsr-4scans, apss, apss-refit, apss-wide, "
                                            "rimls, rimls-refit, rimls-wide, pcl-mls-plane, pcl-mls-random, "
-                                           "pcl-mls-voxel, simden+mls");
+                                           "pcl-mls-voxel, simden+mls, seeds-only");
   const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1"));
   for (const auto& sh : shapes)
     if (sh != "engraved-plane" && sh != "rs1") throw InvalidParameter("shapes", sh, "engraved-plane and/or rs1");
@@ -301,7 +312,7 @@ int runBenchSuperres(int argc, char** argv) {
           << "," << e_in << "," << s_in << "\n";
       std::map<std::string, double> best_peer;
       std::map<std::string, Positions> outputs;
-      double e_qsr = NAN, e_adapt = NAN;
+      double e_qsr = NAN, e_adapt = NAN, e_seeds = NAN;
       for (const auto& m : methods) {
         if (m == "qsr-4scans" && !ds.multi) continue;
         std::vector<Positions> in = m == "qsr-4scans" ? scans : std::vector<Positions>{scans[0]};
@@ -320,6 +331,7 @@ int runBenchSuperres(int argc, char** argv) {
             << "," << w.peak_mb << "," << w.output.size() << "," << e << "," << e_surf << "\n";
         if (m == "qsr") e_qsr = e;
         if (m == "qsr-adapt") e_adapt = e;
+        if (m == "seeds-only") e_seeds = e;
         if (m.rfind("apss", 0) == 0 || m.rfind("rimls", 0) == 0 || m.rfind("pcl-mls-", 0) == 0) best_peer[m] = e;
         if (noise == 0.0001 && m.find("-refit") == std::string::npos && m.find("-wide") == std::string::npos)
           outputs[m] = w.output;
@@ -329,6 +341,8 @@ int runBenchSuperres(int argc, char** argv) {
       for (const auto& [k, v] : best_peer) if (v < best) { best = v; best_name = k; }
       std::printf("  -> QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f\n", best_name.c_str(), e_qsr / best);
       if (!std::isnan(e_adapt)) std::printf("  -> QSR-adapt (noise-adaptive kernel) / best = %.3f\n", e_adapt / best);
+      if (!std::isnan(e_seeds))
+        std::printf("  -> seeds-only (control: no surface, no denoising) / best = %.3f\n", e_seeds / best);
       if (noise == 0.0001 && n_dense >= 50000) {  // render.cpp needs enough points per view
         // Close-ups: a square of 6% of the extent around the centre of the dense cloud.
         Eigen::Vector3f c = Eigen::Vector3f::Zero();

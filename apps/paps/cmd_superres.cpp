@@ -95,6 +95,9 @@ int runSuperres(int argc, char** argv) {
                 p.similarity_scale, p.irls_iterations);
     std::printf("QSR: %zu patches over %zu scan(s); %zu plane fallbacks; %zu patches without a similar patch\n",
                 r.patches, scans.size(), r.plane_fallbacks, r.without_similar);
+    if (r.quadric_only)
+      std::printf("QSR: %zu points without a comparable descriptor (rims, sparse parts) anchor the output by their quadric alone\n",
+                  r.quadric_only);
     if (r.unprojected) std::fprintf(stderr, "warning: %zu output points had no patch nearby and were not projected\n", r.unprojected);
   } else {
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());

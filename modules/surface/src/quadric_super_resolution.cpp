@@ -395,7 +395,11 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   std::vector<std::uint8_t> anchor(n0, 0);
   Normals n0s(n0, Eigen::Vector3f::Constant(NAN));
   for (std::size_t i = 0; i < n0; ++i)
-    if (fits[i].frame.valid()) { anchor[i] = 1; n0s[i] = fits[i].frame.n; }
+    if (fits[i].frame.valid()) {
+      anchor[i] = 1;
+      n0s[i] = fits[i].frame.n;
+      rep.quadric_only += !usable[i];
+    }
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite0));
   Positions out = upsamplingSeeds(P0, n0s, count, 1.2f * s0, params.seed);

@@ -72,6 +72,9 @@ struct QuadricSuperResolutionReport {
   std::size_t patches = 0;          ///< descriptors over all scans
   std::size_t plane_fallbacks = 0;  ///< patches whose quadric fit was ill-posed or flat
   std::size_t without_similar = 0;  ///< patches of the first scan with no similar patch
+  /// Points of the first scan that seed and anchor the output without a comparable descriptor
+  /// (rims, sparse parts): their patch is their quadric alone.
+  std::size_t quadric_only = 0;
   std::size_t output = 0;
   std::size_t unprojected = 0;      ///< output seeds with no usable patch nearby, left in place
   float noise_sigma = 0.f;          ///< noise the parameters were adapted to (metres; 0: none)

@@ -60,7 +60,8 @@ const char* kUsage =
     "                   apss-refit, apss-wide, rimls, rimls-refit, rimls-wide, pcl-mls-plane,\n"
     "                   pcl-mls-random, pcl-mls-voxel, simden+mls, seeds-only (also filters the speed\n"
     "                   test) (-refit: fit at every seed; -wide: seed discs as wide as QSR's;\n"
-    "                   qsr-adapt: QSR with the opt-in noise-adaptive kernel; seeds-only: a control,\n"
+    "                   qsr-adapt: QSR with the opt-in noise-adaptive kernel; qsr-raw: QSR without\n"
+    "                   denoising the input first; seeds-only: a control,\n"
     "                   the seeds on the noisy input's tangent discs, projected on no surface)\n";
 
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
@@ -182,15 +183,16 @@ int runSuperresWorker(int argc, char** argv) {
     timespec c0{};
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     Positions out;
-    if (method == "qsr" || method == "qsr-adapt") {
+    if (method == "qsr" || method == "qsr-adapt" || method == "qsr-raw") {
       QuadricSuperResolutionParameters q;
       q.output_count = target;
       q.adapt_to_noise = method == "qsr-adapt";
+      if (method == "qsr-raw") q.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
       QuadricSuperResolutionReport r;
       out = superResolveQuadric(scans, q, &r);
       lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"
          << r.grid_sr << " K-1 " << r.mean_similar_weight << " fallbacks " << r.plane_fallbacks << " noise "
-         << r.noise_sigma << " kernel " << r.kernel_scale << "\n";
+         << r.noise_sigma << " kernel " << r.kernel_scale << " denoised " << r.denoised << "\n";
     } else if (method == "apss" || method == "rimls" || method == "apss-refit" || method == "rimls-refit" ||
                method == "apss-wide" || method == "rimls-wide") {
       MlsUpsamplingParameters q;
@@ -215,7 +217,7 @@ int runSuperresWorker(int argc, char** argv) {
       const Positions den = denoiseBySimilarity(scans[0], q);
       out = pclMlsUpsample(den, "plane", get("radius", 0), target);
     } else {
-      throw InvalidParameter("method", method, "qsr[-adapt], apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
+      throw InvalidParameter("method", method, "qsr[-adapt|-raw], apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     timespec c1{};
@@ -248,13 +250,13 @@ int runBenchSuperres(int argc, char** argv) {
   const std::vector<std::string> all_methods = {"qsr",           "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",
                                                 "apss-wide",     "rimls",          "rimls-refit",    "rimls-wide",
                                                 "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls",
-                                                "seeds-only"};
+                                                "qsr-raw", "seeds-only"};
   const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", "")) : all_methods;
   for (const auto& m : methods)
     if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
       throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-adapt, qsr-4scans, apss, apss-refit, apss-wide, "
                                            "rimls, rimls-refit, rimls-wide, pcl-mls-plane, pcl-mls-random, "
-                                           "pcl-mls-voxel, simden+mls, seeds-only");
+                                           "pcl-mls-voxel, simden+mls, qsr-raw, seeds-only");
   const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1"));
   for (const auto& sh : shapes)
     if (sh != "engraved-plane" && sh != "rs1") throw InvalidParameter("shapes", sh, "engraved-plane and/or rs1");

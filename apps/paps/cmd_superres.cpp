@@ -37,6 +37,8 @@ const char* kSuperresUsage =
     "  --noise S              QSR noise standard deviation of IN in metres (default: measured)\n"
     "  --adapt                QSR: widen the kernel with the measured noise (2-4% closer to the\n"
     "                         surface at 0.5% noise, about 3x the time)\n"
+    "  --denoise WHEN         QSR: denoise the scans first (paps denoise's default): auto (default:\n"
+    "                         when the measured noise is at least 5% of the patch radius), on, off\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
@@ -46,7 +48,7 @@ int runSuperres(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
-               "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "quiet", "timings",
+               "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
                "refit"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
@@ -78,6 +80,11 @@ int runSuperres(int argc, char** argv) {
     p.similarity_scale = static_cast<float>(a.number("similarity-scale", p.similarity_scale));
     p.irls_iterations = static_cast<int>(a.number("irls", p.irls_iterations));
     p.noise_sigma = static_cast<float>(a.number("noise", 0));
+    const std::string denoise = a.text("denoise", "auto");
+    if (denoise == "auto") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Auto;
+    else if (denoise == "on") p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
+    else if (denoise == "off") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
+    else throw InvalidParameter("denoise", denoise, "auto, on or off");
     p.adapt_to_noise = a.has("adapt") || a.has("noise");
     QuadricSuperResolutionReport r;
     out = superResolveQuadric(scans, p, &r, progress);
@@ -95,6 +102,9 @@ int runSuperres(int argc, char** argv) {
                 p.similarity_scale, p.irls_iterations);
     std::printf("QSR: %zu patches over %zu scan(s); %zu plane fallbacks; %zu patches without a similar patch\n",
                 r.patches, scans.size(), r.plane_fallbacks, r.without_similar);
+    if (r.denoised)
+      std::printf("QSR: the scan%s denoised first (paps denoise's default)%s\n", scans.size() > 1 ? "s were" : " was",
+                  p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? "" : ": noise >= 5% of the patch radius");
     if (r.quadric_only)
       std::printf("QSR: %zu points without a comparable descriptor (rims, sparse parts) anchor the output by their quadric alone\n",
                   r.quadric_only);

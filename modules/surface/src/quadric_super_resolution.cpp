@@ -14,6 +14,7 @@
 #include <paps/core/neighbourhood.h>
 #include <paps/core/noise_estimation.h>
 #include <paps/core/quadric_height_patch.h>
+#include <paps/filters/similarity_denoising.h>
 #include <paps/surface/mls_upsampling.h>
 
 namespace paps {
@@ -108,9 +109,12 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   }
   const float R = sc[0].nh.radius;
   rep.patch_radius = R;
-  // Noise adaptation of the automatic kernel (the noise is measured only when it is needed).
+  // The noise, measured only when something follows it: the kernel (adapt_to_noise) and the
+  // decision to denoise first.
+  using Denoise = QuadricSuperResolutionParameters::Denoise;
+  const bool kernel_follows = params.adapt_to_noise && params.kernel_scale == 0;
   float noise = 0.f;
-  if (params.adapt_to_noise && params.kernel_scale == 0 && R > 0) {
+  if ((kernel_follows || params.denoise_input == Denoise::Auto) && R > 0) {
     noise = params.noise_sigma;
     if (noise == 0) {
       try {
@@ -121,8 +125,26 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
       }
     }
   }
-  const QuadricSuperResolutionParameters run = noiseAdaptedParameters(params, R > 0 ? R : 1.f, noise);
   rep.noise_sigma = noise;
+  // Denoising first (measured, docs/superresolution.md): the patches, the similarity and the
+  // aggregation then work on points within a fraction of the noise of the surface. The
+  // patches keep the radius chosen on the input.
+  std::vector<Positions> denoised;
+  if (params.denoise_input == Denoise::On || (params.denoise_input == Denoise::Auto && R > 0 && noise >= kQuietNoise * R)) {
+    denoised.resize(scans.size());
+    for (std::size_t s = 0; s < scans.size(); ++s) {
+      if (sc[s].nh.radius <= 0) { denoised[s] = scans[s]; continue; }
+      SimilarityDenoisingParameters dp;
+      if (s == 0) dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
+      denoised[s] = denoiseBySimilarity(scans[s], dp, nullptr, {}, progress);
+      sc[s].points = &denoised[s];
+      sc[s].nh = buildRadiusNeighbourhood(denoised[s], R, params.target_neighbours, 4 * params.target_neighbours, progress);
+    }
+    rep.denoised = true;
+  }
+  // After denoising the kernel is the quiet one: what noise is left is not the input's.
+  const QuadricSuperResolutionParameters run = noiseAdaptedParameters(params, R > 0 ? R : 1.f,
+                                                                      kernel_follows && !rep.denoised ? noise : 0.f);
   rep.kernel_scale = run.kernel_scale;
   rep.mean_neighbours = sc[0].nh.graph.meanCount();
   const int n_lr = params.grid_lr ? params.grid_lr
@@ -176,7 +198,7 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   for (std::size_t r = 0; r < rows.size(); ++r)
     std::copy(&desc[rows[r] * B], &desc[rows[r] * B] + B, &table[r * B]);
   const std::size_t n0 = scans[0].size();
-  const Positions& P0 = scans[0];
+  const Positions& P0 = *sc[0].points;
   auto positionOf = [&](int g) -> const Eigen::Vector3f& {
     const Scan& sg = sc[scan_of[g]];
     return (*sg.points)[static_cast<std::size_t>(g) - sg.offset];

@@ -56,9 +56,16 @@ struct QuadricSuperResolutionParameters {
   /// surface on the bench shapes for 2.9x the time, and scores 5% worse on the bench's
   /// dense-to-output error.
   bool adapt_to_noise = false;
-  /// Noise standard deviation of the first scan (metres, >= 0) for `adapt_to_noise`; 0:
-  /// estimated (paps::estimateNoiseLevel at the patch radius).
+  /// Noise standard deviation of the first scan (metres, >= 0) for `adapt_to_noise` and
+  /// `denoise_input`; 0: estimated (paps::estimateNoiseLevel at the patch radius).
   float noise_sigma = 0.f;
+  /// Denoise every scan with paps::SimilarityDenoising (its noise-adaptive default) before the
+  /// patches are built. Auto (default): when the first scan's noise is at least 5% of the
+  /// patch radius, where it was measured to bring the output 1.1x to 5x closer to the true
+  /// surface (docs/superresolution.md, "Denoising noisy scans first"); below that, patch
+  /// similarity already separates relief from noise and the input is used as it is.
+  enum class Denoise { Off, Auto, On };
+  Denoise denoise_input = Denoise::Auto;
   std::uint64_t seed = 1;
   void validate() const;
 };
@@ -80,6 +87,7 @@ struct QuadricSuperResolutionReport {
   float noise_sigma = 0.f;          ///< noise the parameters were adapted to (metres; 0: none)
   bool noise_estimated = false;     ///< noise_sigma was measured (not given)
   float kernel_scale = 0.f;         ///< aggregation kernel scale used
+  bool denoised = false;            ///< the scans were denoised first (denoise_input)
 };
 
 /// The noise-adaptive rule (measured on the distance from the output to the true surface, on
@@ -109,8 +117,10 @@ class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, Point
   /// Similarity radius in metres; 0 chooses it.
   void setSimilarityRadius(float r) { auto p = params_; p.similarity_radius = r; setParameters(p); }
   void setUpsamplingFactor(float f) { auto p = params_; p.factor = f; setParameters(p); }
-  /// The automatic kernel scale follows the measured noise (default on).
+  /// The automatic kernel scale follows the measured noise (default off).
   void setAdaptToNoise(bool on) { auto p = params_; p.adapt_to_noise = on; setParameters(p); }
+  /// Denoise the scans first: Off, Auto (default: when the measured noise is high) or On.
+  void setDenoiseInput(QuadricSuperResolutionParameters::Denoise d) { auto p = params_; p.denoise_input = d; setParameters(p); }
   /// Noise standard deviation in metres for the adaptation; 0 estimates it.
   void setNoiseSigma(float s) { auto p = params_; p.noise_sigma = s; setParameters(p); }
   void addScan(const typename pcl::PointCloud<PointIn>::ConstPtr& scan) { extra_.push_back(scan); }

@@ -5,7 +5,9 @@
 // re-ranking with the masked distance of equation 2.3 and the weights of 2.4); the points of
 // the similar patches are aggregated on a finer grid (equation 2.5, l1 by IRLS), and the
 // output is sampled by projecting Poisson-regularised seeds on the super-resolution patches
-// with a robust partition of unity (equation 2.6).
+// with a robust partition of unity (equation 2.6). Noisy scans are first denoised by
+// paps::SimilarityDenoising (denoise_input; not in the manuscript, measured in
+// docs/superresolution.md).
 #include <cstddef>
 #include <cstdint>
 #include <vector>

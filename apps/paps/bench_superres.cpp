@@ -60,7 +60,7 @@ const char* kUsage =
     "                   apss-refit, apss-wide, rimls, rimls-refit, rimls-wide, pcl-mls-plane,\n"
     "                   pcl-mls-random, pcl-mls-voxel, simden+mls, seeds-only (also filters the speed\n"
     "                   test) (-refit: fit at every seed; -wide: seed discs as wide as QSR's;\n"
-    "                   qsr-adapt: QSR with the opt-in noise-adaptive kernel; qsr-raw: QSR without\n"
+    "                   qsr-adapt: QSR on the raw scan with the opt-in noise-adaptive kernel; qsr-raw: QSR without\n"
     "                   denoising the input first; seeds-only: a control,\n"
     "                   the seeds on the noisy input's tangent discs, projected on no surface)\n";
 
@@ -187,7 +187,8 @@ int runSuperresWorker(int argc, char** argv) {
       QuadricSuperResolutionParameters q;
       q.output_count = target;
       q.adapt_to_noise = method == "qsr-adapt";
-      if (method == "qsr-raw") q.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
+      // qsr-adapt: the adaptive kernel acts on raw scans only (a denoised scan gets the quiet one).
+      if (method == "qsr-raw" || method == "qsr-adapt") q.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
       QuadricSuperResolutionReport r;
       out = superResolveQuadric(scans, q, &r);
       lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"

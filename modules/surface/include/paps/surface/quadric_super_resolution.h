@@ -56,7 +56,7 @@ struct QuadricSuperResolutionParameters {
   /// (measured, docs/superresolution.md "Noise-adaptive kernel"). Off (default): 0.7 whatever
   /// the noise. Opt-in because at 0.5% noise it brings the output 2-4% closer to the true
   /// surface on the bench shapes for 2.9x the time, and scores 5% worse on the bench's
-  /// dense-to-output error.
+  /// dense-to-output error. Scans denoised first (`denoise_input`) get the quiet kernel (0.7).
   bool adapt_to_noise = false;
   /// Noise standard deviation of the first scan (metres, >= 0) for `adapt_to_noise` and
   /// `denoise_input`; 0: estimated (paps::estimateNoiseLevel at the patch radius).

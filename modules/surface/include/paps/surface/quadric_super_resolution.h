@@ -61,7 +61,8 @@ struct QuadricSuperResolutionParameters {
   /// Noise standard deviation of the first scan (metres, >= 0) for `adapt_to_noise` and
   /// `denoise_input`; 0: estimated (paps::estimateNoiseLevel at the patch radius).
   float noise_sigma = 0.f;
-  /// Denoise every scan with paps::SimilarityDenoising (its noise-adaptive default) before the
+  /// Denoise every scan with paps::SimilarityDenoising (its noise-adaptive radius and weight,
+  /// one pass: the aggregation over similar patches is the second filter) before the
   /// patches are built. Auto (default): when the first scan's noise is at least 5% of the
   /// patch radius, where it was measured to bring the output 1.1x to 5x closer to the true
   /// surface (docs/superresolution.md, "Denoising noisy scans first"); below that, patch

@@ -336,9 +336,9 @@ TEST(QuadricSuperResolution, DenoisingFirstIsOnePassOfTheNoiseResolvedDenoiser) 
   p.factor = 2;
   p.noise_sigma = sigma;
   p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
+  // Both runs at the patch radius QSR would choose on the raw scan.
+  p.patch_radius = buildRadiusNeighbourhood(raw, 0.f, p.target_neighbours, 4 * p.target_neighbours).radius;
   QuadricSuperResolutionReport r;
-  superResolveQuadric({raw}, p, &r);
-  p.patch_radius = r.patch_radius;  // both runs at the same patch radius
   const Positions first = superResolveQuadric({raw}, p, &r);
   ASSERT_TRUE(r.denoised);
 

@@ -42,6 +42,8 @@ const char* kSuperresUsage =
     "                         when the measured noise is at least 5% of the patch radius), on, off\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
+    "  --max-neighbours N     APSS/RIMLS: most neighbours a kernel holds, the nearest within the\n"
+    "                         radius (default 16 x --neighbours; bounds memory on clustered input)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
 }  // namespace
 
@@ -50,7 +52,7 @@ int runSuperres(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit"});
+               "refit", "max-neighbours"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   const std::string method = a.text("method", "qsr");
@@ -118,9 +120,14 @@ int runSuperres(int argc, char** argv) {
     p.radius = static_cast<float>(a.number("radius", 0));
     p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
     p.fit_per_input_point = !a.has("refit");
+    p.max_neighbours = static_cast<int>(a.number("max-neighbours", 0));
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
     std::printf("%s: radius %g m%s\n", method.c_str(), r.radius, p.radius > 0 ? "" : " (chosen)");
+    if (r.capped)
+      std::printf("%s: %zu input points hold at least %d neighbours within the radius (much denser than typical); "
+                  "their kernels keep the nearest %d (--max-neighbours)\n",
+                  method.c_str(), r.capped, r.max_neighbours, r.max_neighbours);
     if (r.unprojected) std::fprintf(stderr, "warning: %zu output points could not be projected\n", r.unprojected);
   }
   pcl::PCLPointCloud2 cloud;

@@ -12,6 +12,8 @@
 #include <paps/core/random.h>
 #include <paps/surface/mls_upsampling.h>
 
+#include "peak_allocation.h"
+
 using namespace paps;
 
 namespace {
@@ -114,7 +116,7 @@ std::vector<float> nearestDistances(const Positions& p) {
 }
 }  // namespace
 
-TEST(MlsUpsampling, SeedsArePoissonDiskAndIndependentOfTheGraph) {
+TEST(MlsUpsampling, SeedsArePoissonDiskAndTheSameWithTheCallersLists) {
   // A 40 x 40 grid of spacing 1 on z = 0, seeds 4x denser.
   Positions pts;
   for (int i = 0; i < 40; ++i)
@@ -138,16 +140,13 @@ TEST(MlsUpsampling, SeedsArePoissonDiskAndIndependentOfTheGraph) {
   std::sort(nn.begin(), nn.end());
   EXPECT_GT(nn.front(), 0.6f * nn[nn.size() / 2]);
   // The same seeds when the caller passes its neighbour lists (the conflicts are then found
-  // through them instead of lists built inside).
+  // through them instead of the thinner's grid).
   const SpatialIndex index(pts);
   const NeighbourGraph g = NeighbourGraph::byRadius(pts, index, 3.f);
   std::vector<int> origin2;
   const Positions seeds2 = upsamplingSeeds(pts, normals, 6400, disc, 5, &origin2, &g, 3.f);
-  ASSERT_EQ(seeds2.size(), seeds.size());
-  for (std::size_t s = 0; s < seeds.size(); ++s) {
-    EXPECT_EQ(seeds2[s], seeds[s]);
-    EXPECT_EQ(origin2[s], origin[s]);
-  }
+  EXPECT_EQ(seeds2, seeds);
+  EXPECT_EQ(origin2, origin);
   EXPECT_THROW(upsamplingSeeds(pts, Normals(3, Eigen::Vector3f::UnitZ()), 100, disc, 5), InvalidParameter);
 }
 
@@ -175,6 +174,12 @@ TEST(MlsUpsampling, SeedsExactCountAndThreadIndependentOnLargeInput) {
   const float closest = closestPairDistance(a);
   EXPECT_GT(closest, 0.25f);
   EXPECT_LT(closest, 0.5f);
+  // The same through the caller's lists, in parallel blocks as well.
+  const SpatialIndex index(pts);
+  const NeighbourGraph g = NeighbourGraph::byRadius(pts, index, 2.5f);
+  std::vector<int> o3;
+  EXPECT_EQ(upsamplingSeeds(pts, normals, 90000, 0.7f, 11, &o3, &g, 2.5f), a);
+  EXPECT_EQ(o3, o1);
 }
 
 TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
@@ -242,6 +247,107 @@ TEST(MlsUpsampling, RimlsFitPerInputPointFollowsTheRefit) {
   }
   EXPECT_LT(std::sqrt(s / a.size()), 5e-4);
   EXPECT_LT(m, 4e-3);
+}
+
+TEST(MlsUpsampling, SeedsOnADenseClusterNeedMemoryLinearInTheInput) {
+  // A 100 x 100 grid of spacing 1 with, at one spot, 6000 points inside a ball of radius 0.05,
+  // each stored twice (as in PCL's bun0.pcd sample). Every cluster point is within the
+  // thinning's reach of every other: lists of input points within reach would hold 12,000^2
+  // entries (over 1 GB with the graph they came from; 2.4 GB on bun0). Filing kept seeds in
+  // cells needs memory linear in the input.
+  Positions pts;
+  for (int i = 0; i < 100; ++i)
+    for (int j = 0; j < 100; ++j) pts.emplace_back(i, j, 0.f);
+  Random rng(3);
+  for (int k = 0; k < 6000; ++k) {
+    Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    const Eigen::Vector3f p = Eigen::Vector3f(50.3f, 50.3f, 0.f) + 0.05f * static_cast<float>(rng.uniform()) * v.normalized();
+    pts.push_back(p);
+    pts.push_back(p);
+  }
+  const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
+  const int threads = omp_get_max_threads();
+  auto seeds = [&](int t, std::vector<int>& origin) {
+    omp_set_num_threads(t);
+    Positions s = upsamplingSeeds(pts, normals, 20000, 0.6f, 7, &origin);
+    omp_set_num_threads(threads);
+    return s;
+  };
+  std::vector<int> o1, o2;
+  test::resetAllocationPeak();
+  const Positions a = seeds(2, o2);
+  const std::size_t peak = test::allocationPeakSinceReset();
+  const Positions b = seeds(1, o1);
+  ASSERT_EQ(a.size(), 20000u);
+  EXPECT_EQ(a, b);
+  EXPECT_EQ(o1, o2);
+  // 22,000 inputs, 66,000 candidates: a few MB.
+  EXPECT_LT(peak, std::size_t(32) << 20) << peak / 1048576.0 << " MB";
+  // Still Poisson-disk over the plane and the cluster: no pair much closer than the typical
+  // nearest-neighbour distance.
+  const SpatialIndex index(a);
+  std::vector<int> idx;
+  std::vector<float> d2, nn;
+  for (const auto& p : a) {
+    index.nearestK(p, 2, idx, d2);
+    nn.push_back(std::sqrt(d2[1]));
+  }
+  std::sort(nn.begin(), nn.end());
+  EXPECT_GT(nn.front(), 0.6f * nn[nn.size() / 2]);
+}
+
+TEST(MlsUpsampling, ClusteredInputCapsTheKernelsAndStillLandsOnTheSurface) {
+  // z = 0.3 sin(x) cos(0.7 y) sampled uniformly (12,000 points over 12 x 12), plus 2,000
+  // points within 0.05 of one spot, each stored twice: there every ball of the kernel support
+  // holds the 4,000 cluster points, over 100x the typical count. The kernels keep their
+  // nearest 16 x 30 = 480; with seeds spread over the same discs the output lands on the
+  // surface about as well as with uncapped kernels (vertical RMS), with a fraction of the
+  // memory. (The disc follows the mean neighbour count, which the cluster inflates when
+  // uncapped, hence the matched disc_scale.)
+  auto f = [](float x, float y) { return 0.3f * std::sin(x) * std::cos(0.7f * y); };
+  Random rng(21);
+  Positions pts;
+  for (int k = 0; k < 12000; ++k) {
+    const float x = static_cast<float>(rng.uniform(0, 12)), y = static_cast<float>(rng.uniform(0, 12));
+    pts.emplace_back(x, y, f(x, y));
+  }
+  for (int k = 0; k < 2000; ++k) {
+    const float r = 0.05f * std::sqrt(static_cast<float>(rng.uniform())), t = static_cast<float>(rng.uniform(0, 6.2831853));
+    const float x = 6.f + r * std::cos(t), y = 6.f + r * std::sin(t);
+    pts.emplace_back(x, y, f(x, y));
+    pts.emplace_back(x, y, f(x, y));
+  }
+  for (const MlsSurface s : {MlsSurface::Apss, MlsSurface::Rimls}) {
+    auto run = [&](int max_neighbours, float disc_scale, MlsUpsamplingReport& r, std::size_t& peak) {
+      MlsUpsamplingParameters p;
+      p.factor = 2;
+      p.max_neighbours = max_neighbours;
+      p.disc_scale = disc_scale;
+      test::resetAllocationPeak();
+      const Positions out = upsampleMls(pts, s, p, &r);
+      peak = test::allocationPeakSinceReset();
+      EXPECT_EQ(out.size(), 2 * pts.size());
+      double e = 0;
+      for (const auto& q : out) e += (q.z() - f(q.x(), q.y())) * (q.z() - f(q.x(), q.y()));
+      return std::sqrt(e / out.size());
+    };
+    MlsUpsamplingReport capped, full;
+    std::size_t peak_capped = 0, peak_full = 0;
+    const double e_capped = run(0, 1.f, capped, peak_capped);
+    run(1000000, 1.f, full, peak_full);
+    const float matched = capped.disc_radius / full.disc_radius;
+    const double e_full = run(1000000, matched, full, peak_full);
+    EXPECT_EQ(capped.max_neighbours, 480);
+    EXPECT_GE(capped.capped, 4000u);
+    EXPECT_EQ(full.capped, 0u);
+    EXPECT_NEAR(full.disc_radius, capped.disc_radius, 1e-3f * capped.disc_radius);
+    EXPECT_LT(e_capped, 1.25 * e_full) << e_capped << " vs " << e_full;
+    EXPECT_LT(e_capped, 2e-3);  // the typical spacing is 0.11
+    EXPECT_LT(peak_capped, peak_full / 2) << peak_capped << " vs " << peak_full;
+    std::printf("%s: %zu kernels capped; vertical RMS %.4g (uncapped %.4g); peak %.1f MB (uncapped %.1f MB)\n",
+                s == MlsSurface::Apss ? "APSS" : "RIMLS", capped.capped, e_capped, e_full, peak_capped / 1048576.0,
+                peak_full / 1048576.0);
+  }
 }
 
 TEST(MlsUpsampling, SeedSurplusDroppedWhereCrowded) {

@@ -2,6 +2,7 @@
 #include <paps/surface/impl/mls_upsampling.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 
@@ -19,6 +20,7 @@ void MlsUpsamplingParameters::validate() const {
   if (!(radius >= 0) || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   requireInRange("target_neighbours", target_neighbours, 6, 1000);
+  if (max_neighbours != 0) requireInRange("max_neighbours", max_neighbours, 6, 1000000);
   requireInRange("factor", factor, 1.f, 1000.f);
   requireInRange("iterations", iterations, 1, 50);
   requireInRange("inner_iterations", inner_iterations, 1, 50);
@@ -31,10 +33,15 @@ namespace {
 
 // Dart throwing over seed candidates that were generated on the tangent discs (radius `disc`)
 // of input points. Two candidates closer than d come from input points closer than
-// d + 2 disc, so each candidate is only tested against the seeds already kept from the input
-// points within that distance of its own: no spatial hashing per test, and the kept seeds of
-// one input point sit together in memory. Gives exactly the maximal Poisson-disk subset that
-// plain dart throwing in the same visiting order gives (see run()).
+// reach = d + 2 disc, so the kept seeds are filed by the input point they come from, and a
+// candidate is only tested against the seeds of the input points within d + disc of it. Those
+// are found through the caller's complete neighbour lists when it has some that reach far
+// enough (APSS and RIMLS: the lists at their kernel support), or else through a grid of cells
+// of side >= reach / 2 (5^3 cells around the candidate's input point). The grid needs memory
+// linear in the input however dense it is; lists of input points within reach, which the
+// thinner built for itself before, grew with the square of the local density (2.4 GB on
+// bun0). Both give exactly the maximal Poisson-disk subset that plain dart throwing in the
+// same visiting order gives (see run()), and the same crowding measure.
 class SeedThinner {
  public:
   SeedThinner(const Positions& points, const std::vector<int>& ranked, const Positions& cand,
@@ -42,25 +49,31 @@ class SeedThinner {
               float graph_radius)
       : points_(points), ranked_(ranked), cand_(cand), cand_rank_(cand_rank), slots_(slots), disc_(disc),
         graph_(graph), graph_radius_(graph ? graph_radius : 0.f) {
-    rank_of_.assign(points.size(), -1);
-    for (std::size_t k = 0; k < ranked.size(); ++k) rank_of_[ranked[k]] = static_cast<int>(k);
-    kept_.resize(ranked.size() * static_cast<std::size_t>(slots));
-    kept_c_.resize(kept_.size());
-    cand_m2_.resize(cand.size());
-    cand_p_.resize(cand.size());
     opos_.resize(ranked.size());
     for (std::size_t k = 0; k < ranked.size(); ++k) opos_[k] = points[ranked[k]];
+    lo_ = Eigen::Vector3f::Constant(INFINITY);
+    for (const Eigen::Vector3f& p : opos_) lo_ = lo_.cwiseMin(p);
+    cand_m2_.resize(cand.size());
+    cand_p_.resize(cand.size());
+    kept_.resize(ranked.size() * static_cast<std::size_t>(slots));
+    kept_c_.resize(kept_.size());
     count_.resize(ranked.size());
+    act_pos_.resize(ranked.size());
+    act_rank_.resize(ranked.size());
   }
 
   // Candidates come in blocks of space of side `side` (contiguous ranges, block_start), each
-  // with the parity of its block coordinates (0 to 7). Blocks of the same parity are at least
-  // one side apart: when the side is at least d + 2 disc they share no conflict and no input
-  // point, so they are thinned in parallel, the parities one after the other. The result does
-  // not depend on the thread count (it is the sequential result in that order).
-  void setBlocks(std::vector<std::size_t> block_start, std::vector<std::uint8_t> block_parity, float side) {
+  // with the parity of its block coordinates (0 to 7) and its coordinates (block_coord, as
+  // computed from `lo` = the smallest coordinates of the input points). Blocks of the same
+  // parity are at least one side apart: when the side is at least d + 2 disc they share no
+  // conflict and no grid cell, so they are thinned in parallel, the parities one after the
+  // other. The result does not depend on the thread count (it is the sequential result in
+  // that order).
+  void setBlocks(std::vector<std::size_t> block_start, std::vector<std::uint8_t> block_parity,
+                 std::vector<std::array<std::int64_t, 3>> block_coord, double side) {
     block_start_ = std::move(block_start);
     block_parity_ = std::move(block_parity);
+    block_coord_ = std::move(block_coord);
     side_ = side;
   }
 
@@ -69,23 +82,29 @@ class SeedThinner {
   // small for d, visit the candidates in index order, sequentially.
   std::vector<int> run(float d, std::size_t blocks_limit = 0) {
     const float reach = d + 2.f * disc_;
-    nearLists(reach);
+    const std::int64_t blocks = static_cast<std::int64_t>(block_parity_.size());
+    const std::int64_t nb = blocks_limit ? std::min<std::int64_t>(blocks, blocks_limit) : blocks;
+    const bool aligned = !block_start_.empty() && side_ >= kCellMargin * reach;
+    const bool parallel = aligned && nb == blocks;
+    use_lists_ = graph_ && graph_radius_ >= reach;
+    if (use_lists_)
+      nearLists(reach);
+    else
+      buildCells(reach, aligned);
     reach1_sq_ = (d + disc_) * (d + disc_) * 1.0001f;
     const float d2 = d * d;
     std::vector<int> kept;
-    const std::int64_t blocks = static_cast<std::int64_t>(block_parity_.size());
-    const std::int64_t nb = blocks_limit ? std::min<std::int64_t>(blocks, blocks_limit) : blocks;
     const std::size_t end = block_start_.empty() ? cand_.size() : block_start_[nb];
+    std::fill(count_.begin(), count_.end(), 0);
+    std::fill(act_count_.begin(), act_count_.end(), 0);
     // Pilots (a prefix of the blocks) run sequentially: they are short, and on a loaded
     // machine the eight parity phases would cost more in waiting than they save.
-    if (block_start_.empty() || !(side_ >= reach) || nb < blocks) {
-      std::fill(count_.begin(), count_.end(), 0);
+    if (!parallel) {
       for (std::size_t c = 0; c < end; ++c)
         if (tryKeep(c, d2)) kept.push_back(static_cast<int>(c));
       return kept;
     }
     std::vector<std::uint8_t> keep(end, 0);
-    std::fill(count_.begin(), count_.end(), 0);
     for (int parity = 0; parity < 8; ++parity) {
 #pragma omp parallel for schedule(dynamic, 2)
       for (std::int64_t b = 0; b < nb; ++b) {
@@ -99,7 +118,6 @@ class SeedThinner {
     return kept;
   }
 
-  // The number of blocks whose candidates make up at least `n` candidates.
   // For the seeds `kept` (increasing candidate indices) of the last run: the squared distance
   // to the nearest seed kept before it among those it was tested against (infinite when none)
   // and the position of that seed in `kept` (-1 when none). Seeds closer to an earlier one
@@ -117,6 +135,7 @@ class SeedThinner {
     }
   }
 
+  // The number of blocks whose candidates make up at least `n` candidates.
   std::size_t blocksCovering(std::size_t n) const {
     std::size_t b = 0;
     while (b < block_parity_.size() && block_start_[b + 1] < n) ++b;
@@ -124,40 +143,74 @@ class SeedThinner {
   }
 
  private:
+  // Cells of side >= 1.01 reach / kSpan (a little more than needed, so that rounding never
+  // hides a neighbour), kSpan cells searched on each side. On rs1 (114K -> 457K, APSS's disc)
+  // a candidate then looks at 7 cells and 2 input points with seeds on average.
+  static constexpr float kCellMargin = 1.01f;
+  static constexpr int kSpan = 2;
+
+  // "Tested against" = the seeds of the input points within d + disc of the candidate (the
+  // only ones that can conflict with it): the crowding measure does not depend on the cells.
   bool tryKeep(std::size_t c, float d2) {
     const Eigen::Vector3f& p = cand_[c];
     const int k = cand_rank_[c];
     float best = INFINITY;
-    std::size_t best_slot = 0;
-    for (std::int64_t m = near_off_[k]; m < near_end_[k]; ++m) {
-      const int r = near_[m];
-      // The seeds of input point r lie within disc of it: skip it when p is farther than d + disc.
-      if (count_[r] == 0 || (opos_[r] - p).squaredNorm() >= reach1_sq_) continue;
+    int best_c = -1;
+    // Tests the seeds of input point r (rank) when it lies within d + disc of p.
+    auto test = [&](const Eigen::Vector3f& pos, int r) {
+      if ((pos - p).squaredNorm() >= reach1_sq_) return true;
       const std::size_t first = static_cast<std::size_t>(r) * slots_;
       const Eigen::Vector3f* q = kept_.data() + first;
-      for (int s = 0; s < count_[r]; ++s) {
-        const float e2 = (q[s] - p).squaredNorm();
+      for (int t = 0; t < count_[r]; ++t) {
+        const float e2 = (q[t] - p).squaredNorm();
         if (e2 < d2) return false;
-        if (e2 < best) { best = e2; best_slot = first + s; }
+        if (e2 < best) {
+          best = e2;
+          best_c = kept_c_[first + t];
+        }
       }
+      return true;
+    };
+    if (use_lists_) {
+      for (std::int64_t m = near_off_[k]; m < near_end_[k]; ++m) {
+        const int r = near_[m];
+        if (count_[r] != 0 && !test(opos_[r], r)) return false;
+      }
+      return keep(c, k, best, best_c);
     }
-    kept_c_[static_cast<std::size_t>(k) * slots_ + count_[k]] = static_cast<int>(c);
+    const int cell = cell_of_[k];
+    for (std::int64_t m = nb_off_[cell]; m < nb_off_[cell + 1]; ++m) {
+      const int nc = nb_[m];
+      // The input points of that cell with kept seeds.
+      for (std::size_t a = act_off_[nc], a_end = a + act_count_[nc]; a < a_end; ++a)
+        if (!test(act_pos_[a], act_rank_[a])) return false;
+    }
+    if (count_[k] == 0) {
+      const int cell = cell_of_[k];
+      const std::size_t a = act_off_[cell] + act_count_[cell]++;
+      act_pos_[a] = opos_[k];
+      act_rank_[a] = k;
+    }
+    return keep(c, k, best, best_c);
+  }
+
+  bool keep(std::size_t c, int k, float best, int best_c) {
+    const std::size_t slot = static_cast<std::size_t>(k) * slots_ + count_[k]++;
+    kept_[slot] = cand_[c];
+    kept_c_[slot] = static_cast<int>(c);
     cand_m2_[c] = best;
-    cand_p_[c] = best < INFINITY ? kept_c_[best_slot] : -1;
-    kept_[static_cast<std::size_t>(k) * slots_ + count_[k]++] = p;
+    cand_p_[c] = best_c;
     return true;
   }
 
-  // near_ lists, per ranked input point, the ranks of the ranked points within `reach`
-  // (itself first).
-  // Lists made for a larger reach serve as they are (tryKeep tests exact distances), so they
-  // are only rebuilt when the reach grows past the one they were made for.
+  // near_ lists, per ranked input point, the ranks of the ranked points within 1.15 reach
+  // (itself first, then as in the caller's lists: by distance). Lists made for a larger reach
+  // serve as they are, so they are only rebuilt when the reach grows past theirs.
   void nearLists(float reach) {
     if (near_reach_ >= reach) return;
-    if (!graph_ || graph_radius_ < reach) {
-      graph_radius_ = 1.25f * reach;
-      own_graph_ = gridRadiusGraph(points_, graph_radius_);
-      graph_ = &own_graph_;
+    if (rank_of_.empty()) {
+      rank_of_.assign(points_.size(), -1);
+      for (std::size_t k = 0; k < ranked_.size(); ++k) rank_of_[ranked_[k]] = static_cast<int>(k);
     }
     reach = std::min(1.15f * reach, graph_radius_);
     near_reach_ = reach;
@@ -181,29 +234,147 @@ class SeedThinner {
     }
   }
 
+  // Files every input point in a cell. For parallel runs the cells subdivide the blocks in
+  // m >= kSpan per side (each cell inside one block, so a thread only writes cells of its own
+  // block and reads cells of its own and of adjacent blocks, which have another parity).
+  // Cells made for a larger reach serve as they are, unless much larger. Sequential runs use
+  // the block-aligned cells too when the blocks are large enough, so that the pilot passes
+  // and the full passes share them.
+  void buildCells(float reach, bool aligned) {
+    const double need = kCellMargin * static_cast<double>(reach) / kSpan;
+    std::int64_t m = 1;
+    double s = need;
+    if (aligned) {
+      m = std::max<std::int64_t>(kSpan, static_cast<std::int64_t>(std::floor(side_ / need)));
+      s = side_ / static_cast<double>(m);
+    }
+    if (!cell_of_.empty() && aligned == cells_aligned_ && cell_side_ >= need && cell_side_ <= 1.5 * need) return;
+    cells_aligned_ = aligned;
+    cell_side_ = s;
+    const std::size_t n = opos_.size();
+    // Cell coordinates (+ kSpan, so that no neighbour is negative), packed 42 bits each in
+    // (z, y, x) order: the cell order is the key order.
+    using Key = unsigned __int128;
+    constexpr int kBits = 42;
+    const Key mask = (Key(1) << kBits) - 1;
+    auto pack = [](std::int64_t x, std::int64_t y, std::int64_t z) {
+      return (Key(static_cast<std::uint64_t>(z)) << (2 * kBits)) | (Key(static_cast<std::uint64_t>(y)) << kBits) |
+             Key(static_cast<std::uint64_t>(x));
+    };
+    std::vector<std::pair<Key, int>> order(n);
+    auto fill = [&](std::size_t k, const std::array<std::int64_t, 3>* block) {
+      std::int64_t c[3];
+      for (int a = 0; a < 3; ++a) {
+        const double x = static_cast<double>(opos_[k][a]) - lo_[a];
+        if (block) {
+          const double local = std::floor((x - static_cast<double>((*block)[a]) * side_) / s);
+          c[a] = (*block)[a] * m + std::clamp<std::int64_t>(static_cast<std::int64_t>(local), 0, m - 1);
+        } else {
+          c[a] = static_cast<std::int64_t>(std::min(std::floor(x / s), 1e12));
+        }
+      }
+      order[k] = {pack(c[0] + kSpan, c[1] + kSpan, c[2] + kSpan), static_cast<int>(k)};
+    };
+    if (aligned) {
+      for (std::size_t b = 0; b + 1 < block_start_.size(); ++b)
+        for (std::size_t k = block_start_[b] / slots_; k < block_start_[b + 1] / slots_; ++k) fill(k, &block_coord_[b]);
+    } else {
+      for (std::size_t k = 0; k < n; ++k) fill(k, nullptr);
+    }
+    std::sort(order.begin(), order.end());
+    std::vector<Key> cells;
+    cell_of_.assign(n, -1);
+    act_off_.clear();
+    for (std::size_t i = 0; i < n; ++i) {
+      if (i == 0 || order[i].first != cells.back()) {
+        cells.push_back(order[i].first);
+        act_off_.push_back(i);
+      }
+      cell_of_[order[i].second] = static_cast<int>(cells.size() - 1);
+    }
+    act_off_.push_back(n);
+    act_count_.assign(cells.size(), 0);
+    cell_lo_.assign(cells.size(), Eigen::Vector3f::Constant(INFINITY));
+    cell_hi_.assign(cells.size(), Eigen::Vector3f::Constant(-INFINITY));
+    for (std::size_t k = 0; k < n; ++k) {
+      cell_lo_[cell_of_[k]] = cell_lo_[cell_of_[k]].cwiseMin(opos_[k]);
+      cell_hi_[cell_of_[k]] = cell_hi_[cell_of_[k]].cwiseMax(opos_[k]);
+    }
+    // The occupied cells among the 5^3 around each cell. For each (dz, dy) the cells sought
+    // form one run along x whose start only moves forward as the cells are visited in order:
+    // one sweep per (dz, dy), no search. Cells whose points are all at least the largest reach
+    // these cells serve away from the points of cell c hold no input point within d + disc of
+    // a candidate of c (which lies within disc of its input point): left out. Nearest cells
+    // first (own cell first): a conflicting seed, when there is one, is usually found after a
+    // cell or two.
+    const float serve = static_cast<float>(cell_side_ * kSpan / kCellMargin) * 1.0001f;
+    const float serve2 = serve * serve;
+    constexpr int kRows = (2 * kSpan + 1) * (2 * kSpan + 1);
+    std::array<std::size_t, kRows> at{};
+    std::array<std::pair<int, int>, kRows * (2 * kSpan + 1)> found;  // (squared offset, cell)
+    nb_off_.assign(cells.size() + 1, 0);
+    nb_.clear();
+    for (std::size_t c = 0; c < cells.size(); ++c) {
+      int row = 0, nfound = 0;
+      const std::int64_t cx = static_cast<std::int64_t>(cells[c] & mask);
+      const std::int64_t cy = static_cast<std::int64_t>((cells[c] >> kBits) & mask);
+      const std::int64_t cz = static_cast<std::int64_t>(cells[c] >> (2 * kBits));
+      for (int dz = -kSpan; dz <= kSpan; ++dz)
+        for (int dy = -kSpan; dy <= kSpan; ++dy, ++row) {
+          const Key from = pack(cx - kSpan, cy + dy, cz + dz);
+          std::size_t& p = at[row];
+          while (p < cells.size() && cells[p] < from) ++p;
+          for (std::size_t q = p; q < cells.size() && (cells[q] >> kBits) == (from >> kBits); ++q) {
+            const std::int64_t qx = static_cast<std::int64_t>(cells[q] & mask);
+            if (qx > cx + kSpan) break;
+            const Eigen::Vector3f gap = (cell_lo_[q] - cell_hi_[c]).cwiseMax(cell_lo_[c] - cell_hi_[q]).cwiseMax(0.f);
+            if (gap.squaredNorm() < serve2)
+              found[nfound++] = {dz * dz + dy * dy + static_cast<int>((qx - cx) * (qx - cx)), static_cast<int>(q)};
+          }
+        }
+      std::sort(found.begin(), found.begin() + nfound);
+      for (int i = 0; i < nfound; ++i) nb_.push_back(found[i].second);
+      nb_off_[c + 1] = static_cast<std::int64_t>(nb_.size());
+    }
+  }
+
   const Positions& points_;
   const std::vector<int>& ranked_;
   const Positions& cand_;
   const std::vector<int>& cand_rank_;
   const int slots_;
   const float disc_;
+  Positions opos_;  // the ranked input points
+  // The caller's lists and those derived from them (near_: ranks within near_reach_).
   const NeighbourGraph* graph_;
   float graph_radius_;
-  NeighbourGraph own_graph_;
+  bool use_lists_ = false;
   std::vector<int> rank_of_, near_;
   std::vector<std::int64_t> near_off_, near_end_;
-  std::vector<Eigen::Vector3f> kept_;
-  std::vector<int> kept_c_;   // per slot: the candidate kept there
+  float near_reach_ = 0.f;
+  Eigen::Vector3f lo_;
+  // The grid: cell of each ranked point, the occupied cells near each cell (nearest first),
+  // and per cell its input points that have kept seeds so far (room for all of them).
+  std::vector<int> cell_of_, nb_;
+  std::vector<std::int64_t> nb_off_;
+  std::vector<std::size_t> act_off_;  // per cell: room for its input points with kept seeds,
+  std::vector<int> act_count_;        // how many have some so far,
+  Positions act_pos_;                 // and those points (position, rank)
+  std::vector<int> act_rank_;
+  Positions cell_lo_, cell_hi_;  // bounding box of the input points of each cell
+  Positions kept_;            // per ranked input point, room for its kept seeds
+  std::vector<int> kept_c_;   // (slots each): the seed and its candidate index,
+  std::vector<int> count_;    // and how many it has
+  bool cells_aligned_ = false;
+  double cell_side_ = 0;
   std::vector<float> cand_m2_;  // per kept candidate of the last run: squared distance to the
   std::vector<int> cand_p_;     // nearest earlier seed tested, and that seed (-1: none)
   std::vector<int> cand_p_pos_;
-  std::vector<int> count_;
   std::vector<std::size_t> block_start_;
   std::vector<std::uint8_t> block_parity_;
-  float side_ = 0.f;
-  Positions opos_;  // the ranked input points
+  std::vector<std::array<std::int64_t, 3>> block_coord_;
+  double side_ = 0;
   float reach1_sq_ = 0.f;
-  float near_reach_ = 0.f;
 };
 
 }  // namespace
@@ -263,10 +434,13 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // random stream, in parallel: the result does not depend on the thread count.
   std::vector<std::size_t> block_first;  // first rank of each block
   std::vector<std::uint8_t> block_parity;
+  std::vector<std::array<std::int64_t, 3>> block_coord;
   for (std::size_t k = 0; k < usable; ++k)
     if (k == 0 || keyed[k].first != keyed[k - 1].first) {
       const std::uint64_t key = keyed[k].first;
       block_first.push_back(k);
+      block_coord.push_back({static_cast<std::int64_t>(key >> 42), static_cast<std::int64_t>((key >> 21) & 2097151),
+                             static_cast<std::int64_t>(key & 2097151)});
       block_parity.push_back(static_cast<std::uint8_t>(((key >> 42) & 1) | (((key >> 21) & 1) << 1) | ((key & 1) << 2)));
     }
   block_first.push_back(usable);
@@ -319,7 +493,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // a sparse set, less as the set nears the candidates' own spacing) is measured from the last
   // two passes.
   SeedThinner thinner(points, ranked, cand, cand_rank, per_point, disc_radius, graph, graph_radius);
-  thinner.setBlocks(block_start, std::move(block_parity), static_cast<float>(block));
+  thinner.setBlocks(block_start, std::move(block_parity), std::move(block_coord), block);
   std::vector<int> best, best_partner;
   std::vector<float> best_m2;
   double lo_fail = 0, hi_ok = 0;  // smallest radius giving too few, largest giving enough
@@ -792,27 +966,42 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
   float reach = h * (1.1f + 1.5f / std::sqrt(static_cast<float>(params.target_neighbours)));
   // Grid neighbour lists (core CellGrid): on scanned surfaces several times faster than
   // kd-tree radius searches, which dominated the cost of the whole upsampling.
+  // Lists capped at the nearest max_neighbours (the same lists as uncapped where no ball holds
+  // more).
+  const int cap = params.max_neighbours > 0 ? params.max_neighbours : 16 * params.target_neighbours;
+  auto cappedGraph = [&](float radius) {
+    CellGrid grid;
+    if (!grid.build(points, radius))
+      throw InvalidParameter("radius", detail::toString(radius), "at least extent / 2^21 of the points");
+    return grid.radiusGraph(points.size(), radius, false, {}, cap);
+  };
   NeighbourGraph graph_ext, graph_h;
   if (only_h) {
-    graph_h = gridRadiusGraph(points, h);
+    graph_h = cappedGraph(h);
   } else {
-    graph_ext = gridRadiusGraph(points, reach);
+    graph_ext = cappedGraph(reach);
     graph_h = restrictedGraph(points, graph_ext, h);
   }
   const double mean_count = std::max(1.0, graph_h.meanCount());
   const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f * params.disc_scale;
   if (!only_h && reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
     reach = 1.05f * h + disc;
-    graph_ext = gridRadiusGraph(points, reach);
+    graph_ext = cappedGraph(reach);
+  }
+  std::size_t capped = 0;
+  {
+    const NeighbourGraph& g = only_h ? graph_h : graph_ext;
+    for (std::size_t i = 0; i < g.size(); ++i) capped += g.count(i) >= cap;
   }
   const NeighbourGraph& lists = only_h ? graph_h : graph_ext;
-  const float lists_radius = only_h ? h : reach;
   Normals normals = estimateNormals(points, graph_h);
   orientNormalsByPropagation(points, normals, graph_h);
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite));
   std::vector<int> origin;
-  Positions out = upsamplingSeeds(points, normals, count, disc, params.seed, &origin, &lists, lists_radius);
+  // The lists are complete (and spare the thinner its grid) unless a ball was over the cap.
+  Positions out = upsamplingSeeds(points, normals, count, disc, params.seed, &origin, capped ? nullptr : &lists,
+                                  only_h ? h : reach);
   // Seeds grouped by the input point they were generated from.
   const std::size_t np = points.size();
   std::vector<std::int64_t> soff(np + 1, 0);
@@ -879,7 +1068,14 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
   }
   rep.throwIfCancelled();
   rep.finish();
-  if (report) { report->radius = h; report->output = out.size(); report->unprojected = unprojected; }
+  if (report) {
+    report->radius = h;
+    report->output = out.size();
+    report->unprojected = unprojected;
+    report->capped = capped;
+    report->max_neighbours = cap;
+    report->disc_radius = disc;
+  }
   return out;
 }
 

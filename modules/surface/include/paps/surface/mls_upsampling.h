@@ -23,6 +23,12 @@ struct MlsUpsamplingParameters {
   float radius = 0.f;
   /// Neighbour count that sets the radius: a typical (median) point holds it (6 to 1000).
   int target_neighbours = 30;
+  /// Most neighbours a kernel holds: where the input is far denser than typical (clusters,
+  /// overlapping or duplicated scans), a point keeps its nearest ones within h. Without a cap
+  /// memory grows with the square of the local density (PCL's bun0.pcd sample: 15,800
+  /// neighbours at the 90th percentile where the median has 30; 2.4 GB). 0: 16 x
+  /// target_neighbours; otherwise 6 to 10^6.
+  int max_neighbours = 0;
   /// Output count = factor x finite input count when output_count is 0 (1 to 1000).
   float factor = 4.f;
   /// Exact output count (0: from factor).
@@ -58,6 +64,9 @@ struct MlsUpsamplingReport {
   float radius = 0.f;
   std::size_t output = 0;
   std::size_t unprojected = 0;  ///< seeds with too few neighbours, left where generated
+  std::size_t capped = 0;       ///< input points whose kernel holds max_neighbours (the cap)
+  int max_neighbours = 0;       ///< the cap used
+  float disc_radius = 0.f;      ///< radius of the tangent discs the seeds were spread over
 };
 
 /// Upsamples `points` (NaN entries ignored). Throws InvalidInput for fewer than 3 finite points.
@@ -71,8 +80,9 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin = nullptr);
 /// Same, given the complete neighbour lists of `points` within `graph_radius` (no truncation),
-/// which spares building them. They are used when graph_radius >= d + 2 disc_radius (d the
-/// Poisson-disk radius), as is the case for the kernel neighbourhoods of APSS and RIMLS.
+/// which spare the thinning its own grid. They are used when graph_radius >= d + 2 disc_radius
+/// (d the Poisson-disk radius), as is the case for the kernel neighbourhoods of APSS and RIMLS;
+/// the seeds are the same with or without them.
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius);

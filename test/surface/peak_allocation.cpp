@@ -1,0 +1,44 @@
+// Counting replacements of the global operator new and delete. Each block carries its size in
+// a header of max_align_t size, so that the sized and unsized deletes both know what they free.
+#include "peak_allocation.h"
+
+#include <atomic>
+#include <cstdlib>
+#include <new>
+
+namespace {
+std::atomic<std::size_t> held{0}, peak{0}, base{0};
+constexpr std::size_t kHeader = alignof(std::max_align_t);
+
+void* allocate(std::size_t n) {
+  void* raw = std::malloc(n + kHeader);
+  if (!raw) throw std::bad_alloc();
+  *static_cast<std::size_t*>(raw) = n;
+  const std::size_t now = held.fetch_add(n) + n;
+  std::size_t p = peak.load();
+  while (now > p && !peak.compare_exchange_weak(p, now)) {
+  }
+  return static_cast<char*>(raw) + kHeader;
+}
+void release(void* ptr) noexcept {
+  if (!ptr) return;
+  void* raw = static_cast<char*>(ptr) - kHeader;
+  held.fetch_sub(*static_cast<std::size_t*>(raw));
+  std::free(raw);
+}
+}  // namespace
+
+namespace paps::test {
+void resetAllocationPeak() {
+  base = held.load();
+  peak = base.load();
+}
+std::size_t allocationPeakSinceReset() { return peak.load() - base.load(); }
+}  // namespace paps::test
+
+void* operator new(std::size_t n) { return allocate(n); }
+void* operator new[](std::size_t n) { return allocate(n); }
+void operator delete(void* p) noexcept { release(p); }
+void operator delete[](void* p) noexcept { release(p); }
+void operator delete(void* p, std::size_t) noexcept { release(p); }
+void operator delete[](void* p, std::size_t) noexcept { release(p); }

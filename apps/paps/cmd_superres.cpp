@@ -123,7 +123,8 @@ int runSuperres(int argc, char** argv) {
     p.max_neighbours = static_cast<int>(a.number("max-neighbours", 0));
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
-    std::printf("%s: radius %g m%s\n", method.c_str(), r.radius, p.radius > 0 ? "" : " (chosen)");
+    std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,
+                p.radius > 0 ? "" : " (chosen)", r.disc_radius);
     if (r.capped)
       std::printf("%s: %zu input points hold at least %d neighbours within the radius (much denser than typical); "
                   "their kernels keep the nearest %d (--max-neighbours)\n",

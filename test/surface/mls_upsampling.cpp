@@ -350,6 +350,59 @@ TEST(MlsUpsampling, ClusteredInputCapsTheKernelsAndStillLandsOnTheSurface) {
   }
 }
 
+TEST(MlsUpsampling, SeedThinningIsExactDartThrowing) {
+  // Known answer: plain dart throwing in index order (each candidate kept when no kept one is
+  // closer than d), checked by brute force, through the thinner's own grid and through
+  // caller's lists, on a wavy sheet with a dense duplicated clump; and the crowding measure
+  // (nearest earlier kept seed from an input point within d + disc) likewise.
+  Random rng(5);
+  Positions pts;
+  for (int k = 0; k < 2500; ++k) {
+    const float x = static_cast<float>(rng.uniform(0, 10)), y = static_cast<float>(rng.uniform(0, 10));
+    pts.emplace_back(x, y, 0.5f * std::sin(x) * std::cos(y));
+  }
+  for (int k = 0; k < 250; ++k) {  // 500 points within 0.02 of (5, 5, z)
+    const Eigen::Vector3f p(5.f + 0.02f * static_cast<float>(rng.uniform(-1, 1)), 5.f + 0.02f * static_cast<float>(rng.uniform(-1, 1)),
+                            0.5f * std::sin(5.f) * std::cos(5.f));
+    pts.push_back(p);
+    pts.push_back(p);
+  }
+  const int slots = 3;
+  const float disc = 0.15f;
+  Positions cand;
+  std::vector<int> cand_point;
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    for (int j = 0; j < slots; ++j) {
+      Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+      cand.push_back(pts[i] + disc * static_cast<float>(rng.uniform()) * v.normalized());
+      cand_point.push_back(static_cast<int>(i));
+    }
+  for (const float d : {0.05f, 0.12f, 0.4f}) {
+    const float reach1_sq = (d + disc) * (d + disc) * 1.0001f;
+    std::vector<int> want;
+    std::vector<float> want_m2;
+    for (std::size_t c = 0; c < cand.size(); ++c) {
+      bool ok = true;
+      float m2 = INFINITY;
+      for (const int k : want) {
+        const float e2 = (cand[k] - cand[c]).squaredNorm();
+        if (e2 < d * d) { ok = false; break; }
+        if ((pts[cand_point[k]] - cand[c]).squaredNorm() < reach1_sq) m2 = std::min(m2, e2);
+      }
+      if (ok) want.push_back(static_cast<int>(c)), want_m2.push_back(m2);
+    }
+    std::vector<float> m2_grid, m2_lists;
+    EXPECT_EQ(detail::thinSeedCandidates(pts, cand, cand_point, slots, disc, d, nullptr, 0.f, &m2_grid), want) << d;
+    EXPECT_EQ(m2_grid, want_m2) << d;
+    const float r = d + 2 * disc;
+    const SpatialIndex index(pts);
+    const NeighbourGraph g = NeighbourGraph::byRadius(pts, index, r);
+    EXPECT_EQ(detail::thinSeedCandidates(pts, cand, cand_point, slots, disc, d, &g, r, &m2_lists), want) << d;
+    EXPECT_EQ(m2_lists, want_m2) << d;
+    EXPECT_GT(want.size(), 100u);
+  }
+}
+
 TEST(MlsUpsampling, SeedSurplusDroppedWhereCrowded) {
   // The thinning keeps a few percent more seeds than asked (3.5% aimed at) and
   // drops the surplus where seeds are closest to an earlier one, not at random: the closest

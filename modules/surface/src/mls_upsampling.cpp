@@ -379,6 +379,22 @@ class SeedThinner {
 
 }  // namespace
 
+namespace detail {
+std::vector<int> thinSeedCandidates(const Positions& points, const Positions& cand, const std::vector<int>& cand_point,
+                                    int slots, float disc, float d, const NeighbourGraph* graph, float graph_radius,
+                                    std::vector<float>* m2) {
+  std::vector<int> ranked(points.size());
+  for (std::size_t i = 0; i < ranked.size(); ++i) ranked[i] = static_cast<int>(i);
+  SeedThinner thinner(points, ranked, cand, cand_point, slots, disc, graph, graph_radius);
+  std::vector<int> kept = thinner.run(d);
+  if (m2) {
+    std::vector<int> partner;
+    thinner.crowding(kept, *m2, partner);
+  }
+  return kept;
+}
+}  // namespace detail
+
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin) {
   return upsamplingSeeds(points, normals, count, disc_radius, seed, origin, nullptr, 0.f);

@@ -87,6 +87,18 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius);
 
+namespace detail {
+/// For tests: one sequential dart-throwing pass of the seed thinner over `cand` in index order
+/// at radius d. Candidate c lies within `disc` of points[cand_point[c]], at most `slots`
+/// candidates per point. With `graph` (complete lists within graph_radius >= d + 2 disc) the
+/// thinner takes them, otherwise its own grid (not aligned to any blocks). Returns the kept
+/// candidates; m2 gets, per kept one, the squared distance to the nearest earlier kept one
+/// among those from points within d + disc of it (infinite when none).
+std::vector<int> thinSeedCandidates(const Positions& points, const Positions& cand, const std::vector<int>& cand_point,
+                                    int slots, float disc, float d, const NeighbourGraph* graph, float graph_radius,
+                                    std::vector<float>* m2 = nullptr);
+}  // namespace detail
+
 /// The pcl::CloudSurfaceProcessing stages. Indices are honoured (only those points are used).
 template <typename PointIn, typename PointOut, MlsSurface S>
 class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut> {

@@ -183,12 +183,13 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
   return NeighbourGraph::fromRows(std::move(offsets), std::move(indices));
 }
 
-NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const ProgressCallback& progress) {
+NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const ProgressCallback& progress,
+                               int max_count) {
   requirePositive("radius", radius);
   CellGrid grid;
   if (!grid.build(points, radius))
     throw InvalidParameter("radius", detail::toString(radius), "at least extent / 2^21 of the points");
-  return grid.radiusGraph(points.size(), radius, false, progress);
+  return grid.radiusGraph(points.size(), radius, false, progress, max_count);
 }
 
 }  // namespace paps

@@ -176,7 +176,8 @@ class SeedThinner {
         const int r = near_[m];
         if (count_[r] != 0 && !test(opos_[r], r)) return false;
       }
-      return keep(c, k, best, best_c);
+      keep(c, k, best, best_c);
+      return true;
     }
     const int cell = cell_of_[k];
     for (std::int64_t m = nb_off_[cell]; m < nb_off_[cell + 1]; ++m) {
@@ -191,16 +192,16 @@ class SeedThinner {
       act_pos_[a] = opos_[k];
       act_rank_[a] = k;
     }
-    return keep(c, k, best, best_c);
+    keep(c, k, best, best_c);
+    return true;
   }
 
-  bool keep(std::size_t c, int k, float best, int best_c) {
+  void keep(std::size_t c, int k, float best, int best_c) {
     const std::size_t slot = static_cast<std::size_t>(k) * slots_ + count_[k]++;
     kept_[slot] = cand_[c];
     kept_c_[slot] = static_cast<int>(c);
     cand_m2_[c] = best;
     cand_p_[c] = best_c;
-    return true;
   }
 
   // near_ lists, per ranked input point, the ranks of the ranked points within 1.15 reach
@@ -985,24 +986,18 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
   // Lists capped at the nearest max_neighbours (the same lists as uncapped where no ball holds
   // more).
   const int cap = params.max_neighbours > 0 ? params.max_neighbours : 16 * params.target_neighbours;
-  auto cappedGraph = [&](float radius) {
-    CellGrid grid;
-    if (!grid.build(points, radius))
-      throw InvalidParameter("radius", detail::toString(radius), "at least extent / 2^21 of the points");
-    return grid.radiusGraph(points.size(), radius, false, {}, cap);
-  };
   NeighbourGraph graph_ext, graph_h;
   if (only_h) {
-    graph_h = cappedGraph(h);
+    graph_h = gridRadiusGraph(points, h, {}, cap);
   } else {
-    graph_ext = cappedGraph(reach);
+    graph_ext = gridRadiusGraph(points, reach, {}, cap);
     graph_h = restrictedGraph(points, graph_ext, h);
   }
   const double mean_count = std::max(1.0, graph_h.meanCount());
   const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f * params.disc_scale;
   if (!only_h && reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
     reach = 1.05f * h + disc;
-    graph_ext = cappedGraph(reach);
+    graph_ext = gridRadiusGraph(points, reach, {}, cap);
   }
   std::size_t capped = 0;
   {

@@ -93,8 +93,10 @@ class CellGrid {
 };
 
 /// Neighbour lists within `radius` (closed ball) of every point through a CellGrid of side
-/// `radius`: self first, then by squared distance, ties by index. Throws InvalidParameter on
-/// a radius that is not finite and > 0, or smaller than extent / 2^21 of the points.
-NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const ProgressCallback& progress = {});
+/// `radius`: self first, then by squared distance, ties by index; a list over max_count (> 0)
+/// keeps its first (nearest) max_count. Throws InvalidParameter on a radius that is not finite
+/// and > 0, or smaller than extent / 2^21 of the points.
+NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const ProgressCallback& progress = {},
+                               int max_count = 0);
 
 }  // namespace paps

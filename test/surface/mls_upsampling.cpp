@@ -31,17 +31,31 @@ double maxRadiusError(const Positions& p, float r) {
   for (const auto& x : p) e = std::max(e, static_cast<double>(std::abs(x.norm() - r)));
   return e;
 }
-// Distance between the two closest points of a cloud (Poisson-disk checks).
-float closestPairDistance(const Positions& a) {
+// Distance of each point of a cloud to its nearest other point (Poisson-disk checks).
+std::vector<float> nearestDistances(const Positions& a) {
   const SpatialIndex index(a);
   std::vector<int> idx;
-  std::vector<float> d2;
-  float closest = INFINITY;
+  std::vector<float> d2, d;
+  d.reserve(a.size());
   for (const auto& p : a) {
     index.nearestK(p, 2, idx, d2);
-    closest = std::min(closest, std::sqrt(d2[1]));
+    d.push_back(std::sqrt(d2[1]));
   }
-  return closest;
+  return d;
+}
+// Distance between the two closest points of a cloud.
+float closestPairDistance(const Positions& a) {
+  const std::vector<float> d = nearestDistances(a);
+  return *std::min_element(d.begin(), d.end());
+}
+// upsamplingSeeds with `threads` OpenMP threads (the previous count restored after).
+Positions seedsWithThreads(int threads, const Positions& pts, const Normals& normals, std::size_t count, float disc,
+                           std::uint64_t seed, std::vector<int>& origin) {
+  const int before = omp_get_max_threads();
+  omp_set_num_threads(threads);
+  Positions s = upsamplingSeeds(pts, normals, count, disc, seed, &origin);
+  omp_set_num_threads(before);
+  return s;
 }
 }  // namespace
 
@@ -105,17 +119,6 @@ TEST(MlsUpsampling, WideDiscsStillLandOnSphere) {
   EXPECT_LT(rms(MlsSurface::Rimls, 1.7724539f), 1.2 * rms(MlsSurface::Rimls, 1.f));
 }
 
-namespace {
-// Nearest-neighbour distances within a point set (brute force: small sets only).
-std::vector<float> nearestDistances(const Positions& p) {
-  std::vector<float> d(p.size(), INFINITY);
-  for (std::size_t i = 0; i < p.size(); ++i)
-    for (std::size_t j = 0; j < p.size(); ++j)
-      if (i != j) d[i] = std::min(d[i], (p[i] - p[j]).norm());
-  return d;
-}
-}  // namespace
-
 TEST(MlsUpsampling, SeedsArePoissonDiskAndTheSameWithTheCallersLists) {
   // A 40 x 40 grid of spacing 1 on z = 0, seeds 4x denser.
   Positions pts;
@@ -157,15 +160,9 @@ TEST(MlsUpsampling, SeedsExactCountAndThreadIndependentOnLargeInput) {
   for (int i = 0; i < 150; ++i)
     for (int j = 0; j < 150; ++j) pts.emplace_back(i, j, 0.01f * static_cast<float>((i * 7 + j * 13) % 5));
   const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
-  const int threads = omp_get_max_threads();
-  auto seeds = [&](int t, std::vector<int>& origin) {
-    omp_set_num_threads(t);
-    Positions s = upsamplingSeeds(pts, normals, 90000, 0.7f, 11, &origin);
-    omp_set_num_threads(threads);
-    return s;
-  };
   std::vector<int> o1, o2;
-  const Positions a = seeds(1, o1), b = seeds(2, o2);
+  const Positions a = seedsWithThreads(1, pts, normals, 90000, 0.7f, 11, o1);
+  const Positions b = seedsWithThreads(2, pts, normals, 90000, 0.7f, 11, o2);
   ASSERT_EQ(a.size(), 90000u);
   EXPECT_EQ(a, b);
   EXPECT_EQ(o1, o2);
@@ -266,32 +263,20 @@ TEST(MlsUpsampling, SeedsOnADenseClusterNeedMemoryLinearInTheInput) {
     pts.push_back(p);
   }
   const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
-  const int threads = omp_get_max_threads();
-  auto seeds = [&](int t, std::vector<int>& origin) {
-    omp_set_num_threads(t);
-    Positions s = upsamplingSeeds(pts, normals, 20000, 0.6f, 7, &origin);
-    omp_set_num_threads(threads);
-    return s;
-  };
   std::vector<int> o1, o2;
   test::resetAllocationPeak();
-  const Positions a = seeds(2, o2);
+  const Positions a = seedsWithThreads(2, pts, normals, 20000, 0.6f, 7, o2);
   const std::size_t peak = test::allocationPeakSinceReset();
-  const Positions b = seeds(1, o1);
+  const Positions b = seedsWithThreads(1, pts, normals, 20000, 0.6f, 7, o1);
   ASSERT_EQ(a.size(), 20000u);
   EXPECT_EQ(a, b);
   EXPECT_EQ(o1, o2);
   // 22,000 inputs, 66,000 candidates: a few MB.
   EXPECT_LT(peak, std::size_t(32) << 20) << peak / 1048576.0 << " MB";
+  std::printf("upsamplingSeeds on the clustered input: peak heap %.1f MB\n", peak / 1048576.0);
   // Still Poisson-disk over the plane and the cluster: no pair much closer than the typical
   // nearest-neighbour distance.
-  const SpatialIndex index(a);
-  std::vector<int> idx;
-  std::vector<float> d2, nn;
-  for (const auto& p : a) {
-    index.nearestK(p, 2, idx, d2);
-    nn.push_back(std::sqrt(d2[1]));
-  }
+  std::vector<float> nn = nearestDistances(a);
   std::sort(nn.begin(), nn.end());
   EXPECT_GT(nn.front(), 0.6f * nn[nn.size() / 2]);
 }

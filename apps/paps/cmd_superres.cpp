@@ -103,8 +103,11 @@ int runSuperres(int argc, char** argv) {
     std::printf("QSR: kernel scale %.3g%s, similarity scale %.3g, %d IRLS passes\n", r.kernel_scale,
                 p.kernel_scale > 0 ? "" : (p.adapt_to_noise ? " (chosen from the noise)" : " (fixed default)"),
                 p.similarity_scale, p.irls_iterations);
-    std::printf("QSR: %zu patches over %zu scan(s); %zu plane fallbacks; %zu patches without a similar patch\n",
-                r.patches, scans.size(), r.plane_fallbacks, r.without_similar);
+    std::printf("QSR: %zu patches over %zu scan(s); %zu patches without a similar patch\n", r.patches, scans.size(),
+                r.without_similar);
+    std::printf("QSR: plane instead of quadric at %zu points: %zu flat (curvature below the patch's resolution), "
+                "%zu ill-posed (fewer than 6 neighbours, collinear)\n",
+                r.plane_fallbacks, r.flat_fits, r.ill_posed_fits);
     if (r.denoised)
       std::printf("QSR: the scan%s denoised first (paps denoise's default)%s\n", scans.size() > 1 ? "s were" : " was",
                   p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? "" : ": noise >= 5% of the patch radius");

@@ -4,7 +4,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
+#include <random>
 
 #include <omp.h>
 
@@ -161,17 +163,36 @@ TEST(QuadricSuperResolution, BadInput) {
   p = {};
   p.similarity_radius = INFINITY;
   EXPECT_THROW(p.validate(), InvalidParameter);
-  // Collinear points: every patch falls back and is counted, the run still answers.
+  // Collinear points: every fit is ill-posed and counted as such, and the run still answers.
   Positions line;
   for (int i = 0; i < 200; ++i) line.emplace_back(0.01f * i, 0.f, 0.f);
   QuadricSuperResolutionReport r;
   QuadricSuperResolutionParameters q;
   q.patch_radius = 0.05f;
-  try {
-    superResolveQuadric({line}, q, &r);
-  } catch (const InvalidInput&) {
-  }
-  EXPECT_EQ(r.plane_fallbacks, 0u + r.plane_fallbacks);
+  const Positions out = superResolveQuadric({line}, q, &r);
+  std::printf("line: %zu output, %zu flat, %zu ill-posed, %zu patches\n", out.size(), r.flat_fits, r.ill_posed_fits, r.patches);
+  EXPECT_EQ(r.ill_posed_fits, line.size());
+  EXPECT_EQ(r.flat_fits, 0u);
+  EXPECT_EQ(r.plane_fallbacks, line.size());
+}
+
+// Flat parts are told apart from ill-posed fits: a plane gives flat fits only, a sphere none.
+TEST(QuadricSuperResolution, CountsFlatAndIllPosedFitsApart) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  Positions plane, sphere;
+  for (int i = 0; i < 3000; ++i) plane.emplace_back(u(rng), u(rng), 0.f);
+  for (int i = 0; i < 3000; ++i) sphere.push_back(Eigen::Vector3f(u(rng), u(rng), u(rng)).normalized());
+  QuadricSuperResolutionParameters p;
+  p.patch_radius = 0.3f;  // about 70 neighbours: every fit is well posed
+  QuadricSuperResolutionReport rp, rs;
+  superResolveQuadric({plane}, p, &rp);
+  superResolveQuadric({sphere}, p, &rs);
+  EXPECT_EQ(rp.flat_fits, plane.size());
+  EXPECT_EQ(rp.ill_posed_fits, 0u);
+  EXPECT_EQ(rs.flat_fits, 0u);
+  EXPECT_EQ(rs.ill_posed_fits, 0u);
+  EXPECT_EQ(rs.plane_fallbacks, 0u);
 }
 
 // The rule (measured, docs/superresolution.md "Noise-adaptive kernel"): 0.7 up to

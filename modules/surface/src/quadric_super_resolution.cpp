@@ -166,7 +166,7 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   std::vector<float> desc(total * B, 0.f);
   std::vector<std::uint8_t> valid(total * B, 0), usable(total, 0);
   std::vector<int> scan_of(total);
-  std::size_t fallbacks = 0;
+  std::size_t flat = 0, ill_posed = 0;
   for (std::size_t s = 0; s < sc.size(); ++s) {
     const Positions& P = *sc[s].points;
     for (std::size_t i = 0; i < P.size(); ++i) scan_of[sc[s].offset + i] = static_cast<int>(s);
@@ -177,14 +177,17 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
     const LocalFrames frames = estimatePrincipalFrames(normals, g);
     ProgressReporter pr(progress, "quadric patches", P.size());
     const std::int64_t n = static_cast<std::int64_t>(P.size());
-#pragma omp parallel for schedule(dynamic, 256) reduction(+ : fallbacks)
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : flat, ill_posed)
     for (std::int64_t i = 0; i < n; ++i) {
       if (pr.cancelled() || !isFinite(P[i])) continue;
       const std::size_t gi = sc[s].offset + i;
       const Eigen::Vector3f* nh = isFinite(normals[i]) ? &normals[i] : nullptr;
       const Eigen::Vector3f* th = frames[i].valid() ? &frames[i].t1 : nullptr;
       fits[gi] = fitQuadric(P, P[i], g.begin(i), g.count(i), R, nh, th);
-      if (fits[gi].isPlaneFallback()) ++fallbacks;
+      if (fits[gi].status == QuadricFit::Status::FlatPlane)
+        ++flat;
+      else if (fits[gi].isPlaneFallback())
+        ++ill_posed;
       if (!fits[gi].frame.valid()) continue;
       const int nv = lr.describe(fits[gi], P, g.begin(i), g.count(i), &desc[gi * B], &valid[gi * B]);
       usable[gi] = nv * 2 >= B;
@@ -193,7 +196,9 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
     pr.throwIfCancelled();
     pr.finish();
   }
-  rep.plane_fallbacks = fallbacks;
+  rep.flat_fits = flat;
+  rep.ill_posed_fits = ill_posed;
+  rep.plane_fallbacks = flat + ill_posed;
   rep.patches = static_cast<std::size_t>(std::count(usable.begin(), usable.end(), 1));
 
   // 3. Similar patches of the first scan: kd-tree candidates, exact masked re-ranking (2.3).

@@ -80,7 +80,12 @@ struct QuadricSuperResolutionReport {
   double mean_neighbours = 0;       ///< at the patch radius, first scan
   double mean_similar_weight = 0;   ///< K - 1: mean summed similarity weight of other patches
   std::size_t patches = 0;          ///< descriptors over all scans
-  std::size_t plane_fallbacks = 0;  ///< patches whose quadric fit was ill-posed or flat
+  std::size_t plane_fallbacks = 0;  ///< fits that use the plane: flat_fits + ill_posed_fits
+  /// Fits whose curvature is below the resolution of the patch (flat parts of the scene: the
+  /// plane is the right answer there, not a failure).
+  std::size_t flat_fits = 0;
+  /// Fits with too few neighbours (< 6) or collinear / singular neighbourhoods.
+  std::size_t ill_posed_fits = 0;
   std::size_t without_similar = 0;  ///< patches of the first scan with no similar patch
   /// Points of the first scan that seed and anchor the output without a comparable descriptor
   /// (rims, sparse parts): their patch is their quadric alone.

@@ -42,17 +42,23 @@ const char* kSuperresUsage =
     "                         when the measured noise is at least 5% of the patch radius), on, off\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
+    "  --seed-disc S          radius of the tangent discs the output seeds are spread over, in mean\n"
+    "                         input spacings (default 1.2 QSR, 0.68 APSS/RIMLS; 0.1 to 10); on\n"
+    "                         scan-line LiDAR, 0.6 keeps seeds out of the gaps between the lines\n"
     "  --max-neighbours N     APSS/RIMLS: most neighbours a kernel holds, the nearest within the\n"
     "                         radius (default 16 x --neighbours; bounds memory on clustered input)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
 }  // namespace
+
+// APSS/RIMLS's default seed disc in mean input spacings: 1.2 / sqrt(pi).
+constexpr double kMlsDiscSpacings = 0.677;
 
 int runSuperres(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit", "max-neighbours"});
+               "refit", "max-neighbours", "seed-disc"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   const std::string method = a.text("method", "qsr");
@@ -83,6 +89,7 @@ int runSuperres(int argc, char** argv) {
     p.similarity_scale = static_cast<float>(a.number("similarity-scale", p.similarity_scale));
     p.irls_iterations = static_cast<int>(a.number("irls", p.irls_iterations));
     p.noise_sigma = static_cast<float>(a.number("noise", 0));
+    p.seed_disc = static_cast<float>(a.number("seed-disc", p.seed_disc));
     const std::string denoise = a.text("denoise", "auto");
     if (denoise == "auto") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Auto;
     else if (denoise == "on") p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
@@ -106,8 +113,10 @@ int runSuperres(int argc, char** argv) {
     std::printf("QSR: %zu patches over %zu scan(s); %zu patches without a similar patch\n", r.patches, scans.size(),
                 r.without_similar);
     std::printf("QSR: plane instead of quadric at %zu points: %zu flat (curvature below the patch's resolution), "
-                "%zu ill-posed (fewer than 6 neighbours, collinear)\n",
+                "%zu ill-posed (fewer than 6 distinct neighbours, collinear, or bending more than the patch)\n",
                 r.plane_fallbacks, r.flat_fits, r.ill_posed_fits);
+    std::printf("QSR: seeds spread over tangent discs of radius %g m (%.2f mean spacings of %g m%s)\n", r.disc_radius,
+                p.seed_disc, r.spacing, a.has("seed-disc") ? "" : "; --seed-disc");
     if (r.denoised)
       std::printf("QSR: the scan%s denoised first (paps denoise's default)%s\n", scans.size() > 1 ? "s were" : " was",
                   p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? "" : ": noise >= 5% of the patch radius");
@@ -124,6 +133,12 @@ int runSuperres(int argc, char** argv) {
     p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
     p.fit_per_input_point = !a.has("refit");
     p.max_neighbours = static_cast<int>(a.number("max-neighbours", 0));
+    // The disc is 1.2 h / sqrt(mean count) x disc_scale = (1.2 / sqrt(pi)) disc_scale spacings.
+    if (a.has("seed-disc")) {
+      const double disc = a.number("seed-disc", 0);
+      requireInRange("seed-disc", disc, 0.1, 10.0);
+      p.disc_scale = static_cast<float>(disc / kMlsDiscSpacings);
+    }
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
     std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,

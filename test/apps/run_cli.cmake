@@ -121,6 +121,17 @@ elseif(CASE STREQUAL "superres_denoise_choice")
   expect_one_error_line("denoise")
   run_paps(superres ${input} ${output} --denoise on --factor 2 --quiet)
   expect_success_saying("denoised first")
+elseif(CASE STREQUAL "superres_seed_disc")
+  # The seed disc in mean input spacings: printed by QSR, one error line when out of range,
+  # for QSR and for APSS (whose own parameter is a scale of its default disc).
+  write_input(900)
+  run_paps(superres ${input} ${output} --seed-disc 0.6 --factor 2 --quiet)
+  expect_success_saying("0.60 mean spacings")
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --seed-disc 0 --quiet)
+  expect_one_error_line("seed_disc")
+  run_paps(superres ${input} ${output} --method apss --seed-disc 11 --quiet)
+  expect_one_error_line("seed-disc")
 elseif(CASE STREQUAL "superres_max_neighbours")
   # APSS/RIMLS kernel cap: out of range is one error line; a cap below the typical count
   # caps (nearly) every kernel and says so.

@@ -26,7 +26,7 @@ void MlsUpsamplingParameters::validate() const {
   requireInRange("inner_iterations", inner_iterations, 1, 50);
   requirePositive("sigma_r", sigma_r);
   requirePositive("sigma_n", sigma_n);
-  requireInRange("disc_scale", disc_scale, 0.1f, 10.f);
+  requireInRange("disc_scale", disc_scale, 0.1f, 15.f);
 }
 
 namespace {

@@ -33,6 +33,7 @@ void QuadricSuperResolutionParameters::validate() const {
   requireInRange("candidates", candidates, 1, 1024);
   requireInRange("search_checks", search_checks, 0, 1000000);
   requireInRange("irls_iterations", irls_iterations, 0, 10);
+  requireInRange("seed_disc", seed_disc, 0.1f, 10.f);
   if (!(kernel_scale >= 0) || !std::isfinite(kernel_scale))
     throw InvalidParameter("kernel_scale", detail::toString(kernel_scale), "0 (automatic) or a finite value > 0");
   requireNonNegative("noise_sigma", noise_sigma, "estimated");
@@ -435,7 +436,9 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
     }
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite0));
-  Positions out = upsamplingSeeds(P0, n0s, count, 1.2f * s0, params.seed);
+  rep.spacing = s0;
+  rep.disc_radius = params.seed_disc * s0;
+  Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed);
   {
     const SpatialIndex& index0 = *sc[0].nh.index;
     const float inv_2sig2 = 1.f / (2.f * 0.5f * s0 * 0.5f * s0);

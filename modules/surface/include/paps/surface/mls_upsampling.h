@@ -49,7 +49,7 @@ struct MlsUpsamplingParameters {
   /// RIMLS: residual scale in units of the radius, and normal scale (Oztireli et al.: 0.5-1.5).
   float sigma_r = 0.2f, sigma_n = 0.8f;
   /// Radius of the tangent discs the seeds are spread over, as a multiple of 1.2 h / sqrt(mean
-  /// neighbour count at h) (0.1 to 10). The default keeps the seeds close to their input
+  /// neighbour count at h) (0.1 to 15). The default keeps the seeds close to their input
   /// points (cheap thinning, accurate per-point fits). sqrt(pi) = 1.7725 gives QSR's disc (1.2
   /// mean spacings): on the bench the output then covers the surface more evenly, and the
   /// error (dense points to their nearest output point) drops by 17-25% at 0.01% noise, for

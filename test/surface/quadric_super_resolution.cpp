@@ -483,3 +483,43 @@ TEST(QuadricSuperResolution, SeedDiscOnScanLinesMatchesApssAtApssDisc) {
   bad.seed_disc = NAN;
   EXPECT_THROW(bad.validate(), InvalidParameter);
 }
+
+// A sphere whose lower half is sampled 10x more sparsely than its upper half, every point stored
+// twice: at the radius chosen on the dense half, the sparse half's balls hold too few distinct
+// positions for a quadric. Widened fits (the default) put its output on the sphere; without
+// them those points keep the plane through their few neighbours.
+TEST(QuadricSuperResolution, SparsePartsAreFittedOnAWiderSupport) {
+  Random rng(11);
+  Positions pts;
+  auto onSphere = [&](bool upper) {
+    for (;;) {
+      Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+      v.normalize();
+      if ((v.z() > 0) == upper) return v;
+    }
+  };
+  for (int i = 0; i < 3000; ++i) { const Eigen::Vector3f v = onSphere(true); pts.push_back(v); pts.push_back(v); }
+  for (int i = 0; i < 300; ++i) { const Eigen::Vector3f v = onSphere(false); pts.push_back(v); pts.push_back(v); }
+  auto lowerRms = [](const Positions& out) {
+    double s = 0;
+    std::size_t n = 0;
+    for (const auto& p : out)
+      if (p.z() < -0.5f) { s += (p.norm() - 1.0) * (p.norm() - 1.0); ++n; }
+    return std::sqrt(s / std::max<std::size_t>(1, n));
+  };
+  QuadricSuperResolutionParameters on, off;
+  off.widen_sparse_fits = false;
+  QuadricSuperResolutionReport r_on, r_off;
+  const Positions o_on = superResolveQuadric({pts}, on, &r_on);
+  const Positions o_off = superResolveQuadric({pts}, off, &r_off);
+  const double e_on = lowerRms(o_on), e_off = lowerRms(o_off);
+  std::printf("sparse half: widened %zu, ill-posed %zu (without widening %zu); radial RMS below z = -0.5: %.3e vs %.3e\n",
+              r_on.widened_fits, r_on.ill_posed_fits, r_off.ill_posed_fits, e_on, e_off);
+  EXPECT_EQ(r_off.widened_fits, 0u);
+  EXPECT_GT(r_off.ill_posed_fits, 300u);
+  // Near the equator the nearest positions lie on the dense side (one-sided): those keep the
+  // plane, the rest of the sparse half is widened.
+  EXPECT_GT(r_on.widened_fits, r_off.ill_posed_fits / 2);
+  EXPECT_EQ(r_on.widened_fits + r_on.ill_posed_fits, r_off.ill_posed_fits);
+  EXPECT_LT(e_on, 0.5 * e_off);
+}

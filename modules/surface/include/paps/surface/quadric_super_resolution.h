@@ -58,6 +58,10 @@ struct QuadricSuperResolutionParameters {
   /// into the gaps: there 0.56 to 0.68 lands as close to the surface as APSS, 1.2 up to 1.6x
   /// farther (docs/superresolution.md, "Scan-line sampling").
   float seed_disc = 1.2f;
+  /// Where the ball of radius R holds fewer distinct positions than the quadric's 6 unknowns,
+  /// refit it on the nearest target_neighbours distinct positions
+  /// (exact duplicates counted once), at the radius they need. Off: such points keep the plane.
+  bool widen_sparse_fits = true;
   /// With the automatic kernel_scale: measure the noise of the first scan and widen the kernel
   /// as q = noise sigma / R grows (R the patch radius), by the rule of noiseAdaptedParameters
   /// (measured, docs/superresolution.md "Noise-adaptive kernel"). Off (default): 0.7 whatever
@@ -91,8 +95,10 @@ struct QuadricSuperResolutionReport {
   /// Fits whose curvature is below the resolution of the patch (flat parts of the scene: the
   /// plane is the right answer there, not a failure).
   std::size_t flat_fits = 0;
-  /// Fits with too few neighbours (< 6) or collinear / singular neighbourhoods.
+  /// Fits with too few neighbours (< 6) or collinear / singular neighbourhoods, after widening.
   std::size_t ill_posed_fits = 0;
+  /// Fits of sparse parts made on a wider support (widen_sparse_fits).
+  std::size_t widened_fits = 0;
   std::size_t without_similar = 0;  ///< patches of the first scan with no similar patch
   /// Points of the first scan that seed and anchor the output without a comparable descriptor
   /// (rims, sparse parts): their patch is their quadric alone.

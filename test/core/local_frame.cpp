@@ -374,7 +374,12 @@ TEST(LocalFrame, ToLocalToWorldRoundTrip) {
   f.n = Eigen::Vector3f(1, -2, 2).normalized();
   f.t1 = f.n.unitOrthogonal();
   f.t2 = f.n.cross(f.t1);
-  expectOrthonormalRightHanded(f, "built", 0);
+  // The frame's own axes have the unit coordinates, and back.
+  const Eigen::Vector3f axes[3] = {f.t1, f.t2, f.n};
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_LT((f.toLocal(axes[a]) - Eigen::Vector3f::Unit(a)).norm(), 1e-6f) << a;
+    EXPECT_LT((f.toWorld(Eigen::Vector3f::Unit(a)) - axes[a]).norm(), 1e-6f) << a;
+  }
   const Eigen::Vector3f d(0.3f, 0.7f, -1.1f);
   const Eigen::Vector3f l = f.toLocal(d);
   EXPECT_LT((f.toWorld(l) - d).norm(), 1e-6f);

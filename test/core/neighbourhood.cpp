@@ -268,11 +268,11 @@ TEST(NeighbourGraph, SelfFirstAmongExactDuplicates) {
 }
 
 TEST(NeighbourGraph, SelfFirstAmongDuplicatesBeyondTheCap) {
-  // BUG (modules/core/src/neighbourhood.cpp:77-79, NeighbourGraphBuilder::build): self is
-  // moved to the front only when the capped query returned it; with more exact duplicates
-  // than max_count (byRadius) or k (byCount) the query may return other copies only, so the
-  // list does not start with the point (8 of 12 points here). Fix: when self is missing,
-  // put it first and drop the last entry. Remove this skip once fixed.
+  // Regression: self was once moved to the front only when the capped query returned it;
+  // with more exact duplicates than max_count (byRadius) or k (byCount) the query may return
+  // other copies only, and 8 of these 12 lists did not start with their point. Fixed: the
+  // kd-tree path puts self first (putSelfFirst, neighbourhood.cpp) and so do the cell grid's
+  // lists that byRadius uses (cell_grid.cpp).
   // More exact copies than the list may hold: the list must still start with the point
   // itself (the header promises self first; the denoiser drops element 0 as "self").
   const Positions p(12, Eigen::Vector3f(0.25f, 0.5f, 0.75f));
@@ -456,11 +456,28 @@ TEST(BuildRadiusNeighbourhood, GivenOrAutomaticRadius) {
   EXPECT_EQ(fixed.radius, 0.03f);
   ASSERT_TRUE(fixed.index);
   EXPECT_EQ(fixed.index->size(), p.size());
-  EXPECT_EQ(fixed.graph.size(), p.size());
+  ASSERT_EQ(fixed.graph.size(), p.size());
+  // The lists at the given radius: those of byRadius on the same index (as sets), and, on a
+  // sample, exactly the points of the open ball by brute force.
+  const NeighbourGraph direct = NeighbourGraph::byRadius(p, *fixed.index, 0.03f);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const std::vector<int> a = listOf(fixed.graph, i), b = listOf(direct, i);
+    ASSERT_EQ(std::set<int>(a.begin(), a.end()), std::set<int>(b.begin(), b.end())) << i;
+    ASSERT_EQ(a.size(), b.size()) << i;
+  }
+  for (std::size_t i = 0; i < p.size(); i += 97) {
+    std::set<int> ball;
+    for (const auto& [d2, j] : bruteForce(p, p[i]))
+      if (d2 < 0.03f * 0.03f) ball.insert(j);
+    const std::vector<int> a = listOf(fixed.graph, i);
+    EXPECT_EQ(std::set<int>(a.begin(), a.end()), ball) << i;
+  }
   const paps::RadiusNeighbourhood automatic = paps::buildRadiusNeighbourhood(p, 0.f, 25);
   EXPECT_NEAR(automatic.graph.meanCount(), 25, 0.15 * 25);
   const paps::RadiusNeighbourhood capped = paps::buildRadiusNeighbourhood(p, 0.1f, 25, 7);
-  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LE(capped.graph.count(i), 7);
+  // Density 5000 per unit area: a ball of 0.1 holds about 157 points inside the square and
+  // about 39 at a corner, always far more than 7, so every list is cut to exactly 7.
+  for (std::size_t i = 0; i < p.size(); ++i) EXPECT_EQ(capped.graph.count(i), 7) << i;
 }
 
 TEST(BuildRadiusNeighbourhood, Errors) {

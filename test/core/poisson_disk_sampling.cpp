@@ -1,5 +1,6 @@
 // Tests of paps/core/poisson_disk_sampling.h: the subset is a maximal Poisson-disk set.
 #include <cmath>
+#include <cstdio>
 
 #include <gtest/gtest.h>
 
@@ -29,10 +30,14 @@ TEST(PoissonDiskSubset, IsSeparatedAndCovering) {
     for (const int k : kept) best = std::min(best, (pts[k] - p).norm());
     ASSERT_LT(best, r);
   }
-  // Maximal disk packings of a unit square at r = 0.05 hold between 1/(pi r^2) ~ 127
-  // (disks of radius r cover) and 4/(pi r^2) ~ 509 (disks of radius r/2 disjoint) points.
-  EXPECT_GT(kept.size(), 127u);
-  EXPECT_LT(kept.size(), 509u);
+  // The count of random dart throwing, not just of any maximal packing (127 to 509 follow
+  // from the two checks above): an independent simulation (Python, 20,000 uniform candidates
+  // per run as here, r = 0.05, random order, with and without the 8r blocks used here)
+  // kept 267 to 288 over 80 seeds, mean 275, standard deviation ~4.5. The band is about
+  // +-6 deviations; a row-by-row scan of these points keeps 350, darts at r = 0.045 keep 339.
+  std::printf("kept %zu points\n", kept.size());
+  EXPECT_GE(kept.size(), 250u);
+  EXPECT_LE(kept.size(), 305u);
   EXPECT_EQ(kept, paps::poissonDiskSubset(pts, r, 7));  // deterministic
 }
 

@@ -48,7 +48,15 @@ TEST(OrthogonalMatchingPursuit, RecoversAnExactSparseCombination) {
 TEST(OrthogonalMatchingPursuit, RespectsSparsityAndTolerance) {
   const Eigen::MatrixXf D = randomDictionary(32, 48, 2);
   const Eigen::MatrixXf Y = sparseSignals(D, 50, 6, 3);
-  for (const auto& c : paps::orthogonalMatchingPursuit(D, Y, 2)) EXPECT_LE(c.size(), 2u);
+  // Each signal mixes up to 6 atoms and the default tolerance 0 never stops early: every
+  // code takes exactly T0 = 2 atoms, and leaves a residual smaller than the signal.
+  const auto codes = paps::orthogonalMatchingPursuit(D, Y, 2);
+  ASSERT_EQ(codes.size(), 50u);
+  for (std::size_t i = 0; i < codes.size(); ++i) {
+    EXPECT_EQ(codes[i].size(), 2u) << i;
+    const Eigen::VectorXf y = Y.col(static_cast<Eigen::Index>(i));
+    EXPECT_LT((paps::reconstructSignal(D, codes[i]) - y).norm(), y.norm()) << i;
+  }
   // Zero signal: empty code.
   const auto z = paps::orthogonalMatchingPursuit(D, Eigen::MatrixXf::Zero(32, 1), 4);
   EXPECT_EQ(z[0].size(), 0u);

@@ -596,8 +596,15 @@ TEST(WavejetEstimation, NarrowingBoundsCrowdedBalls) {
   EXPECT_LT(report.narrowed_radius_median, 0.25f * report.radius);
   EXPECT_LT(report.mean_neighbours, 200.0);
   double se_narrow = 0, se_ball = 0, se_ref = 0;
-  std::size_t n_narrow = 0, n_ball = 0;
+  std::size_t n_narrow = 0, n_ball = 0, n_exact = 0, n_widened = 0, n_widened_checked = 0;
   const std::size_t base = u.size();
+  // The distinct positions by distance to u[i] (brute force), for the fits checked below.
+  auto byDistance = [&](std::size_t i) {
+    std::vector<std::pair<float, int>> d;
+    for (std::size_t j = 0; j < base; ++j) d.emplace_back((u[j] - u[i]).squaredNorm(), static_cast<int>(j));
+    std::sort(d.begin(), d.end());
+    return d;
+  };
   auto ws = paps::makeWavejetWorkspace();
   for (std::size_t i = 0; i < base; ++i) {
     ASSERT_TRUE(res[i].valid()) << i;
@@ -611,9 +618,7 @@ TEST(WavejetEstimation, NarrowingBoundsCrowdedBalls) {
       EXPECT_LT(angleDeg(res[i].normal, out[i]), 0.5);
       if (n_narrow % 500 != 1) continue;
       // Exactly the fit on the 200 nearest distinct positions at the 200th distance.
-      std::vector<std::pair<float, int>> d;
-      for (std::size_t j = 0; j < base; ++j) d.emplace_back((u[j] - u[i]).squaredNorm(), static_cast<int>(j));
-      std::sort(d.begin(), d.end());
+      const auto d = byDistance(i);
       std::vector<int> nb;
       for (int j = 0; j < 200; ++j) nb.push_back(d[j].second);
       const auto r = paps::fitWavejet(u, nb.data(), 200, u[i], std::sqrt(d[199].first), params, *ws,
@@ -623,16 +628,44 @@ TEST(WavejetEstimation, NarrowingBoundsCrowdedBalls) {
       EXPECT_NEAR(res[i].k1, r.k1, 1e-3);
       EXPECT_NEAR(res[i].k2, r.k2, 1e-3);
       EXPECT_LT(angleDeg(res[i].normal, r.normal), 1e-2);
-    } else {
-      ASSERT_EQ(res[i].radius, std::max(report.radius, res[i].radius));
-      // Not narrowed: the same output as with the full ball or widened.
-      if (res[i].radius == report.radius) ASSERT_EQ(res[i].k1, ref[i].k1) << i;
+    } else if (res[i].radius == report.radius) {
+      // The ball of R_phi exactly: the same output as with widening never.
+      ASSERT_EQ(res[i].k1, ref[i].k1) << i;
+      ASSERT_EQ(res[i].k2, ref[i].k2) << i;
+      ASSERT_EQ(res[i].normal, ref[i].normal) << i;
+      ++n_exact;
       se_ball += e;
       ++n_ball;
+    } else {
+      // Widened (fewer than N = 50 distinct positions in the ball of R_phi): the fit on the
+      // 50 nearest distinct positions at the 50th distance.
+      ++n_widened;
+      se_ball += e;
+      ++n_ball;
+      if (n_widened % 10 != 1) continue;
+      ++n_widened_checked;
+      const auto d = byDistance(i);
+      ASSERT_GE(d[49].first, report.radius * report.radius) << i << ": the ball held 50, nothing to widen";
+      std::vector<int> nb;
+      for (int j = 0; j < 50; ++j) nb.push_back(d[j].second);
+      const auto r = paps::fitWavejet(u, nb.data(), 50, u[i], std::sqrt(d[49].first), params, *ws,
+                                      Eigen::Vector3f::Constant(NAN), out[i]);
+      ASSERT_TRUE(r.valid());
+      // Measured identical (the same neighbours in the same order); the tolerances only
+      // allow a different summation order.
+      EXPECT_FLOAT_EQ(res[i].radius, std::sqrt(d[49].first)) << i;
+      EXPECT_NEAR(res[i].k1, r.k1, 1e-6) << i;
+      EXPECT_NEAR(res[i].k2, r.k2, 1e-6) << i;
+      EXPECT_LT((res[i].normal - r.normal).norm(), 1e-5f) << i;
     }
   }
   ASSERT_GE(n_narrow, 4000u);
-  ASSERT_GT(n_ball, 0u);
+  ASSERT_GT(n_exact, 0u);
+  ASSERT_GT(n_widened, 0u);
+  // The report counts per input point: every distinct position is there twice.
+  EXPECT_EQ(report.widened, 2 * n_widened);
+  std::printf("ball of R_phi exactly: %zu points, widened: %zu (%zu checked against fitWavejet)\n", n_exact,
+              n_widened, n_widened_checked);
   // Truth k1 = k2 = -1 (outward normals). Measured 0.00034 on the narrowed points (full
   // ball: 0.00005, no noise here) and 0.00011 on the others.
   const double rms_narrow = std::sqrt(se_narrow / n_narrow), rms_ref = std::sqrt(se_ref / n_narrow);

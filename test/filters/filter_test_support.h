@@ -91,7 +91,11 @@ void expectSinglePointUnchanged(Filter<PointT>& f) {
 }
 
 /// `filter(points)` on clouds of 2 to 60 points (fewer than any neighbour count asked for)
-/// gives finite points that stay near their input.
+/// gives finite points that stay near their input: the points lie on z = 0 with noise of
+/// sigma 0.01, and a point moved along a near-vertical normal towards its neighbours' heights
+/// moves by at most their spread, about 5 sigma at 60 points. Measured: at most 0.027 (the
+/// similarity denoiser and the bilateral filter, 60 points), so 0.05; a fit that went wrong on
+/// a tiny neighbourhood (a tilted normal, a huge radius) moves points a good part of the square.
 template <typename FilterFn>
 void expectTinyCloudsGiveFiniteOutput(FilterFn filter) {
   Random rng(77);
@@ -102,7 +106,7 @@ void expectTinyCloudsGiveFiniteOutput(FilterFn filter) {
     ASSERT_EQ(out.size(), p.size());
     for (int i = 0; i < n; ++i) {
       EXPECT_TRUE(isFinite(out[i])) << n << " points, point " << i;
-      EXPECT_LT((out[i] - p[i]).norm(), 0.5f) << n << " points, point " << i;
+      EXPECT_LT((out[i] - p[i]).norm(), 0.05f) << n << " points, point " << i;
     }
   }
 }

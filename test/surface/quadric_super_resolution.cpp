@@ -531,4 +531,13 @@ TEST(QuadricSuperResolution, SparsePartsAreFittedOnAWiderSupport) {
   EXPECT_GT(r_on.widened_fits, r_off.ill_posed_fits / 2);
   EXPECT_EQ(r_on.widened_fits + r_on.ill_posed_fits, r_off.ill_posed_fits);
   EXPECT_LT(e_on, 0.5 * e_off);
+  // The widened fits do not depend on the thread count either.
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  QuadricSuperResolutionReport r_one;
+  const Positions o_one = superResolveQuadric({pts}, on, &r_one);
+  omp_set_num_threads(threads);
+  EXPECT_EQ(r_one.widened_fits, r_on.widened_fits);
+  ASSERT_EQ(o_one.size(), o_on.size());
+  EXPECT_EQ(std::memcmp(o_one.data(), o_on.data(), o_on.size() * sizeof(o_on[0])), 0);
 }

@@ -103,9 +103,7 @@ float nearestDistinct(const SpatialIndex& index, const std::vector<int>& first,
 
 // A ball is sparse when it holds fewer distinct positions than the quadric has unknowns: the
 // fit is then ill-posed for want of points, and a wider support is the cure. Elsewhere an
-// ill-posed fit comes from noise, a crease or a rim, where the plane is the safer answer:
-// widening those too (below 12 positions) put the bench plane's 0.5% output 2.3% farther from
-// the surface (1.384e-3 against 1.353e-3).
+// ill-posed fit comes from noise or a crease, where the plane is the safer answer.
 constexpr int kSparseBall = 6;
 // Largest tangential offset of the centroid of a widened support from its point, in units of
 // the wider radius: a half disc has 0.42, a quarter disc 0.60, a full uniform disc 0.

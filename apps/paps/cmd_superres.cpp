@@ -65,12 +65,15 @@ int runSuperres(int argc, char** argv) {
   if (method != "qsr" && method != "apss" && method != "rimls")
     throw InvalidParameter("method", method, "qsr, apss or rimls");
   const std::string out_path = a.positional.back();
+  // Parameters are checked before the scans are read, so a bad value fails at once.
   std::vector<Positions> scans;
-  for (std::size_t i = 0; i + 1 < a.positional.size(); ++i) {
-    scans.push_back(loadPositions(a.positional[i]));
-    std::printf("read %s: %zu points (%zu finite)\n", a.positional[i].c_str(), scans.back().size(),
-                countFinite(scans.back()));
-  }
+  auto readScans = [&] {
+    for (std::size_t i = 0; i + 1 < a.positional.size(); ++i) {
+      scans.push_back(loadPositions(a.positional[i]));
+      std::printf("read %s: %zu points (%zu finite)\n", a.positional[i].c_str(), scans.back().size(),
+                  countFinite(scans.back()));
+    }
+  };
   const double count = a.number("count", 0);
   if (count < 0 || count > 4e9) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
@@ -96,6 +99,8 @@ int runSuperres(int argc, char** argv) {
     else if (denoise == "off") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
     else throw InvalidParameter("denoise", denoise, "auto, on or off");
     p.adapt_to_noise = a.has("adapt") || a.has("noise");
+    p.validate();
+    readScans();
     QuadricSuperResolutionReport r;
     out = superResolveQuadric(scans, p, &r, progress);
     std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
@@ -128,7 +133,6 @@ int runSuperres(int argc, char** argv) {
                   r.quadric_only);
     if (r.unprojected) std::fprintf(stderr, "warning: %zu output points had no patch nearby and were not projected\n", r.unprojected);
   } else {
-    if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     MlsUpsamplingParameters p;
     p.factor = static_cast<float>(a.number("factor", p.factor));
     p.output_count = static_cast<std::size_t>(count);
@@ -142,6 +146,9 @@ int runSuperres(int argc, char** argv) {
       requireInRange("seed-disc", disc, 0.1, 10.0);
       p.disc_scale = static_cast<float>(disc / kMlsDiscSpacings);
     }
+    p.validate();
+    readScans();
+    if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
     std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,

@@ -132,6 +132,9 @@ elseif(CASE STREQUAL "superres_seed_disc")
   expect_one_error_line("seed_disc")
   run_paps(superres ${input} ${output} --method apss --seed-disc 11 --quiet)
   expect_one_error_line("seed-disc")
+  # Parameters are checked before the input is read: the parameter error, not the file's.
+  run_paps(superres ${WORK_DIR}/no_such_scan.pcd ${output} --seed-disc 0 --quiet)
+  expect_one_error_line("seed_disc")
 elseif(CASE STREQUAL "superres_max_neighbours")
   # APSS/RIMLS kernel cap: out of range is one error line; a cap below the typical count
   # caps (nearly) every kernel and says so.

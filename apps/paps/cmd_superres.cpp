@@ -50,9 +50,6 @@ const char* kSuperresUsage =
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
 }  // namespace
 
-// APSS/RIMLS's default seed disc in mean input spacings: 1.2 / sqrt(pi).
-constexpr double kMlsDiscSpacings = 0.677;
-
 int runSuperres(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
@@ -140,11 +137,10 @@ int runSuperres(int argc, char** argv) {
     p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
     p.fit_per_input_point = !a.has("refit");
     p.max_neighbours = static_cast<int>(a.number("max-neighbours", 0));
-    // The disc is 1.2 h / sqrt(mean count) x disc_scale = (1.2 / sqrt(pi)) disc_scale spacings.
     if (a.has("seed-disc")) {
       const double disc = a.number("seed-disc", 0);
       requireInRange("seed-disc", disc, 0.1, 10.0);
-      p.disc_scale = static_cast<float>(disc / kMlsDiscSpacings);
+      p.disc_scale = static_cast<float>(disc / kMlsDiscSpacingsAtScaleOne);
     }
     p.validate();
     readScans();

@@ -17,6 +17,11 @@ namespace paps {
 
 enum class MlsSurface { Apss, Rimls };
 
+/// The seed disc of `disc_scale` 1 in mean input spacings: 1.2 h / sqrt(n) over the spacing
+/// h sqrt(pi / n) of n neighbours within h, i.e. 1.2 / sqrt(pi). A disc of S spacings is
+/// disc_scale = S / kMlsDiscSpacingsAtScaleOne.
+constexpr float kMlsDiscSpacingsAtScaleOne = 0.6770275f;
+
 /// Parameters of APSS / RIMLS upsampling. Zero means "choose from the data".
 struct MlsUpsamplingParameters {
   /// Kernel support h in metres (> 0), or 0: the radius holding `target_neighbours` points.

@@ -192,7 +192,7 @@ int runSuperresWorker(int argc, char** argv) {
       QuadricSuperResolutionReport r;
       out = superResolveQuadric(scans, q, &r);
       lf << "info R " << r.patch_radius << " rsim " << r.similarity_radius << " grid " << r.grid_lr << "->"
-         << r.grid_sr << " K-1 " << r.mean_similar_weight << " flat " << r.flat_fits << " ill-posed " << r.ill_posed_fits << " widened " << r.widened_fits << " noise "
+         << r.grid_sr << " K-1 " << r.mean_similar_weight << " flat " << r.flat_fits << " ill-posed " << r.ill_posed_fits << " widened " << r.widened_fits << " thin " << r.thin_balls << " noise "
          << r.noise_sigma << " kernel " << r.kernel_scale << " denoised " << r.denoised << "\n";
     } else if (method == "apss" || method == "rimls" || method == "apss-refit" || method == "rimls-refit" ||
                method == "apss-wide" || method == "rimls-wide") {

@@ -60,7 +60,10 @@ struct QuadricSuperResolutionParameters {
   float seed_disc = 1.2f;
   /// Where the ball of radius R holds fewer distinct positions than the quadric's 6 unknowns,
   /// refit it on the nearest target_neighbours distinct positions
-  /// (exact duplicates counted once), at the radius they need. Off: such points keep the plane.
+  /// (exact duplicates counted once), at the radius they need. Also where the ball is too
+  /// thin for a quadric, whatever its count (points along one or two LiDAR scan lines, with
+  /// the next line beyond R): refit on the nearest 36, 72, ... up to 288 distinct positions,
+  /// the first that cover two directions. Off: such points keep their fit at R.
   bool widen_sparse_fits = true;
   /// With the automatic kernel_scale: measure the noise of the first scan and widen the kernel
   /// as q = noise sigma / R grows (R the patch radius), by the rule of noiseAdaptedParameters
@@ -99,6 +102,10 @@ struct QuadricSuperResolutionReport {
   std::size_t ill_posed_fits = 0;
   /// Fits of sparse parts made on a wider support (widen_sparse_fits).
   std::size_t widened_fits = 0;
+  /// Balls at R with 6 distinct positions or more that are too thin for a quadric (points
+  /// along one or two scan lines of a LiDAR, a strip), all scans: their fit is remade on a
+  /// wider support that reaches across (counted in widened_fits when kept).
+  std::size_t thin_balls = 0;
   std::size_t without_similar = 0;  ///< patches of the first scan with no similar patch
   /// Points of the first scan that seed and anchor the output without a comparable descriptor
   /// (rims, sparse parts): their patch is their quadric alone.

@@ -271,3 +271,44 @@ TEST(Outliers, CountIndicesAndBox) {
 }
 
 }  // namespace
+
+// The scan-line pass: one line per degree of elevation, one return per azimuth step, each
+// stored `copies` times; returns lie on the ground within the range noise projected on the
+// vertical; the sector mesh lies on the ground and has the area of its annular sector.
+TEST(ScanLinePass, CountsGeometryAndSectorMesh) {
+  syn::ScanLinePass pass;
+  const Positions scan = syn::scanLinePass(pass, 5);
+  ASSERT_EQ(scan.size(), 29u * 180u * 2u);
+  double s = 0;
+  float nearest = INFINITY, farthest = 0;
+  for (std::size_t i = 0; i < scan.size(); i += 2) {
+    EXPECT_EQ(scan[i], scan[i + 1]);
+    const double d = syn::distanceToWavyGround(scan[i]);
+    s += d * d;
+    const float r = std::hypot(scan[i].x(), scan[i].y());
+    nearest = std::min(nearest, r);
+    farthest = std::max(farthest, r);
+  }
+  // 5 mm along rays 12 to 40 degrees below the horizon (and tilted ground): 1 to 3 mm vertically.
+  const double rms = std::sqrt(s / (scan.size() / 2));
+  EXPECT_GT(rms, 1e-3);
+  EXPECT_LT(rms, 3.5e-3);
+  EXPECT_NEAR(nearest, 1.8 / std::tan(40 * kPi / 180), 0.25);
+  EXPECT_NEAR(farthest, 1.8 / std::tan(12 * kPi / 180), 1.0);
+  pass.range_noise = 0;
+  pass.copies = 1;
+  for (const auto& p : syn::scanLinePass(pass, 5)) EXPECT_LT(std::abs(syn::distanceToWavyGround(p)), 1e-4f);
+  const TriangleMesh sector = syn::wavyGroundSector(pass, 0.2f, 0.05f);
+  const double r0 = 1.8 / std::tan(40 * kPi / 180) + 0.2, r1 = 1.8 / std::tan(12 * kPi / 180) - 0.2;
+  const double flat_area = kPi / 4 * (r1 * r1 - r0 * r0);
+  EXPECT_GT(sector.area(), flat_area * 0.99);  // the slopes (at most 0.23) add up to 2.6%
+  EXPECT_LT(sector.area(), flat_area * 1.03);
+  for (const auto& v : sector.vertices) EXPECT_LT(std::abs(syn::distanceToWavyGround(v)), 1e-6f);
+  pass.elevation_max = 5;
+  EXPECT_THROW(syn::scanLinePass(pass, 5), paps::InvalidParameter);
+  pass = {};
+  pass.copies = 0;
+  EXPECT_THROW(syn::scanLinePass(pass, 5), paps::InvalidParameter);
+  pass = {};
+  EXPECT_THROW(syn::wavyGroundSector(pass, 5.f), paps::InvalidParameter);
+}

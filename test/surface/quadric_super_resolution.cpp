@@ -419,38 +419,12 @@ TEST(QuadricSuperResolution, NoiseParametersBadValuesAndTinyClouds) {
 }
 
 namespace {
-// A scan-line LiDAR pass over a wavy ground z = 0.15 sin 1.3x cos 0.9y: sensor 1.8 m up, one
-// line per degree of elevation (-40 to -12), a return every 0.5 degree of azimuth, range noise
-// 5 mm, every return stored twice (as in PCL's bun0 sample). Along a line the returns are
-// 2 to 7 cm apart, the lines 9 cm to 0.9 m: far sparser across than along.
-float wavyGround(float x, float y) { return 0.15f * std::sin(1.3f * x) * std::cos(0.9f * y); }
-float distanceToWavyGround(const Eigen::Vector3f& p) {
-  const float gx = 0.15f * 1.3f * std::cos(1.3f * p.x()) * std::cos(0.9f * p.y());
-  const float gy = -0.15f * 0.9f * std::sin(1.3f * p.x()) * std::sin(0.9f * p.y());
-  return (p.z() - wavyGround(p.x(), p.y())) / std::sqrt(1 + gx * gx + gy * gy);
-}
-Positions scanLineGround() {
-  Random rng(5);
-  Positions scan;
-  const Eigen::Vector3f sensor(0, 0, 1.8f);
-  for (int el = -40; el <= -12; ++el)
-    for (float az = -45.f; az < 45.f; az += 0.5f) {
-      const float e = el * 3.14159265f / 180, a = az * 3.14159265f / 180;
-      const Eigen::Vector3f d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
-      float t = -sensor.z() / d.z();
-      for (int it = 0; it < 30; ++it) {  // march along the ray onto the ground
-        const Eigen::Vector3f p = sensor + t * d;
-        t += 0.8f * (p.z() - wavyGround(p.x(), p.y())) / -d.z();
-      }
-      const Eigen::Vector3f p = sensor + (t + 0.005f * static_cast<float>(rng.gaussian())) * d;
-      scan.push_back(p);
-      scan.push_back(p);
-    }
-  return scan;
-}
+// The default pass of paps::synthetic (2 to 7 cm along a line, 9 cm to 0.9 m across, every
+// return stored twice, 5 mm range noise).
+Positions scanLineGround() { return synthetic::scanLinePass({}, 5); }
 double rmsToWavyGround(const Positions& pts) {
   double s = 0;
-  for (const auto& p : pts) s += distanceToWavyGround(p) * distanceToWavyGround(p);
+  for (const auto& p : pts) s += synthetic::distanceToWavyGround(p) * synthetic::distanceToWavyGround(p);
   return std::sqrt(s / std::max<std::size_t>(1, pts.size()));
 }
 }  // namespace

@@ -183,6 +183,69 @@ TriangleMesh engravedPlane(float size, float wavelength, float amplitude, int re
   return mesh;
 }
 
+float wavyGroundHeight(float x, float y) { return 0.15f * std::sin(1.3f * x) * std::cos(0.9f * y); }
+
+float distanceToWavyGround(const Eigen::Vector3f& p) {
+  const float gx = 0.15f * 1.3f * std::cos(1.3f * p.x()) * std::cos(0.9f * p.y());
+  const float gy = -0.15f * 0.9f * std::sin(1.3f * p.x()) * std::sin(0.9f * p.y());
+  return (p.z() - wavyGroundHeight(p.x(), p.y())) / std::sqrt(1 + gx * gx + gy * gy);
+}
+
+namespace {
+void checkPass(const ScanLinePass& pass) {
+  requirePositive("sensor_height", pass.sensor_height);
+  if (!(pass.elevation_min <= pass.elevation_max && pass.elevation_max < 0 && pass.elevation_min > -90))
+    throw InvalidParameter("elevation", std::to_string(pass.elevation_min) + ".." + std::to_string(pass.elevation_max),
+                           "-90 < elevation_min <= elevation_max < 0 (degrees, looking down)");
+  requireInRange("azimuth_step", pass.azimuth_step, 0.01f, 90.f);
+  requireInRange("azimuth_half", pass.azimuth_half, 0.01f, 80.f);
+  if (!(pass.range_noise >= 0) || !std::isfinite(pass.range_noise))
+    throw InvalidParameter("range_noise", detail::toString(pass.range_noise), "a finite value >= 0 (metres)");
+  requireInRange("copies", pass.copies, 1, 100);
+}
+}  // namespace
+
+Positions scanLinePass(const ScanLinePass& pass, std::uint64_t seed) {
+  checkPass(pass);
+  Random rng(seed);
+  Positions scan;
+  const Eigen::Vector3f sensor(0, 0, pass.sensor_height);
+  for (int el = pass.elevation_min; el <= pass.elevation_max; ++el)
+    for (float az = -pass.azimuth_half; az < pass.azimuth_half; az += pass.azimuth_step) {
+      const float e = static_cast<float>(el) * 3.14159265f / 180, a = az * 3.14159265f / 180;
+      const Eigen::Vector3f d(std::cos(e) * std::cos(a), std::cos(e) * std::sin(a), std::sin(e));
+      float t = -sensor.z() / d.z();
+      for (int it = 0; it < 30; ++it) {  // march along the ray onto the ground
+        const Eigen::Vector3f p = sensor + t * d;
+        t += 0.8f * (p.z() - wavyGroundHeight(p.x(), p.y())) / -d.z();
+      }
+      const Eigen::Vector3f p = sensor + (t + pass.range_noise * static_cast<float>(rng.gaussian())) * d;
+      for (int c = 0; c < pass.copies; ++c) scan.push_back(p);
+    }
+  return scan;
+}
+
+TriangleMesh wavyGroundSector(const ScanLinePass& pass, float margin, float cell) {
+  checkPass(pass);
+  requirePositive("cell", cell);
+  if (!(margin >= 0) || !std::isfinite(margin))
+    throw InvalidParameter("margin", detail::toString(margin), "a finite value >= 0 (metres)");
+  const double deg = kPi / 180;
+  const double r0 = pass.sensor_height / std::tan(-pass.elevation_min * deg) + margin;
+  const double r1 = pass.sensor_height / std::tan(-pass.elevation_max * deg) - margin;
+  if (!(r1 > r0)) throw InvalidParameter("margin", detail::toString(margin), "less than half the scanned depth");
+  const double a0 = -pass.azimuth_half * deg, a1 = pass.azimuth_half * deg;
+  const int nr = std::max(1, static_cast<int>(std::ceil((r1 - r0) / cell)));
+  const int na = std::max(1, static_cast<int>(std::ceil((a1 - a0) * r1 / cell)));
+  TriangleMesh mesh;
+  addGrid(mesh, na, nr, false, [&](int i, int j) {
+    const double a = a0 + (a1 - a0) * i / na, r = r0 + (r1 - r0) * j / nr;
+    const float x = static_cast<float>(r * std::cos(a)), y = static_cast<float>(r * std::sin(a));
+    return Eigen::Vector3f(x, y, wavyGroundHeight(x, y));
+  });
+  return mesh;
+}
+
 // Centred on the origin, z in [-height/2, height/2]. `resolution` quads along z and about as
 // many per unit length around, so quads are roughly square. Around the axis the wavelength
 // is rounded to fit a whole number of periods in the circumference: otherwise the pattern

@@ -26,6 +26,30 @@ TriangleMesh engravedPlane(float size = 1.f, float wavelength = 0.1f, float ampl
 TriangleMesh engravedCylinder(float radius = 0.3f, float height = 1.f, float wavelength = 0.1f,
                               float amplitude = 0.01f, int resolution = 400);
 
+/// A LiDAR pass over a wavy ground z = 0.15 sin(1.3 x) cos(0.9 y) (metres): a sensor at
+/// (0, 0, sensor_height), one scan line per degree of elevation from elevation_min to
+/// elevation_max (degrees, negative: down), a return every azimuth_step degrees over
+/// [-azimuth_half, azimuth_half), Gaussian range noise (metres), every return stored `copies`
+/// times (as in PCL's bun0 sample). With the defaults the returns are 2 to 7 cm apart along
+/// a line and the lines 9 cm to 0.9 m apart: far sparser across than along.
+struct ScanLinePass {
+  float sensor_height = 1.8f;
+  int elevation_min = -40, elevation_max = -12;
+  float azimuth_step = 0.5f, azimuth_half = 45.f;
+  float range_noise = 0.005f;
+  int copies = 2;
+};
+/// Height of the wavy ground at (x, y), and the signed distance of p to it (first order:
+/// height difference over the gradient's norm; exact to about 1e-5 m within 2 cm).
+float wavyGroundHeight(float x, float y);
+float distanceToWavyGround(const Eigen::Vector3f& p);
+/// The returns of the pass, line by line.
+Positions scanLinePass(const ScanLinePass& pass, std::uint64_t seed);
+/// The wavy ground inside the scanned sector (azimuth within the pass's, horizontal range
+/// between its nearest and farthest line on flat ground, shrunk by `margin` metres), as a
+/// polar grid of cells about `cell` metres: ground truth for sampling dense reference points.
+TriangleMesh wavyGroundSector(const ScanLinePass& pass, float margin = 0.2f, float cell = 0.02f);
+
 /// Samples a mesh uniformly by area with a fixed seed. Returns positions; the true unit
 /// normals (of the triangle each sample lies on) when `normals` is given.
 Positions sampleMesh(const TriangleMesh& mesh, std::size_t count, std::uint64_t seed,

@@ -44,7 +44,8 @@ const char* kSuperresUsage =
     "                         point (slower, slightly more accurate)\n"
     "  --seed-disc S          radius of the tangent discs the output seeds are spread over, in mean\n"
     "                         input spacings (default 1.2 QSR, 0.68 APSS/RIMLS; 0.1 to 10); on\n"
-    "                         scan-line LiDAR, 0.6 keeps seeds out of the gaps between the lines\n"
+    "                         scan-line LiDAR, 0.6 keeps seeds near the lines (QSR 0.6x as far\n"
+    "                         from the surface as at 1.2 on the bench's scan-lines shape)\n"
     "  --max-neighbours N     APSS/RIMLS: most neighbours a kernel holds, the nearest within the\n"
     "                         radius (default 16 x --neighbours; bounds memory on clustered input)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";

@@ -55,8 +55,8 @@ struct QuadricSuperResolutionParameters {
   /// spacings s0 (0.1 to 10). 1.2 (default) covers the rims and scores best on the bench's
   /// protocol (dense points to their nearest output); 0.68 is APSS/RIMLS's disc. On scans
   /// sampled much more finely along scan lines than across them, wide discs put seeds far
-  /// into the gaps: there 0.56 to 0.68 lands as close to the surface as APSS, 1.2 up to 1.6x
-  /// farther (docs/superresolution.md, "Scan-line sampling").
+  /// into the gaps: on the scan-line bench 0.6 lands 0.6x as far from the surface as 1.2
+  /// (docs/superresolution.md, "Scan-line sampling").
   float seed_disc = 1.2f;
   /// Where the ball of radius R holds fewer distinct positions than the quadric's 6 unknowns,
   /// refit it on the nearest target_neighbours distinct positions

@@ -118,14 +118,13 @@ int runSuperres(int argc, char** argv) {
     std::printf("QSR: plane instead of quadric at %zu points: %zu flat (curvature below the patch's resolution), "
                 "%zu ill-posed (fewer than 6 distinct neighbours, collinear, or bending more than the patch)\n",
                 r.plane_fallbacks, r.flat_fits, r.ill_posed_fits);
-    if (r.widened_fits)
-      std::printf("QSR: %zu fits in sparse parts made on their %d nearest distinct positions or more (wider than the patch "
-                  "radius)\n",
-                  r.widened_fits, p.target_neighbours);
     if (r.thin_balls)
-      std::printf("QSR: %zu balls too thin for a quadric (along one or two scan lines): refitted on a support that "
-                  "reaches across\n",
+      std::printf("QSR: %zu balls too thin for a quadric (along one or two scan lines): a wider support that reaches "
+                  "across is tried\n",
                   r.thin_balls);
+    if (r.widened_fits)
+      std::printf("QSR: %zu fits of sparse or thin balls made on their %d (thin: up to %d) nearest distinct positions\n",
+                  r.widened_fits, p.target_neighbours, kQsrThinWidening * p.target_neighbours);
     std::printf("QSR: seeds spread over tangent discs of radius %g m (%.2f mean spacings of %g m%s)\n", r.disc_radius,
                 p.seed_disc, r.spacing, a.has("seed-disc") ? "" : "; --seed-disc");
     if (r.denoised)

@@ -158,9 +158,6 @@ double quadricConditioning(const Positions& P, const int* nb, int count, const E
 // (2e-3, kept: the rim guard below handles it) and two scan lines (1e-5).
 // On the scan-line test any threshold from 3e-4 to 3e-3 gives the output within 4%.
 constexpr double kThinSupport = 1e-3;
-// How far a thin ball is widened at most, in target_neighbours: 8 x 36 distinct positions
-// reach the next scan line on the scan-line test's far lines (0.6 m apart, 6 cm along).
-constexpr int kThinWidening = 8;
 // How close (RMS, in patch radii) the thin ball's own points must lie to the wider fit: 0.05
 // and 0.1 give the same output on the scan-line test; without the check, rs1 at 0.01% noise
 // in the bench lost 7% (dense points to output) to 16 such fits.
@@ -293,7 +290,7 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
             wide_radius = nearestDistinct(*sc[s].nh.index, first, P[i], want, idx, d2, kept);
             if (wide_radius == 0 || !thin || sparse) break;
             if (quadricConditioning(P, kept.data(), static_cast<int>(kept.size()), P[i], wide_radius) >= kThinSupport) break;
-            if (want >= kThinWidening * widen_to) {  // thin however wide (a wire, a rim)
+            if (want >= kQsrThinWidening * widen_to) {  // thin however wide (a wire, a rim)
               wide_radius = 0;
               break;
             }

@@ -19,6 +19,11 @@
 
 namespace paps {
 
+/// A thin ball (see widen_sparse_fits) is refitted on up to this many times target_neighbours
+/// distinct positions: 8 x 36 reach the next scan line on the scan-line bench's far lines
+/// (0.6 m apart, 6 cm along).
+constexpr int kQsrThinWidening = 8;
+
 /// Parameters of QSR. Only the patch radius and the similarity radius are the user's; zero
 /// means "choose from the data" and the report says what was chosen.
 struct QuadricSuperResolutionParameters {

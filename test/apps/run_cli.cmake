@@ -135,6 +135,28 @@ elseif(CASE STREQUAL "superres_seed_disc")
   # Parameters are checked before the input is read: the parameter error, not the file's.
   run_paps(superres ${WORK_DIR}/no_such_scan.pcd ${output} --seed-disc 0 --quiet)
   expect_one_error_line("seed_disc")
+elseif(CASE STREQUAL "bench_superres_scan_lines")
+  # The bench's scan-line shape end to end (child processes, table, CSV): QSR with the narrow
+  # disc lands closer to the analytic ground than APSS and PCL MLS (bench: 1.662e-3 against
+  # 4.113e-3 and 3.784e-3).
+  set(output ${dir}/bench/superres.csv)
+  run_paps(bench superres --out ${dir}/bench --speed 0 --points 20000 --shapes scan-lines
+           --methods qsr-narrow,apss,pcl-mls-plane)
+  expect_success_saying("qsr-narrow / best = 0\\.[0-9]+")
+  foreach(m qsr-narrow apss pcl-mls-plane)
+    if(NOT out MATCHES "scan-lines +5mm +${m} +41760 +[0-9.]+ +[0-9]+ +[0-9.e+-]+ +([0-9.e+-]+)")
+      message(FATAL_ERROR "no scan-lines row for ${m}: ${out}")
+    endif()
+    set(g_${m} ${CMAKE_MATCH_1})
+  endforeach()
+  if(NOT g_qsr-narrow LESS g_apss OR NOT g_qsr-narrow LESS g_pcl-mls-plane)
+    message(FATAL_ERROR "qsr-narrow (${g_qsr-narrow}) not closer to the ground than apss (${g_apss}) and PCL (${g_pcl-mls-plane})")
+  endif()
+  file(STRINGS ${output} rows)
+  list(LENGTH rows n)
+  if(NOT n EQUAL 5)
+    message(FATAL_ERROR "superres.csv: expected a header, the input and 3 rows, got ${n} lines")
+  endif()
 elseif(CASE STREQUAL "superres_max_neighbours")
   # APSS/RIMLS kernel cap: out of range is one error line; a cap below the typical count
   # caps (nearly) every kernel and says so.

@@ -174,15 +174,10 @@ void runScanLines(const std::string& out_dir, const std::vector<std::string>& me
   const synthetic::ScanLinePass pass;
   const Positions scan = synthetic::scanLinePass(pass, 5);
   const Positions dense = synthetic::sampleMesh(synthetic::wavyGroundSector(pass), n_dense, 7);
-  auto toGround = [](const Positions& pts) {
-    double s = 0;
-    for (const auto& p : pts) s += static_cast<double>(synthetic::distanceToWavyGround(p)) * synthetic::distanceToWavyGround(p);
-    return pts.empty() ? NAN : std::sqrt(s / pts.size());
-  };
   const SpatialIndex index(scan);
   const float r = radiusForNeighbourCount(scan, index, 30, NeighbourCountStatistic::Median);
   const std::size_t target = 4 * scan.size();
-  const double e_in = nearestRmse(dense, scan), g_in = toGround(scan);
+  const double e_in = nearestRmse(dense, scan), g_in = synthetic::rmsDistanceToWavyGround(scan);
   std::printf("\nscan-lines: %zu returns (each stored twice) upsampled x4; RMSE over %zu dense points of the sector,\n"
               "to surface = RMS distance to the analytic ground (metres)\n",
               scan.size(), dense.size());
@@ -200,7 +195,7 @@ void runScanLines(const std::string& out_dir, const std::vector<std::string>& me
       csv << "scan-lines," << dense.size() << "," << scan.size() << ",0.005," << m << ",0,,,,,\n";
       continue;
     }
-    const double e = nearestRmse(dense, w.output), g = toGround(w.output);
+    const double e = nearestRmse(dense, w.output), g = synthetic::rmsDistanceToWavyGround(w.output);
     std::printf("%-15s %-6s %-15s %9zu %9.2f %9.0f %11.3e %11.3e\n", "scan-lines", "5mm", m.c_str(), w.output.size(),
                 w.seconds, w.peak_mb, e, g);
     std::fflush(stdout);

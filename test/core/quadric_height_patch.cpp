@@ -116,3 +116,37 @@ TEST(QuadricHeightPatch, GeodesicBinsAndHeights) {
   const float d01 = (c[1] - c[0]).norm(), d34 = (c[3] - c[2]).norm();
   EXPECT_NEAR(d01, d34, 0.02f * patch.binSpacing());
 }
+
+// The conditioning of the regression tells a ball that covers the disc from one whose points lie
+// along lines (scan lines), whatever their count, and does not depend on the scale.
+TEST(QuadricFit, ConditioningSeparatesDiscsFromLines) {
+  auto fit = [](const Positions& p, float radius) {
+    const auto nb = all(p);
+    return fitQuadric(p, Eigen::Vector3f::Zero(), nb.data(), static_cast<int>(p.size()), radius);
+  };
+  // A saddle sampled over the whole ball of radius 0.1.
+  Positions disc;
+  for (const auto& p : heightField([](float x, float y) { return 0.2f * (x * x - y * y); }, 0.1f, 14))
+    if (p.head<2>().norm() <= 0.1f) disc.push_back(p);
+  const float c_disc = fit(disc, 0.1f).conditioning;
+  EXPECT_GT(c_disc, 3e-3f);
+  Positions half;
+  for (const auto& p : disc) if (p.x() >= 0) half.push_back(p);
+  const float c_half = fit(half, 0.1f).conditioning;
+  EXPECT_LT(c_half, c_disc);
+  EXPECT_GT(c_half, 1e-3f);  // a rim is not thin
+  // Two parallel lines 0.05 apart, 40 points each, 0.1 mm of noise: thin.
+  Random rng(7);
+  Positions lines;
+  for (int l = 0; l < 2; ++l)
+    for (int i = 0; i < 40; ++i)
+      lines.emplace_back(-0.08f + 0.004f * i, -0.025f + 0.05f * l, 1e-4f * static_cast<float>(rng.gaussian()));
+  EXPECT_LT(fit(lines, 0.1f).conditioning, 1e-4f);
+  // Scaled by 10 (points and radius): the same conditioning.
+  Positions big = disc;
+  for (auto& p : big) p *= 10.f;
+  EXPECT_NEAR(fit(big, 1.f).conditioning, c_disc, 1e-3f * c_disc);
+  // Stopped before the regression: 0.
+  Positions few = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.01f, 0}};
+  EXPECT_EQ(fit(few, 0.1f).conditioning, 0.f);
+}

@@ -422,11 +422,6 @@ namespace {
 // The default pass of paps::synthetic (2 to 7 cm along a line, 9 cm to 0.9 m across, every
 // return stored twice, 5 mm range noise).
 Positions scanLineGround() { return synthetic::scanLinePass({}, 5); }
-double rmsToWavyGround(const Positions& pts) {
-  double s = 0;
-  for (const auto& p : pts) s += synthetic::distanceToWavyGround(p) * synthetic::distanceToWavyGround(p);
-  return std::sqrt(s / std::max<std::size_t>(1, pts.size()));
-}
 }  // namespace
 
 // On scan lines the balls along one or two lines are too thin for a quadric: their fits are
@@ -464,8 +459,9 @@ TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
   mls.process(pcl_out);
   Positions op = positionsOf(pcl_out);
   op.erase(std::remove_if(op.begin(), op.end(), [](const Eigen::Vector3f& p) { return !isFinite(p); }), op.end());
-  const double ew = rmsToWavyGround(ow), en = rmsToWavyGround(on), eu = rmsToWavyGround(ou);
-  const double ea = rmsToWavyGround(oa), ep = rmsToWavyGround(op), ei = rmsToWavyGround(scan);
+  using synthetic::rmsDistanceToWavyGround;
+  const double ew = rmsDistanceToWavyGround(ow), en = rmsDistanceToWavyGround(on), eu = rmsDistanceToWavyGround(ou);
+  const double ea = rmsDistanceToWavyGround(oa), ep = rmsDistanceToWavyGround(op), ei = rmsDistanceToWavyGround(scan);
   std::printf("scan lines: %zu returns -> %zu; to the ground: input %.3e, QSR disc 1.2 %.3e (%.3g m), "
               "QSR disc 0.6 %.3e (%.3g m), QSR disc 0.6 unwidened %.3e, APSS %.3e (%.3g m), PCL MLS voxel %.3e "
               "(%zu points); thin balls %zu, widened %zu\n",

@@ -85,9 +85,16 @@ QuadricFit fitQuadric(const Positions& points, const Eigen::Vector3f& centre, co
     z[r] = n0.dot(d) * s;
     ++r;
   }
+  const float conditioning = static_cast<float>(
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>>((A.transpose() * A) / m, Eigen::EigenvaluesOnly)
+          .eigenvalues()[0]);
+  auto fallback = [&](QuadricFit f) {
+    f.conditioning = conditioning;
+    return f;
+  };
   Eigen::Matrix<double, 6, 1> c;
   const bool ok = solveIrlsL1<6>(A, z, w, options.irls_iterations, 1e-4, c);
-  if (!ok || !c.allFinite()) return planeFit(origin_plane, n0, direction_hint, QuadricFit::Status::Degenerate);
+  if (!ok || !c.allFinite()) return fallback(planeFit(origin_plane, n0, direction_hint, QuadricFit::Status::Degenerate));
   // Back to metres: h(x) = a' x^2 ... with a' = a / R, d' = d, f' = f R.
   const double a = c[0] * s, b = c[1] * s, cc = c[2] * s, dx = c[3], dy = c[4], f0 = c[5] * radius;
   // Fundamental forms at (0, 0).
@@ -110,13 +117,13 @@ QuadricFit fitQuadric(const Positions& points, const Eigen::Vector3f& centre, co
   // A quadric bending away by more than the patch within the patch, or whose apex is half a
   // radius off the points, fits noise or a crease: not a local surface model.
   if (std::abs(f0) > 0.5 * radius || std::max(std::abs(k1), std::abs(k2)) * radius > 4.0)
-    return planeFit(origin_plane, n0, direction_hint, QuadricFit::Status::Degenerate);
+    return fallback(planeFit(origin_plane, n0, direction_hint, QuadricFit::Status::Degenerate));
   QuadricFit fit;
+  fit.conditioning = conditioning;
   fit.origin = centre + static_cast<float>(f0) * n0;
   fit.frame.n = world(nl).normalized();
   if (std::max(std::abs(k1), std::abs(k2)) * radius < options.flat_threshold) {
-    QuadricFit p = planeFit(fit.origin, fit.frame.n, direction_hint, QuadricFit::Status::FlatPlane);
-    return p;
+    return fallback(planeFit(fit.origin, fit.frame.n, direction_hint, QuadricFit::Status::FlatPlane));
   }
   fit.status = QuadricFit::Status::Quadric;
   if ((k1 - k2) * radius < options.umbilic_threshold) {

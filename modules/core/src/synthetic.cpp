@@ -191,6 +191,18 @@ float distanceToWavyGround(const Eigen::Vector3f& p) {
   return (p.z() - wavyGroundHeight(p.x(), p.y())) / std::sqrt(1 + gx * gx + gy * gy);
 }
 
+double rmsDistanceToWavyGround(const Positions& points) {
+  double s = 0;
+  std::size_t n = 0;
+  for (const auto& p : points)
+    if (isFinite(p)) {
+      const double d = distanceToWavyGround(p);
+      s += d * d;
+      ++n;
+    }
+  return n ? std::sqrt(s / n) : NAN;
+}
+
 namespace {
 void checkPass(const ScanLinePass& pass) {
   requirePositive("sensor_height", pass.sensor_height);

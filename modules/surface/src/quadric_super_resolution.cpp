@@ -121,39 +121,6 @@ bool distinctFewerThan(const std::vector<int>& first, const int* nb, int count, 
   return true;
 }
 
-// How well the points nb[0..count) determine a quadric height field over their PCA plane
-// around `centre`: the smallest eigenvalue of the normal matrix A^T A / m of the fit z = a x^2
-// + b xy + c y^2 + d x + e y + f, in units of `radius`. A uniform disc gives about 0.03, a half
-// disc 2e-3; points along one line 1e-8 and along two parallel lines 1e-5, whatever their
-// count: the surface between or across the lines is not seen, and a quadric fitted there is
-// a guess (on scan-line LiDAR, across the gap to the next line).
-double quadricConditioning(const Positions& P, const int* nb, int count, const Eigen::Vector3f& centre, float radius) {
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  int m = 0;
-  for (int k = 0; k < count; ++k)
-    if (isFinite(P[nb[k]])) { mean += (P[nb[k]] - centre).cast<double>(); ++m; }
-  if (m < 6) return 0.0;
-  mean /= m;
-  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  for (int k = 0; k < count; ++k)
-    if (isFinite(P[nb[k]])) {
-      const Eigen::Vector3d d = (P[nb[k]] - centre).cast<double>() - mean;
-      cov += d * d.transpose();
-    }
-  const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-  const Eigen::Vector3d e1 = es.eigenvectors().col(2), e2 = es.eigenvectors().col(1);
-  Eigen::Matrix<double, 6, 6> M = Eigen::Matrix<double, 6, 6>::Zero();
-  for (int k = 0; k < count; ++k)
-    if (isFinite(P[nb[k]])) {
-      const Eigen::Vector3d d = (P[nb[k]] - centre).cast<double>() / radius;
-      const double x = e1.dot(d), y = e2.dot(d);
-      Eigen::Matrix<double, 6, 1> a;
-      a << x * x, x * y, y * y, x, y, 1.0;
-      M.selfadjointView<Eigen::Lower>().rankUpdate(a);
-    }
-  M = M.selfadjointView<Eigen::Lower>();
-  return Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, 6, 6>>(M / m, Eigen::EigenvaluesOnly).eigenvalues()[0];
-}
 // Below this a support counts as thin (lines, strips): between the half disc of a rim
 // (2e-3, kept: the rim guard below handles it) and two scan lines (1e-5).
 // On the scan-line test any threshold from 3e-4 to 3e-3 gives the output within 4%.
@@ -282,23 +249,24 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
         // A ball both sparse and thin is a sparse one (36 positions, as since session 10): sent
         // through the thin widening instead, such balls lost session 10's gain on rs1 at 0.01%
         // noise (bench protocol error 2.129e-1 to 2.142e-1 against 1.989e-1).
-        const bool thin = params.widen_sparse_fits && quadricConditioning(P, g.begin(i), g.count(i), P[i], R) < kThinSupport;
+        const bool thin = params.widen_sparse_fits && fits[gi].conditioning < kThinSupport;
         const bool sparse = (ill || thin) && params.widen_sparse_fits &&
                             distinctFewerThan(first, g.begin(i), g.count(i), kSparseBall, kept);
         if (thin && !sparse) ++thin_balls;
         if ((ill && sparse) || thin) {
           float wide_radius = 0;
+          QuadricFit wide;
           for (int want = widen_to;; want *= 2) {
             wide_radius = nearestDistinct(*sc[s].nh.index, first, P[i], want, idx, d2, kept);
-            if (wide_radius == 0 || !thin || sparse) break;
-            if (quadricConditioning(P, kept.data(), static_cast<int>(kept.size()), P[i], wide_radius) >= kThinSupport) break;
+            if (wide_radius == 0) break;
+            wide = fitQuadric(P, P[i], kept.data(), static_cast<int>(kept.size()), wide_radius, nh, th);
+            if (!thin || sparse || wide.conditioning >= kThinSupport) break;
             if (want >= kQsrThinWidening * widen_to) {  // thin however wide (a wire, a rim)
               wide_radius = 0;
               break;
             }
           }
           if (wide_radius > R) {
-            const QuadricFit wide = fitQuadric(P, P[i], kept.data(), static_cast<int>(kept.size()), wide_radius, nh, th);
             // A point whose wider neighbours lie on one side of it is on a rim, where the
             // quadric would extrapolate past the scan (measured on the bench plane's corners at
             // 0.5% noise: outputs 16 mm off the mid-plane, 12 mm at most without); it keeps its

@@ -27,6 +27,11 @@ struct QuadricFit {
   Eigen::Vector3f origin = Eigen::Vector3f::Zero();
   float k1 = 0.f, k2 = 0.f;  ///< principal curvatures (1/m), k1 >= k2
   Status status = Status::Degenerate;
+  /// How well the neighbours determine the regression: the smallest eigenvalue of its normal
+  /// matrix A^T A / m, coordinates in units of the radius (a uniform disc about 0.03, a half
+  /// disc 2e-3, points along two parallel lines 1e-5, along one line 1e-8, whatever their
+  /// count); 0 when the fit stopped before the regression (fewer than 6 points, collinear).
+  float conditioning = 0.f;
   bool isPlaneFallback() const { return status != Status::Quadric; }
   /// Q(x, y) in the intrinsic frame (metres).
   float height(float x, float y) const { return 0.5f * (k1 * x * x + k2 * y * y); }

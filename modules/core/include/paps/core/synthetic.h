@@ -43,6 +43,8 @@ struct ScanLinePass {
 /// height difference over the gradient's norm; exact to about 1e-5 m within 2 cm).
 float wavyGroundHeight(float x, float y);
 float distanceToWavyGround(const Eigen::Vector3f& p);
+/// RMS of distanceToWavyGround over the finite points (NaN when there are none).
+double rmsDistanceToWavyGround(const Positions& points);
 /// The returns of the pass, line by line.
 Positions scanLinePass(const ScanLinePass& pass, std::uint64_t seed);
 /// The wavy ground inside the scanned sector (azimuth within the pass's, horizontal range

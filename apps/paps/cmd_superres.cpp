@@ -46,6 +46,9 @@ const char* kSuperresUsage =
     "                         input spacings (default 1.2 QSR, 0.68 APSS/RIMLS; 0.1 to 10); on\n"
     "                         scan-line LiDAR, 0.6 keeps seeds near the lines (QSR 0.6x as far\n"
     "                         from the surface as at 1.2 on the bench's scan-lines shape)\n"
+    "  --thin-disc F          QSR: scale of the seed disc of points whose ball is too thin for a\n"
+    "                         quadric (along scan lines, strips, sparse parts), in (0, 1] (default\n"
+    "                         0.5; 1: the same disc everywhere)\n"
     "  --max-neighbours N     APSS/RIMLS: most neighbours a kernel holds, the nearest within the\n"
     "                         radius (default 16 x --neighbours; bounds memory on clustered input)\n"
     "  --quiet, --timings     no progress bar / wall time of each stage\n";
@@ -56,12 +59,14 @@ int runSuperres(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit", "max-neighbours", "seed-disc"});
+               "refit", "max-neighbours", "seed-disc", "thin-disc"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   const std::string method = a.text("method", "qsr");
   if (method != "qsr" && method != "apss" && method != "rimls")
     throw InvalidParameter("method", method, "qsr, apss or rimls");
+  if (method != "qsr" && a.has("thin-disc"))
+    throw InvalidParameter("thin-disc", a.text("thin-disc", ""), "--method qsr (APSS and RIMLS have no thin-ball test)");
   const std::string out_path = a.positional.back();
   // Parameters are checked before the scans are read, so a bad value fails at once.
   std::vector<Positions> scans;
@@ -91,6 +96,7 @@ int runSuperres(int argc, char** argv) {
     p.irls_iterations = static_cast<int>(a.number("irls", p.irls_iterations));
     p.noise_sigma = static_cast<float>(a.number("noise", 0));
     p.seed_disc = static_cast<float>(a.number("seed-disc", p.seed_disc));
+    p.thin_disc = static_cast<float>(a.number("thin-disc", p.thin_disc));
     const std::string denoise = a.text("denoise", "auto");
     if (denoise == "auto") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Auto;
     else if (denoise == "on") p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
@@ -127,6 +133,9 @@ int runSuperres(int argc, char** argv) {
                   r.widened_fits, p.target_neighbours, kQsrThinWidening * p.target_neighbours);
     std::printf("QSR: seeds spread over tangent discs of radius %g m (%.2f mean spacings of %g m%s)\n", r.disc_radius,
                 p.seed_disc, r.spacing, a.has("seed-disc") ? "" : "; --seed-disc");
+    if (r.narrowed_discs)
+      std::printf("QSR: %zu points whose ball is too thin for a quadric seed over discs %.2f times as wide%s\n",
+                  r.narrowed_discs, p.thin_disc, a.has("thin-disc") ? "" : " (--thin-disc)");
     if (r.denoised)
       std::printf("QSR: the scan%s denoised first (paps denoise's default)%s\n", scans.size() > 1 ? "s were" : " was",
                   p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? "" : ": noise >= 5% of the patch radius");

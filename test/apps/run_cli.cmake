@@ -135,6 +135,14 @@ elseif(CASE STREQUAL "superres_seed_disc")
   # Parameters are checked before the input is read: the parameter error, not the file's.
   run_paps(superres ${WORK_DIR}/no_such_scan.pcd ${output} --seed-disc 0 --quiet)
   expect_one_error_line("seed_disc")
+  # The disc scale of thin balls: QSR only, in (0, 1].
+  run_paps(superres ${input} ${output} --thin-disc 1 --factor 2 --quiet)
+  expect_success_saying("0.60 mean spacings|1.20 mean spacings")
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --thin-disc 0 --quiet)
+  expect_one_error_line("thin_disc")
+  run_paps(superres ${input} ${output} --method rimls --thin-disc 0.5 --quiet)
+  expect_one_error_line("thin-disc")
 elseif(CASE STREQUAL "bench_superres_scan_lines")
   # The bench's scan-line shape end to end (child processes, table, CSV): QSR with the narrow
   # disc lands closer to the analytic ground than APSS and PCL MLS (bench: 1.662e-3 against

@@ -163,6 +163,40 @@ TEST(MlsUpsampling, SeedsArePoissonDiskAndTheSameWithTheCallersLists) {
   EXPECT_THROW(upsamplingSeeds(pts, Normals(3, Eigen::Vector3f::UnitZ()), 100, disc, 5), InvalidParameter);
 }
 
+// A disc per point: points of the left half spread their seeds over a quarter of the disc.
+// Every seed stays within its own point's disc; all-ones scales give the seeds of one disc.
+TEST(MlsUpsampling, SeedsPerPointDiscs) {
+  Positions pts;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) pts.emplace_back(i, j, 0.f);
+  const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
+  const float disc = 0.6f;
+  std::vector<float> scale(pts.size(), 1.f);
+  for (std::size_t i = 0; i < pts.size(); ++i)
+    if (pts[i].x() < 20) scale[i] = 0.25f;
+  std::vector<int> origin;
+  const Positions seeds = upsamplingSeeds(pts, normals, 6400, disc, 5, &origin, nullptr, 0.f, &scale);
+  ASSERT_EQ(seeds.size(), 6400u);
+  float far_right = 0;
+  for (std::size_t s = 0; s < seeds.size(); ++s) {
+    const float d = (seeds[s] - pts[origin[s]]).norm();
+    EXPECT_LE(d, scale[origin[s]] * disc * 1.0001f);
+    if (pts[origin[s]].x() >= 20) far_right = std::max(far_right, d);
+  }
+  EXPECT_GT(far_right, 0.5f * disc);  // the right half still uses the whole disc
+  const std::vector<float> ones(pts.size(), 1.f);
+  std::vector<int> origin1, origin0;
+  EXPECT_EQ(upsamplingSeeds(pts, normals, 6400, disc, 5, &origin1, nullptr, 0.f, &ones),
+            upsamplingSeeds(pts, normals, 6400, disc, 5, &origin0));
+  for (const float bad : {0.f, 1.5f, NAN}) {
+    std::vector<float> b = ones;
+    b[7] = bad;
+    EXPECT_THROW(upsamplingSeeds(pts, normals, 100, disc, 5, nullptr, nullptr, 0.f, &b), InvalidParameter) << bad;
+  }
+  const std::vector<float> short_scales(10, 1.f);
+  EXPECT_THROW(upsamplingSeeds(pts, normals, 100, disc, 5, nullptr, nullptr, 0.f, &short_scales), InvalidParameter);
+}
+
 TEST(MlsUpsampling, SeedsExactCountAndThreadIndependentOnLargeInput) {
   // 150 x 150 points (many blocks, pilot passes), seeds 4x denser: exactly the count asked,
   // Poisson-disk spread, identical with 1 and 2 threads.

@@ -425,19 +425,23 @@ Positions scanLineGround() { return synthetic::scanLinePass({}, 5); }
 }  // namespace
 
 // On scan lines the balls along one or two lines are too thin for a quadric: their fits are
-// remade on a support reaching the next lines. QSR then lands closer to the ground than APSS
-// and PCL's MLS at both seed discs, and with the narrow disc (0.6 spacings, APSS's is 0.68)
-// closer than the returns themselves. Measured: docs/superresolution.md, "Scan-line sampling"
-// (this test prints the figures).
+// remade on a support reaching the next lines, and their seeds stay nearer the returns (half
+// the disc). QSR then lands closer to the ground than APSS and PCL's MLS, and closer than the
+// returns themselves, with the default disc as with the narrow one (0.6 spacings, APSS's is
+// 0.68). Measured: docs/superresolution.md, "Scan-line sampling" and "Narrower seed discs on
+// thin balls" (this test prints the figures).
 TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
   const Positions scan = scanLineGround();
-  QuadricSuperResolutionParameters wide, narrow, unwidened;
-  wide.factor = narrow.factor = unwidened.factor = 4;
-  narrow.seed_disc = unwidened.seed_disc = 0.6f;
+  QuadricSuperResolutionParameters wide, wide_even, narrow, narrow_even, unwidened;
+  wide.factor = wide_even.factor = narrow.factor = narrow_even.factor = unwidened.factor = 4;
+  narrow.seed_disc = narrow_even.seed_disc = unwidened.seed_disc = 0.6f;
+  wide_even.thin_disc = narrow_even.thin_disc = unwidened.thin_disc = 1.f;  // one disc everywhere
   unwidened.widen_sparse_fits = false;
-  QuadricSuperResolutionReport rw, rn, ru;
+  QuadricSuperResolutionReport rw, rw1, rn, rn1, ru;
   const Positions ow = superResolveQuadric({scan}, wide, &rw);
+  const Positions ow1 = superResolveQuadric({scan}, wide_even, &rw1);
   const Positions on = superResolveQuadric({scan}, narrow, &rn);
+  const Positions on1 = superResolveQuadric({scan}, narrow_even, &rn1);
   const Positions ou = superResolveQuadric({scan}, unwidened, &ru);
   MlsUpsamplingParameters mp;
   mp.factor = 4;
@@ -460,28 +464,37 @@ TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
   Positions op = positionsOf(pcl_out);
   op.erase(std::remove_if(op.begin(), op.end(), [](const Eigen::Vector3f& p) { return !isFinite(p); }), op.end());
   using synthetic::rmsDistanceToWavyGround;
-  const double ew = rmsDistanceToWavyGround(ow), en = rmsDistanceToWavyGround(on), eu = rmsDistanceToWavyGround(ou);
+  const double ew = rmsDistanceToWavyGround(ow), ew1 = rmsDistanceToWavyGround(ow1);
+  const double en = rmsDistanceToWavyGround(on), en1 = rmsDistanceToWavyGround(on1), eu = rmsDistanceToWavyGround(ou);
   const double ea = rmsDistanceToWavyGround(oa), ep = rmsDistanceToWavyGround(op), ei = rmsDistanceToWavyGround(scan);
-  std::printf("scan lines: %zu returns -> %zu; to the ground: input %.3e, QSR disc 1.2 %.3e (%.3g m), "
-              "QSR disc 0.6 %.3e (%.3g m), QSR disc 0.6 unwidened %.3e, APSS %.3e (%.3g m), PCL MLS voxel %.3e "
-              "(%zu points); thin balls %zu, widened %zu\n",
-              scan.size(), ow.size(), ei, ew, rw.disc_radius, en, rn.disc_radius, eu, ea, ra.disc_radius, ep, op.size(),
-              rn.thin_balls, rn.widened_fits);
+  std::printf("scan lines: %zu returns -> %zu; to the ground: input %.3e, QSR disc 1.2 %.3e (%.3g m; one disc "
+              "everywhere %.3e), QSR disc 0.6 %.3e (%.3g m; one disc everywhere %.3e, and unwidened %.3e), APSS %.3e "
+              "(%.3g m), PCL MLS voxel %.3e (%zu points); thin balls %zu, widened %zu, narrowed discs %zu\n",
+              scan.size(), ow.size(), ei, ew, rw.disc_radius, ew1, en, rn.disc_radius, en1, eu, ea, ra.disc_radius,
+              ep, op.size(), rn.thin_balls, rn.widened_fits, rw.narrowed_discs);
   ASSERT_EQ(on.size(), 4 * scan.size());
   EXPECT_NEAR(rn.disc_radius, 0.5f * rw.disc_radius, 1e-6f * rw.disc_radius);
   EXPECT_EQ(rn.spacing, rw.spacing);
   EXPECT_GT(rn.thin_balls, scan.size() / 10);
   EXPECT_EQ(ru.thin_balls, 0u);
-  EXPECT_LT(en, ei);        // closer to the ground than the returns
-  EXPECT_LT(en, 0.6 * ea);  // measured 0.40
-  EXPECT_LT(en, 0.6 * eu);  // what the widening brings (measured 0.41)
-  EXPECT_LT(ew, ea);        // the default disc too
+  EXPECT_GT(rw.narrowed_discs, scan.size() / 10);
+  EXPECT_EQ(rw1.narrowed_discs, 0u);
+  // One disc everywhere (as before session 12), narrow: the widened fits.
+  EXPECT_LT(en1, ei);        // closer to the ground than the returns
+  EXPECT_LT(en1, 0.6 * ea);  // measured 0.37
+  EXPECT_LT(en1, 0.6 * eu);  // what the widening brings (measured 0.39)
   // Seeds between the lines read SR bins whose points lie along a line: with the ridge on the
   // bins' slopes the default disc lands within 1.2x the returns' distance (measured 1.176; a
   // plain first-order fit 1.326, session 11's pivot switch 1.277).
-  EXPECT_LT(ew, 1.2 * ei);
+  EXPECT_LT(ew1, 1.2 * ei);
+  EXPECT_GT(ew1, 1.2 * en1);  // the trade-off the disc parameter is for
+  // The default: thin balls seed over half discs. The default disc then lands closer than the
+  // returns (measured 0.71 of their distance) and 0.60 of one disc everywhere.
+  EXPECT_LT(ew, ei);
+  EXPECT_LT(ew, 0.7 * ew1);
+  EXPECT_LT(ew, ea);
   EXPECT_LT(ew, ep);
-  EXPECT_GT(ew, 1.2 * en);  // the trade-off the disc parameter is for
+  EXPECT_LT(en, en1);  // measured 1.261e-3 against 1.533e-3
   // A seed stays within its disc of the return it was spread from (then moves along the normal
   // by the projection, a few mm here).
   const SpatialIndex index(scan);
@@ -498,6 +511,13 @@ TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
   EXPECT_THROW(bad.validate(), InvalidParameter);
   bad.seed_disc = NAN;
   EXPECT_THROW(bad.validate(), InvalidParameter);
+  bad = QuadricSuperResolutionParameters();
+  for (const float t : {0.f, -0.5f, 1.01f, NAN}) {
+    bad.thin_disc = t;
+    EXPECT_THROW(bad.validate(), InvalidParameter) << t;
+  }
+  bad.thin_disc = 1.f;
+  EXPECT_NO_THROW(bad.validate());
 }
 
 // A sphere whose lower half is sampled 10x more sparsely than its upper half, every point stored

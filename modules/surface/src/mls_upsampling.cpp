@@ -404,10 +404,20 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius) {
+  return upsamplingSeeds(points, normals, count, disc_radius, seed, origin, graph, graph_radius, nullptr);
+}
+
+Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
+                          float disc_radius, std::uint64_t seed, std::vector<int>* origin,
+                          const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale) {
   requirePositive("disc_radius", disc_radius);
   if (normals.size() != points.size())
     throw InvalidParameter("normals", std::to_string(normals.size()) + " normals",
                            std::to_string(points.size()) + ", one per point");
+  if (disc_scale && (disc_scale->size() != points.size() ||
+                     std::any_of(disc_scale->begin(), disc_scale->end(), [](float f) { return !(f > 0.f && f <= 1.f); })))
+    throw InvalidParameter("disc_scale", std::to_string(disc_scale->size()) + " values",
+                           std::to_string(points.size()) + " values in (0, 1], one per point");
   if (graph && graph->size() != points.size())
     throw InvalidParameter("graph", std::to_string(graph->size()) + " lists",
                            std::to_string(points.size()) + ", one per point");
@@ -482,7 +492,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
           v = static_cast<float>((bits >> 16) & 0xFFFFFFu) * (2.f / 16777216.f) - 1.f;
         } while (u * u + v * v > 1.f);
         const std::size_t c = k * per_point + j;
-        cand[c] = points[i] + disc_radius * (u * t1 + v * t2);
+        cand[c] = points[i] + (disc_scale ? (*disc_scale)[i] * disc_radius : disc_radius) * (u * t1 + v * t2);
         cand_rank[c] = static_cast<int>(k);
       }
     }

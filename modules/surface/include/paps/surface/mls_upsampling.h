@@ -91,6 +91,11 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius);
+/// Same, with a disc per point: point i spreads its seeds over a disc of radius
+/// (*disc_scale)[i] x disc_radius (each scale in (0, 1]; null: 1 for every point).
+Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
+                          float disc_radius, std::uint64_t seed, std::vector<int>* origin,
+                          const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale);
 
 namespace detail {
 /// For tests: one sequential dart-throwing pass of the seed thinner over `cand` in index order

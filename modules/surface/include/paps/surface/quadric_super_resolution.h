@@ -63,6 +63,13 @@ struct QuadricSuperResolutionParameters {
   /// into the gaps: on the scan-line bench 0.6 lands 0.6x as far from the surface as 1.2
   /// (docs/superresolution.md, "Scan-line sampling").
   float seed_disc = 1.2f;
+  /// Scale of the seed disc of a point whose ball at R is too thin for a quadric (along one or
+  /// two LiDAR scan lines, a strip, a sparse part; QuadricFit::conditioning < 1e-3), in (0, 1];
+  /// 1 disables. Across such a ball the surface is an extrapolation, so its seeds stay nearer
+  /// the returns. 0.5 (default) puts the default disc's output on the scan-line bench as close
+  /// to the ground as a global seed_disc of 0.6, while evenly sampled parts keep the wide
+  /// disc (docs/superresolution.md, "Narrower seed discs on thin balls").
+  float thin_disc = 0.5f;
   /// Where the ball of radius R holds fewer distinct positions than the quadric's 6 unknowns,
   /// refit it on the nearest target_neighbours distinct positions
   /// (exact duplicates counted once), at the radius they need. Also where the ball is too
@@ -111,6 +118,9 @@ struct QuadricSuperResolutionReport {
   /// along one or two scan lines of a LiDAR, a strip), all scans: their fit is remade on a
   /// wider support that reaches across (counted in widened_fits when kept).
   std::size_t thin_balls = 0;
+  /// Points of the first scan whose ball at R is too thin for a quadric (sparse or not), which
+  /// seed over discs narrowed by thin_disc.
+  std::size_t narrowed_discs = 0;
   std::size_t without_similar = 0;  ///< patches of the first scan with no similar patch
   /// Points of the first scan that seed and anchor the output without a comparable descriptor
   /// (rims, sparse parts): their patch is their quadric alone.
@@ -160,6 +170,7 @@ class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, Point
   void setNoiseSigma(float s) { auto p = params_; p.noise_sigma = s; setParameters(p); }
   /// Seed disc radius in mean input spacings (default 1.2; about 0.6 for scan-line LiDAR).
   void setSeedDisc(float spacings) { auto p = params_; p.seed_disc = spacings; setParameters(p); }
+  void setThinDisc(float scale) { auto p = params_; p.thin_disc = scale; setParameters(p); }
   void addScan(const typename pcl::PointCloud<PointIn>::ConstPtr& scan) { extra_.push_back(scan); }
   void clearScans() { extra_.clear(); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }

@@ -111,10 +111,11 @@ constexpr int kSparseBall = 6;
 // the wider radius: a half disc has 0.42, a quarter disc 0.60, a full uniform disc 0.
 constexpr float kOneSided = 0.3f;
 // Ridge on the slopes of the SR bins' local linear fit, in units of the weight sum (offsets in
-// kernel widths). Measured on the bench against a plain first-order fit (session 12): rs1 to
-// the surface -3% (0.01%, default disc) and -9% (narrow disc), scan-lines -8 to -11%, the
-// engraved plane within 1%; the protocol error (nearest output) +0.3 to +0.6% on rs1. A
-// zero-order fit (infinite ridge) loses 1.5-4% on the plane at 0.01% noise.
+// kernel widths). Measured on the bench (session 12) against session 11's fit (pivoted LDLT,
+// the mean below a pivot of 1e-3): rs1 at 0.01% -3% (default disc) and -9% (narrow disc) to
+// the surface, scan lines -8%, the engraved plane within 1.1%; the protocol error (nearest
+// output) +0.3 to +0.5% on rs1. A plain first-order fit is 11% worse on scan lines, a
+// zero-order one (infinite ridge) 1.5-4% worse on the plane at 0.01% noise.
 constexpr double kSlopeRidge = 0.3;
 
 // Whether nb[0..count) holds fewer than `limit` distinct positions (by `first`).

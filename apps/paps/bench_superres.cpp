@@ -58,12 +58,13 @@ const char* kUsage =
     "                   scan-lines: a simulated LiDAR pass over a wavy ground, every return stored\n"
     "                   twice, 5 mm range noise, upsampled x4; errors to the analytic ground)\n"
     "  --noises LIST    comma-separated noise fractions of the diagonal (default 0.0001,0.001,0.005)\n"
-    "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-narrow, qsr-adapt,\n"
-    "                   qsr-4scans, apss,\n"
+    "  --methods LIST   comma-separated subset of the methods (default all): qsr, qsr-narrow, qsr-even,\n"
+    "                   qsr-adapt, qsr-4scans, apss,\n"
     "                   apss-refit, apss-wide, rimls, rimls-refit, rimls-wide, pcl-mls-plane,\n"
     "                   pcl-mls-random, pcl-mls-voxel, simden+mls, seeds-only (also filters the speed\n"
     "                   test) (-refit: fit at every seed; -wide: seed discs as wide as QSR's;\n"
     "                   qsr-narrow: QSR with --seed-disc 0.6 (seeds near the returns);\n"
+    "                   qsr-even: QSR with --thin-disc 1 (the same disc for thin balls);\n"
     "                   qsr-adapt: QSR on the raw scan with the opt-in noise-adaptive kernel; qsr-raw: QSR without\n"
     "                   denoising the input first; seeds-only: a control,\n"
     "                   the seeds on the noisy input's tangent discs, projected on no surface)\n";
@@ -235,10 +236,11 @@ int runSuperresWorker(int argc, char** argv) {
     timespec c0{};
     clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &c0);
     Positions out;
-    if (method == "qsr" || method == "qsr-adapt" || method == "qsr-raw" || method == "qsr-narrow") {
+    if (method == "qsr" || method == "qsr-adapt" || method == "qsr-raw" || method == "qsr-narrow" || method == "qsr-even") {
       QuadricSuperResolutionParameters q;
       q.output_count = target;
       if (method == "qsr-narrow") q.seed_disc = 0.6f;
+      if (method == "qsr-even") q.thin_disc = 1.f;  // before session 12: one disc everywhere
       q.adapt_to_noise = method == "qsr-adapt";
       // qsr-adapt: the adaptive kernel acts on raw scans only (a denoised scan gets the quiet one).
       if (method == "qsr-raw" || method == "qsr-adapt") q.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
@@ -301,14 +303,14 @@ int runBenchSuperres(int argc, char** argv) {
   const std::size_t n_speed = static_cast<std::size_t>(a.number("speed", quick ? 30000 : 100000));
   if (n_dense < 1000) throw InvalidParameter("points", std::to_string(n_dense), "at least 1000");
   std::filesystem::create_directories(out_dir);
-  const std::vector<std::string> all_methods = {"qsr",           "qsr-narrow",     "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",
+  const std::vector<std::string> all_methods = {"qsr",           "qsr-narrow",     "qsr-even",       "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",
                                                 "apss-wide",     "rimls",          "rimls-refit",    "rimls-wide",
                                                 "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls",
                                                 "qsr-raw", "seeds-only"};
   const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", "")) : all_methods;
   for (const auto& m : methods)
     if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
-      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-narrow, qsr-adapt, qsr-4scans, apss, apss-refit, apss-wide, "
+      throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-narrow, qsr-even, qsr-adapt, qsr-4scans, apss, apss-refit, apss-wide, "
                                            "rimls, rimls-refit, rimls-wide, pcl-mls-plane, pcl-mls-random, "
                                            "pcl-mls-voxel, simden+mls, qsr-raw, seeds-only");
   const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1,scan-lines"));

@@ -145,13 +145,14 @@ elseif(CASE STREQUAL "superres_seed_disc")
   expect_one_error_line("thin-disc")
 elseif(CASE STREQUAL "bench_superres_scan_lines")
   # The bench's scan-line shape end to end (child processes, table, CSV): QSR with the narrow
-  # disc lands closer to the analytic ground than APSS and PCL MLS (bench: 1.662e-3 against
-  # 4.113e-3 and 3.784e-3).
+  # disc lands closer to the analytic ground than APSS and PCL MLS (bench: 1.261e-3 against
+  # 4.113e-3 and 3.784e-3), and the default (thin balls on half discs) closer than qsr-even,
+  # the same disc everywhere (1.534e-3 against 2.540e-3).
   set(output ${dir}/bench/superres.csv)
   run_paps(bench superres --out ${dir}/bench --speed 0 --points 20000 --shapes scan-lines
-           --methods qsr-narrow,apss,pcl-mls-plane)
+           --methods qsr,qsr-even,qsr-narrow,apss,pcl-mls-plane)
   expect_success_saying("qsr-narrow / best = 0\\.[0-9]+")
-  foreach(m qsr-narrow apss pcl-mls-plane)
+  foreach(m qsr qsr-even qsr-narrow apss pcl-mls-plane)
     if(NOT out MATCHES "scan-lines +5mm +${m} +41760 +[0-9.]+ +[0-9]+ +[0-9.e+-]+ +([0-9.e+-]+)")
       message(FATAL_ERROR "no scan-lines row for ${m}: ${out}")
     endif()
@@ -160,10 +161,13 @@ elseif(CASE STREQUAL "bench_superres_scan_lines")
   if(NOT g_qsr-narrow LESS g_apss OR NOT g_qsr-narrow LESS g_pcl-mls-plane)
     message(FATAL_ERROR "qsr-narrow (${g_qsr-narrow}) not closer to the ground than apss (${g_apss}) and PCL (${g_pcl-mls-plane})")
   endif()
+  if(NOT g_qsr LESS g_qsr-even)
+    message(FATAL_ERROR "qsr (${g_qsr}) not closer to the ground than qsr-even (${g_qsr-even})")
+  endif()
   file(STRINGS ${output} rows)
   list(LENGTH rows n)
-  if(NOT n EQUAL 5)
-    message(FATAL_ERROR "superres.csv: expected a header, the input and 3 rows, got ${n} lines")
+  if(NOT n EQUAL 7)
+    message(FATAL_ERROR "superres.csv: expected a header, the input and 5 rows, got ${n} lines")
   endif()
 elseif(CASE STREQUAL "superres_max_neighbours")
   # APSS/RIMLS kernel cap: out of range is one error line; a cap below the typical count

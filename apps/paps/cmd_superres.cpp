@@ -40,8 +40,9 @@ const char* kSuperresUsage =
     "                         not denoised first (a denoised scan gets the quiet kernel)\n"
     "  --denoise WHEN         QSR: denoise the scans first (paps denoise's default): auto (default:\n"
     "                         when the measured noise is at least 5% of the patch radius), on, off;\n"
-    "                         on also pays on quieter scans of smooth scenes (scan-line bench: 17%\n"
-    "                         closer to the ground) but costs detailed surfaces their detail\n"
+    "                         auto also denoises from 0.5% when the surface is smooth at the patch\n"
+    "                         scale (scan-line bench: 17% closer to the ground); on denoises always,\n"
+    "                         which costs detailed, quiet surfaces their detail\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
     "  --seed-disc S          radius of the tangent discs the output seeds are spread over, in mean\n"
@@ -140,7 +141,13 @@ int runSuperres(int argc, char** argv) {
                   r.narrowed_discs, p.thin_disc, a.has("thin-disc") ? "" : " (--thin-disc)");
     if (r.denoised)
       std::printf("QSR: the scan%s denoised first (paps denoise's default)%s\n", scans.size() > 1 ? "s were" : " was",
-                  p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? "" : ": noise >= 5% of the patch radius");
+                  p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? ""
+                  : r.noise_growth > 0 ? ": the surface is smooth at the patch scale (noise over balls of 2R / R below 1.3)"
+                                       : ": noise >= 5% of the patch radius");
+    if (r.noise_growth > 0)
+      std::printf("QSR: noise over balls of 2R / over balls of R = %.2f: %s\n", r.noise_growth,
+                  r.denoised ? "smooth at the patch scale (below 1.3), denoised first"
+                             : "relief at the patch scale (1.3 or more), not denoised");
     if (r.quadric_only)
       std::printf("QSR: %zu points without a comparable descriptor (rims, sparse parts) anchor the output by their quadric alone\n",
                   r.quadric_only);

@@ -403,12 +403,6 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
-                          const NeighbourGraph* graph, float graph_radius) {
-  return upsamplingSeeds(points, normals, count, disc_radius, seed, origin, graph, graph_radius, nullptr);
-}
-
-Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
-                          float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale) {
   requirePositive("disc_radius", disc_radius);
   if (normals.size() != points.size())

@@ -195,7 +195,8 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   bool smooth_and_noisy = false;
   if (params.denoise_input == Denoise::Auto && R > 0 && noise >= kSmoothNoise * R && noise < kQuietNoise * R) {
     try {
-      const float at_r = estimateNoiseLevel(scans[0], *sc[0].nh.index, R).sigma;
+      // The noise at R is the one measured above, unless the caller gave it.
+      const float at_r = rep.noise_estimated ? noise : estimateNoiseLevel(scans[0], *sc[0].nh.index, R).sigma;
       const float at_2r = estimateNoiseLevel(scans[0], *sc[0].nh.index, 2 * R).sigma;
       if (at_r > 0) {
         rep.noise_growth = at_2r / at_r;
@@ -279,11 +280,11 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
         // A ball both sparse and thin is a sparse one (36 positions, as since session 10): sent
         // through the thin widening instead, such balls lost session 10's gain on rs1 at 0.01%
         // noise (bench protocol error 2.129e-1 to 2.142e-1 against 1.989e-1).
-        const bool thin = params.widen_sparse_fits && fits[gi].conditioning < kThinSupport;
+        thin_ball[gi] = fits[gi].conditioning < kThinSupport;
+        const bool thin = params.widen_sparse_fits && thin_ball[gi];
         const bool sparse = (ill || thin) && params.widen_sparse_fits &&
                             distinctFewerThan(first, g.begin(i), g.count(i), kSparseBall, kept);
         if (thin && !sparse) ++thin_balls;
-        thin_ball[gi] = fits[gi].conditioning < kThinSupport;
         if ((ill && sparse) || thin) {
           float wide_radius = 0;
           QuadricFit wide;

@@ -87,15 +87,13 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 /// Same, given the complete neighbour lists of `points` within `graph_radius` (no truncation),
 /// which spare the thinning its own grid. They are used when graph_radius >= d + 2 disc_radius
 /// (d the Poisson-disk radius), as is the case for the kernel neighbourhoods of APSS and RIMLS;
-/// the seeds are the same with or without them.
+/// the seeds are the same with or without them (null graph: the thinner's own grid). With
+/// `disc_scale`, point i spreads its seeds over a disc of radius (*disc_scale)[i] x disc_radius
+/// (each scale in (0, 1]; null: 1 for every point).
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
-                          const NeighbourGraph* graph, float graph_radius);
-/// Same, with a disc per point: point i spreads its seeds over a disc of radius
-/// (*disc_scale)[i] x disc_radius (each scale in (0, 1]; null: 1 for every point).
-Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
-                          float disc_radius, std::uint64_t seed, std::vector<int>* origin,
-                          const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale);
+                          const NeighbourGraph* graph, float graph_radius,
+                          const std::vector<float>* disc_scale = nullptr);
 
 namespace detail {
 /// For tests: one sequential dart-throwing pass of the seed thinner over `cand` in index order

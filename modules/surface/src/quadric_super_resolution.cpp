@@ -473,9 +473,14 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
 #pragma omp parallel
     {
       std::vector<Eigen::Vector3f> mapped;
-      std::vector<float> mw, hk, wk, uk, vk, rw;
+      std::vector<float> mw;
       std::vector<float> xs(m), ys(m);
-      std::vector<int> row;  // the mapped points within the kernel's cut of the current bin row
+      // The points within the kernel's cut band of the current bin row (structure of arrays,
+      // so that the kernel weights, their exp and the fit's sums run on SIMD packets), and the
+      // points within the cut of the current bin: height over the bin's tangent plane, weight,
+      // offset in units of the kernel width, IRLS weight.
+      Eigen::ArrayXf rx, ry, rz, rwt, kw;
+      Eigen::ArrayXf hk, wk, uk, vk, rw;
 #pragma omp for schedule(dynamic, 128)
       for (std::int64_t i = 0; i < n; ++i) {
         if (pr.cancelled() || !usable[i]) continue;
@@ -501,49 +506,55 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
           xs[k] = parabolaAbscissaForArcLength(0.5f * f0.k1, (k - half) * d_sr);
           ys[k] = parabolaAbscissaForArcLength(0.5f * f0.k2, (k - half) * d_sr);
         }
+        const Eigen::Index nm = static_cast<Eigen::Index>(mapped.size());
+        if (rx.size() < nm) {
+          for (Eigen::ArrayXf* a : {&rx, &ry, &rz, &rwt, &kw, &hk, &wk, &uk, &vk, &rw}) a->resize(nm);
+        }
         for (int by = 0; by < m; ++by) {
           // A point outside the cut's band of this row is outside the cut of all its bins.
-          // Kept in the order of `mapped`, so the sums below add in the same order as a scan
-          // of every point would (the same output, bit for bit).
-          row.clear();
-          for (std::size_t k = 0; k < mapped.size(); ++k) {
+          Eigen::Index nr = 0;
+          for (Eigen::Index k = 0; k < nm; ++k) {  // branch-free, as the cut below
             const float dy = mapped[k].y() - ys[by];
-            if (dy * dy <= cut2) row.push_back(static_cast<int>(k));
+            rx[nr] = mapped[k].x();
+            ry[nr] = mapped[k].y();
+            rz[nr] = mapped[k].z();
+            rwt[nr] = mw[k];
+            nr += (dy * dy <= cut2);
           }
           for (int bx = 0; bx < m; ++bx) {
             const Eigen::Vector3f c(xs[bx], ys[by], f0.height(xs[bx], ys[by]));
             const Eigen::Vector3f nb = f0.normalAt(c.x(), c.y());
-            // The points within the kernel's cut: height over the bin's tangent plane, weight,
-            // and offset in units of the kernel width.
-            hk.clear();
-            wk.clear();
-            uk.clear();
-            vk.clear();
-            double sw = 0, sh = 0;
-            for (const int k : row) {
-              const float dx = mapped[k].x() - c.x(), dy = mapped[k].y() - c.y();
-              if (dx * dx + dy * dy > cut2) continue;
-              const Eigen::Vector3f d = mapped[k] - c;
-              const float h = d.dot(nb);
-              const float t2 = std::max(0.f, d.squaredNorm() - h * h);
-              const float w = mw[k] * std::exp(-t2 * inv_2s2);
-              hk.push_back(h);
-              wk.push_back(w);
-              uk.push_back(dx * inv_sigma_sr);
-              vk.push_back(dy * inv_sigma_sr);
-              sw += w;
-              sh += w * h;
+            // The points within the kernel's cut, in the band's order (branch-free: every
+            // point is written, the count only moves past those inside), then their height over
+            // the bin's tangent plane and kernel weight on SIMD packets.
+            Eigen::Index nk = 0;
+            for (Eigen::Index k = 0; k < nr; ++k) {
+              const float dx = rx[k] - c.x(), dy = ry[k] - c.y();
+              uk[nk] = dx;
+              vk[nk] = dy;
+              hk[nk] = rz[k] - c.z();
+              wk[nk] = rwt[k];
+              nk += (dx * dx + dy * dy <= cut2);
             }
+            {
+              auto dx = uk.head(nk), dy = vk.head(nk), dz = hk.head(nk), w = wk.head(nk);
+              kw.head(nk) = dx.square() + dy.square() + dz.square();  // squared distance
+              dz = dx * nb.x() + dy * nb.y() + dz * nb.z();                 // now the height h
+              w *= (-inv_2s2 * (kw.head(nk) - dz.square()).max(0.f)).exp();
+              dx *= inv_sigma_sr;
+              dy *= inv_sigma_sr;
+            }
+            const double sw = nk ? static_cast<double>(wk.head(nk).sum()) : 0.0;
             if (!(sw > 1e-6)) {  // a hole: interpolate at the input spacing
-              sw = sh = 0;
+              double hsw = 0, hsh = 0;
               for (std::size_t k = 0; k < mapped.size(); ++k) {
                 const Eigen::Vector3f d = mapped[k] - c;
                 const float h = d.dot(nb);
                 const float w = mw[k] * std::exp(-std::max(0.f, d.squaredNorm() - h * h) * inv_wide2);
-                sw += w;
-                sh += w * h;
+                hsw += w;
+                hsh += w * h;
               }
-              if (sw > 1e-12) srh[(i * m + by) * m + bx] = static_cast<float>(sh / sw);
+              if (hsw > 1e-12) srh[(i * m + by) * m + bx] = static_cast<float>(hsh / hsw);
               continue;
             }
             // Local linear kernel regression h ~ c0 + c1 u + c2 v, l1 by IRLS. The slopes take
@@ -551,23 +562,29 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
             // or v (along a scan line, at a rim) the fit leans towards the weighted mean
             // instead of extrapolating a slope. The 3 x 3 normal equations are solved by LDL^T
             // (the ridge keeps every pivot at least kSlopeRidge x the weight sum).
-            const std::size_t nk = hk.size();
-            float est = static_cast<float>(sh / sw);
-            rw.assign(nk, 1.f);
+            const auto h = hk.head(nk), u = uk.head(nk), v = vk.head(nk);
+            float est = 0.f;
+            rw.head(nk).setOnes();
             for (int pass = 0; pass <= params.irls_iterations; ++pass) {
-              double s0w = 0, su = 0, sv = 0, suu = 0, suv = 0, svv = 0, b0 = 0, bu = 0, bv = 0;
-              for (std::size_t k = 0; k < nk; ++k) {
-                const double w = static_cast<double>(wk[k]) * rw[k], u = uk[k], v = vk[k], wh = w * hk[k];
-                s0w += w;
-                su += w * u;
-                sv += w * v;
-                suu += w * u * u;
-                suv += w * u * v;
-                svv += w * v * v;
-                b0 += wh;
-                bu += wh * u;
-                bv += wh * v;
+              // The nine sums in one pass, on SIMD lanes (the lane order is fixed by the
+              // build, so the result does not depend on the run or the thread count).
+              float fs0 = 0, fsu = 0, fsv = 0, fsuu = 0, fsuv = 0, fsvv = 0, fb0 = 0, fbu = 0, fbv = 0;
+              const float *pw = wk.data(), *pr = rw.data(), *ph = hk.data(), *pu = uk.data(), *pv = vk.data();
+#pragma omp simd reduction(+ : fs0, fsu, fsv, fsuu, fsuv, fsvv, fb0, fbu, fbv)
+              for (Eigen::Index k = 0; k < nk; ++k) {
+                const float w = pw[k] * pr[k], wu = w * pu[k], wv = w * pv[k], wh = w * ph[k];
+                fs0 += w;
+                fsu += wu;
+                fsv += wv;
+                fsuu += wu * pu[k];
+                fsuv += wu * pv[k];
+                fsvv += wv * pv[k];
+                fb0 += wh;
+                fbu += wh * pu[k];
+                fbv += wh * pv[k];
               }
+              const double s0w = fs0, su = fsu, sv = fsv, suv = fsuv, b0 = fb0, bu = fbu, bv = fbv;
+              double suu = fsuu, svv = fsvv;
               if (!(s0w > 1e-12)) break;
               suu += kSlopeRidge * s0w;
               svv += kSlopeRidge * s0w;
@@ -579,8 +596,11 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
               const double cv = y2 / d2, cu = y1 / d1 - l21 * cv, c0 = b0 / s0w - l1 * cu - l2 * cv;
               est = static_cast<float>(c0);
               if (pass == params.irls_iterations) break;
-              for (std::size_t k = 0; k < nk; ++k)
-                rw[k] = l1Weight(static_cast<float>(hk[k] - (c0 + cu * uk[k] + cv * vk[k])), 0.1f * sigma_sr);
+              // l1Weight (paps/core/irls.h) on packets.
+              rw.head(nk) = (h - (static_cast<float>(c0) + static_cast<float>(cu) * u + static_cast<float>(cv) * v))
+                                .abs()
+                                .max(0.1f * sigma_sr)
+                                .inverse();
             }
             srh[(i * m + by) * m + bx] = est;
           }

@@ -146,7 +146,6 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
           buf.push_back(s == t ? static_cast<std::uint32_t>(original_[s])
                                : distanceIndexKey(d2, original_[s]) + (std::uint64_t(1) << 32));
         });
-        std::sort(buf.begin(), buf.end());
         if (max_count > 0 && buf.size() > static_cast<std::size_t>(max_count)) {
           if (overflow) {
             list.clear();
@@ -155,8 +154,13 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
             found[c].insert(found[c].end(), list.begin(), list.end());
             continue;
           }
+          // The keys are distinct (they hold the index): selecting the max_count smallest and
+          // sorting only those gives the lists a full sort would, without sorting the rest of
+          // a crowded ball (bun0: thousands of points in the balls of its dense parts).
+          std::nth_element(buf.begin(), buf.begin() + max_count, buf.end());
           buf.resize(static_cast<std::size_t>(max_count));
         }
+        std::sort(buf.begin(), buf.end());
         cnt[original_[t]] = static_cast<int>(buf.size());
         for (const std::uint64_t e : buf) found[c].push_back(static_cast<int>(e & 0xFFFFFFFFu));
       }

@@ -478,9 +478,9 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
       // The points within the kernel's cut band of the current bin row (structure of arrays,
       // so that the kernel weights, their exp and the fit's sums run on SIMD packets), and the
       // points within the cut of the current bin: height over the bin's tangent plane, weight,
-      // offset in units of the kernel width, IRLS weight.
-      Eigen::ArrayXf rx, ry, rz, rwt, kw;
-      Eigen::ArrayXf hk, wk, uk, vk, rw;
+      // offset in units of the kernel width, IRLS weight, squared distance to the bin centre.
+      Eigen::ArrayXf rx, ry, rz, rwt;
+      Eigen::ArrayXf hk, wk, uk, vk, rw, dist2;
 #pragma omp for schedule(dynamic, 128)
       for (std::int64_t i = 0; i < n; ++i) {
         if (pr.cancelled() || !usable[i]) continue;
@@ -508,7 +508,7 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
         }
         const Eigen::Index nm = static_cast<Eigen::Index>(mapped.size());
         if (rx.size() < nm) {
-          for (Eigen::ArrayXf* a : {&rx, &ry, &rz, &rwt, &kw, &hk, &wk, &uk, &vk, &rw}) a->resize(nm);
+          for (Eigen::ArrayXf* a : {&rx, &ry, &rz, &rwt, &hk, &wk, &uk, &vk, &rw, &dist2}) a->resize(nm);
         }
         for (int by = 0; by < m; ++by) {
           // A point outside the cut's band of this row is outside the cut of all its bins.
@@ -538,13 +538,13 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
             }
             {
               auto dx = uk.head(nk), dy = vk.head(nk), dz = hk.head(nk), w = wk.head(nk);
-              kw.head(nk) = dx.square() + dy.square() + dz.square();  // squared distance
-              dz = dx * nb.x() + dy * nb.y() + dz * nb.z();                 // now the height h
-              w *= (-inv_2s2 * (kw.head(nk) - dz.square()).max(0.f)).exp();
+              dist2.head(nk) = dx.square() + dy.square() + dz.square();
+              dz = dx * nb.x() + dy * nb.y() + dz * nb.z();  // now the height h
+              w *= (-inv_2s2 * (dist2.head(nk) - dz.square()).max(0.f)).exp();
               dx *= inv_sigma_sr;
               dy *= inv_sigma_sr;
             }
-            const double sw = nk ? static_cast<double>(wk.head(nk).sum()) : 0.0;
+            const double sw = wk.head(nk).sum();  // 0 when no point is within the cut
             if (!(sw > 1e-6)) {  // a hole: interpolate at the input spacing
               double hsw = 0, hsh = 0;
               for (std::size_t k = 0; k < mapped.size(); ++k) {

@@ -15,6 +15,7 @@
 #ifndef PAPS_CODEC_LEAN
 #include <paps/core/cloud_io.h>
 #endif
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
 
 #include "cli_common.h"
@@ -83,15 +84,6 @@ void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b
   }
 }
 
-// Bytes from the stream's position to its end (the position is kept).
-std::uint64_t bytesLeft(std::ifstream& f) {
-  const std::streampos here = f.tellg();
-  f.seekg(0, std::ios::end);
-  const std::uint64_t left = std::uint64_t(f.tellg() - here);
-  f.seekg(here);
-  return left;
-}
-
 // Reads `count` fixed-size binary records of `step` bytes by chunks (no whole-file buffer),
 // appending fn(record) to `out`; the caller has checked that the file holds them.
 template <typename Fn>
@@ -142,176 +134,116 @@ void lzfDecompress(const std::uint8_t* in, std::size_t in_size, std::uint8_t* ou
 // Reads the x y z of a binary or binary_compressed PCD file whose x, y and z are float
 // fields, without PCL's whole-cloud copies, so the peak memory of `compress` stays near the
 // cloud's own 12 bytes per point (binary_compressed needs its unpacked data once more).
-// Returns false for any other file (the caller then uses PCL, or paps-codec says why not).
+// The header is parsed and checked against the file's size by paps::readPcdLayout (a bad
+// one throws). Returns false for another layout (the caller then uses PCL, or paps-codec
+// says why not).
 bool readBinaryPcdXyz(const std::string& path, Positions& out) {
   if (std::filesystem::path(path).extension() != ".pcd") return false;
-  std::ifstream f(path, std::ios::binary);
-  if (!f) return false;
-  std::vector<std::string> fields;
-  std::vector<int> sizes, counts;
-  std::vector<char> types;
-  std::size_t points = 0;
-  bool have_points = false;
-  std::string line;
-  for (int lines = 0; lines < 32 && std::getline(f, line); ++lines) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.empty() || line[0] == '#') continue;
-    std::istringstream ss(line);
-    std::string key, v;
-    ss >> key;
-    if (key == "FIELDS") { while (ss >> v) fields.push_back(v); }
-    else if (key == "SIZE") { while (ss >> v) sizes.push_back(std::atoi(v.c_str())); }
-    else if (key == "TYPE") { while (ss >> v) types.push_back(v.empty() ? '?' : v[0]); }
-    else if (key == "COUNT") { while (ss >> v) counts.push_back(std::atoi(v.c_str())); }
-    else if (key == "POINTS") { long long c = -1; ss >> c; if (c < 0) return false; points = std::size_t(c); have_points = true; }
-    else if (key == "DATA") {
-      ss >> v;
-      const bool packed = v == "binary_compressed";
-      if ((v != "binary" && !packed) || !have_points || fields.empty() || sizes.size() != fields.size() ||
-          types.size() != fields.size())
-        return false;
-      if (counts.empty()) counts.assign(fields.size(), 1);
-      if (counts.size() != fields.size()) return false;
-      // off: byte offset of x, y, z inside a point (binary) or of their column (packed).
-      std::size_t step = 0, off[3] = {0, 0, 0};
-      bool found[3] = {false, false, false};
-      for (std::size_t i = 0; i < fields.size(); ++i) {
-        const char* xyz[3] = {"x", "y", "z"};
-        if (sizes[i] <= 0 || sizes[i] > 8 || counts[i] <= 0 || counts[i] > 1 << 20) return false;
-        for (int a = 0; a < 3; ++a)
-          if (fields[i] == xyz[a]) {
-            if (types[i] != 'F' || sizes[i] != 4 || counts[i] != 1) return false;
-            off[a] = packed ? step * points : step;
-            found[a] = true;
-          }
-        step += std::size_t(sizes[i]) * std::size_t(counts[i]);
-      }
-      if (!found[0] || !found[1] || !found[2]) return false;
-      const std::uint64_t left = bytesLeft(f);
-      out.clear();
-      if (packed) {
-        std::uint32_t sz[2];
-        if (left < 8 || !f.read(reinterpret_cast<char*>(sz), 8)) throw IoError("cannot read '" + path + "': truncated data");
-        if (sz[0] > left - 8) throw IoError("cannot read '" + path + "': truncated data");
-        if (std::uint64_t(sz[1]) != std::uint64_t(points) * step)
-          throw IoError("cannot read '" + path + "': binary_compressed size does not match POINTS");
-        // LZF turns 3 bytes into at most 264: a larger claim is a corrupt header, not a reason
-        // to allocate gigabytes.
-        if (std::uint64_t(sz[1]) > std::uint64_t(sz[0]) * 88 + 1024)
-          throw IoError("cannot read '" + path + "': corrupt binary_compressed data");
-        std::vector<std::uint8_t> packed_bytes(sz[0]), raw(sz[1]);
-        if (!f.read(reinterpret_cast<char*>(packed_bytes.data()), std::streamsize(sz[0])))
-          throw IoError("cannot read '" + path + "': truncated data");
-        lzfDecompress(packed_bytes.data(), packed_bytes.size(), raw.data(), raw.size(), path);
-        packed_bytes = {};
-        out.resize(points);
-        for (std::size_t i = 0; i < points; ++i)
-          for (int a = 0; a < 3; ++a) std::memcpy(&out[i][a], raw.data() + off[a] + 4 * i, 4);
-        return true;
-      }
-      if (left < std::uint64_t(points) * step) throw IoError("cannot read '" + path + "': truncated data");
-      readRecords(f, points, step, path, out, [&](const char* rec) {
-        Eigen::Vector3f p;
-        for (int a = 0; a < 3; ++a) std::memcpy(&p[a], rec + off[a], 4);
-        return p;
-      });
-      return true;
-    }
+  const PcdLayout L = readPcdLayout(path);
+  if (L.data == PcdLayout::Data::Ascii) return false;
+  const bool packed = L.data == PcdLayout::Data::BinaryCompressed;
+  // off: byte offset of x, y, z inside a point (binary) or of their column (packed).
+  std::size_t off[3];
+  const char* xyz[3] = {"x", "y", "z"};
+  for (int a = 0; a < 3; ++a) {
+    const int i = L.field(xyz[a]);
+    if (i < 0 || L.types[std::size_t(i)] != 'F' || L.sizes[std::size_t(i)] != 4 || L.counts[std::size_t(i)] != 1)
+      return false;
+    off[a] = std::size_t(packed ? L.offsetOf(i) * L.points : L.offsetOf(i));
   }
-  return false;
+  const std::size_t points = std::size_t(L.points), step = std::size_t(L.point_step);
+  std::ifstream f(path, std::ios::binary);
+  f.seekg(std::streamoff(L.data_offset));
+  if (!f) throw IoError("cannot read '" + path + "': read failed");
+  out.clear();
+  if (packed) {
+    if (points == 0) return true;
+    std::uint32_t sz[2];  // packed and unpacked sizes, checked against the file by readPcdLayout
+    if (!f.read(reinterpret_cast<char*>(sz), 8)) throw IoError("cannot read '" + path + "': truncated data");
+    std::vector<std::uint8_t> packed_bytes(sz[0]), raw(sz[1]);
+    if (!f.read(reinterpret_cast<char*>(packed_bytes.data()), std::streamsize(sz[0])))
+      throw IoError("cannot read '" + path + "': truncated data");
+    lzfDecompress(packed_bytes.data(), packed_bytes.size(), raw.data(), raw.size(), path);
+    packed_bytes = {};
+    out.resize(points);
+    for (std::size_t i = 0; i < points; ++i)
+      for (int a = 0; a < 3; ++a) std::memcpy(&out[i][a], raw.data() + off[a] + 4 * i, 4);
+    return true;
+  }
+  readRecords(f, points, step, path, out, [&](const char* rec) {
+    Eigen::Vector3f p;
+    for (int a = 0; a < 3; ++a) std::memcpy(&p[a], rec + off[a], 4);
+    return p;
+  });
+  return true;
 }
 
 // Reads the vertex x y z of an ascii or binary_little_endian PLY file whose first element is
 // the vertices (as scanners and mesh tools write them) and whose x, y, z are float or double;
-// other vertex properties are skipped and later elements (faces) are not read. Returns false
-// for any other file (the caller then uses PCL, or paps-codec says why not).
+// other vertex properties are skipped and later elements (faces) are not read. The header is
+// parsed and checked by paps::readPlyLayout (a bad one throws). Returns false for another
+// layout (the caller then uses PCL, or paps-codec says why not).
 bool readPlyXyz(const std::string& path, Positions& out) {
   if (std::filesystem::path(path).extension() != ".ply") return false;
-  std::ifstream f(path, std::ios::binary);
-  if (!f) return false;
-  std::string line, format;
-  std::getline(f, line);
-  if (line != "ply" && line != "ply\r") return false;
-  std::size_t vertices = 0;
-  bool in_vertex = false, vertex_seen = false;
-  struct Property { int size; char kind; int axis; };  // kind: 'i' signed, 'u' unsigned, 'f' float
-  std::vector<Property> props;
-  auto typeOf = [](const std::string& t, int& size, char& kind) {
-    static const struct { const char* name; int size; char kind; } types[] = {
-        {"char", 1, 'i'}, {"int8", 1, 'i'}, {"uchar", 1, 'u'}, {"uint8", 1, 'u'}, {"short", 2, 'i'},
-        {"int16", 2, 'i'}, {"ushort", 2, 'u'}, {"uint16", 2, 'u'}, {"int", 4, 'i'}, {"int32", 4, 'i'},
-        {"uint", 4, 'u'}, {"uint32", 4, 'u'}, {"float", 4, 'f'}, {"float32", 4, 'f'}, {"double", 8, 'f'},
-        {"float64", 8, 'f'}};
-    for (const auto& x : types)
-      if (t == x.name) { size = x.size; kind = x.kind; return true; }
-    return false;
-  };
-  for (int lines = 0; lines < 200 && std::getline(f, line); ++lines) {
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    std::istringstream ss(line);
-    std::string key;
-    ss >> key;
-    if (key == "format") ss >> format;
-    else if (key == "element") {
-      std::string name;
-      long long count = -1;
-      ss >> name >> count;
-      if (vertex_seen || name != "vertex" || count < 0) { if (!vertex_seen) return false; in_vertex = false; continue; }
-      vertices = std::size_t(count);
-      in_vertex = vertex_seen = true;
-    } else if (key == "property" && in_vertex) {
-      std::string type, name;
-      ss >> type >> name;
-      Property pr{0, '?', -1};
-      if (type == "list" || !typeOf(type, pr.size, pr.kind)) return false;
-      if (name == "x") pr.axis = 0;
-      if (name == "y") pr.axis = 1;
-      if (name == "z") pr.axis = 2;
-      if (pr.axis >= 0 && pr.kind != 'f') return false;
-      props.push_back(pr);
-    } else if (key == "end_header") {
-      bool found[3] = {false, false, false};
-      for (const auto& pr : props)
-        if (pr.axis >= 0) found[pr.axis] = true;
-      if (!vertex_seen || !found[0] || !found[1] || !found[2]) return false;
-      auto bad = [&](const char* what) { return IoError("cannot read '" + path + "': " + what); };
-      out.clear();
-      if (format == "ascii") {
-        // A vertex line holds at least 6 characters ("0 0 0\n"): the header's count cannot
-        // make us reserve more than the file could hold.
-        out.reserve(std::size_t(std::min<std::uint64_t>(vertices, bytesLeft(f) / 6)));
-        for (std::size_t v = 0; v < vertices; ++v) {
-          if (!std::getline(f, line)) throw bad("truncated vertex list");
-          std::istringstream vs(line);
-          Eigen::Vector3f p;
-          for (const auto& pr : props) {
-            double value;
-            if (!(vs >> value)) throw bad("a vertex line has too few values");
-            if (pr.axis >= 0) p[pr.axis] = float(value);
-          }
-          out.push_back(p);
-        }
-        return true;
+  const PlyLayout L = readPlyLayout(path);
+  if (L.elements.empty() || L.elements[0].name != "vertex") return false;
+  const PlyLayout::Element& vertex = L.elements[0];
+  int axis_of[3] = {-1, -1, -1};
+  for (std::size_t i = 0; i < vertex.properties.size(); ++i) {
+    const PlyLayout::Property& pr = vertex.properties[i];
+    if (pr.count_size) return false;
+    for (int a = 0; a < 3; ++a)
+      if (pr.name == std::string(1, char('x' + a))) {
+        if (pr.kind != 'f') return false;
+        axis_of[a] = int(i);
       }
-      if (format != "binary_little_endian") return false;
-      std::size_t step = 0;
-      for (const auto& pr : props) step += std::size_t(pr.size);
-      if (bytesLeft(f) < std::uint64_t(vertices) * step) throw bad("truncated data");
-      readRecords(f, vertices, step, path, out, [&](const char* rec) {
-        Eigen::Vector3f p;
-        for (const auto& pr : props) {
-          if (pr.axis >= 0) {
-            if (pr.size == 4) { float v; std::memcpy(&v, rec, 4); p[pr.axis] = v; }
-            else { double v; std::memcpy(&v, rec, 8); p[pr.axis] = float(v); }
-          }
-          rec += pr.size;
-        }
-        return p;
-      });
-      return true;
-    }
   }
-  return false;
+  if (axis_of[0] < 0 || axis_of[1] < 0 || axis_of[2] < 0) return false;
+  auto axisOf = [&](std::size_t i) {
+    for (int a = 0; a < 3; ++a)
+      if (axis_of[a] == int(i)) return a;
+    return -1;
+  };
+  const std::size_t vertices = std::size_t(vertex.count);
+  std::ifstream f(path, std::ios::binary);
+  f.seekg(std::streamoff(L.data_offset));
+  if (!f) throw IoError("cannot read '" + path + "': read failed");
+  auto bad = [&](const char* what) { return IoError("cannot read '" + path + "': " + what); };
+  out.clear();
+  if (L.format == PlyLayout::Format::Ascii) {
+    out.reserve(vertices);  // bounded by the file's size (readPlyLayout)
+    std::string line;
+    for (std::size_t v = 0; v < vertices; ++v) {
+      if (!std::getline(f, line)) throw bad("truncated vertex list");
+      std::istringstream vs(line);
+      Eigen::Vector3f p;
+      for (std::size_t i = 0; i < vertex.properties.size(); ++i) {
+        double value;
+        if (!(vs >> value)) throw bad("a vertex line has too few values");
+        const int a = axisOf(i);
+        if (a >= 0) p[a] = float(value);
+      }
+      out.push_back(p);
+    }
+    return true;
+  }
+  if (L.format != PlyLayout::Format::BinaryLittleEndian) return false;
+  std::size_t step = 0;
+  for (const auto& pr : vertex.properties) step += std::size_t(pr.size);
+  readRecords(f, vertices, step, path, out, [&](const char* rec) {
+    Eigen::Vector3f p;
+    for (std::size_t i = 0; i < vertex.properties.size(); ++i) {
+      const int a = axisOf(i);
+      const int size = vertex.properties[i].size;
+      if (a >= 0) {
+        if (size == 4) { float v; std::memcpy(&v, rec, 4); p[a] = v; }
+        else { double v; std::memcpy(&v, rec, 8); p[a] = float(v); }
+      }
+      rec += size;
+    }
+    return p;
+  });
+  return true;
 }
 
 // Writes float x y z as binary PCD or PLY straight from Positions (no PCL copies of the

@@ -87,6 +87,33 @@ endfunction()
 if(CASE STREQUAL "missing_input")
   run_paps(denoise ${dir}/does_not_exist.pcd ${output} --quiet)
   expect_one_error_line("does_not_exist.pcd")
+elseif(CASE STREQUAL "damaged_inputs")
+  # Files that crash PCL 1.13's readers (no FIELDS line, an unknown header line) or make them
+  # allocate gigabytes (counts the file cannot hold): every command refuses them with one
+  # error line naming the file, and leaves nothing behind.
+  set(head "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n")
+  set(names empty.pcd text.pcd nofields.pcd bomb.pcd bomb.ply)
+  set(contents ""
+    "9 .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n0 0 0\n"
+    "VERSION 0.7\nWIDTH 1\nPOINTS 1\nDATA ascii\n0 0 0\n"
+    "${head}WIDTH 2000000000\nHEIGHT 1\nPOINTS 2000000000\nDATA binary\n0123456789ab"
+    "ply\nformat binary_little_endian 1.0\nelement vertex 1000000000\nproperty float x\nproperty float y\nproperty float z\nend_header\n0123456789ab")
+  foreach(name content IN ZIP_LISTS names contents)
+    set(input ${dir}/${name})
+    file(WRITE ${input} "${content}")
+    foreach(command denoise curvature superres compress)
+      set(output ${dir}/out.pcd)
+      set(extra)
+      if(command STREQUAL "superres")
+        set(extra --factor 2)
+      elseif(command STREQUAL "compress")
+        set(output ${dir}/out.paps)
+      endif()
+      run_paps(${command} ${input} ${output} ${extra} --quiet)
+      expect_one_error_line("${name}")
+    endforeach()
+    file(REMOVE ${input})
+  endforeach()
 elseif(CASE STREQUAL "unknown_option")
   write_input(400)
   run_paps(denoise ${input} ${output} --no-such-option 3 --quiet)

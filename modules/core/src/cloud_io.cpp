@@ -11,6 +11,7 @@
 #include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
 
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
 
 namespace paps {
@@ -48,14 +49,25 @@ XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
 
 pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) {
   if (origin) origin->setZero();
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw IoError("cannot read '" + path + "': no such file");
-  {
-    std::ifstream probe(path, std::ios::binary);
-    if (!probe) throw IoError("cannot read '" + path + "': permission denied or unreadable");
-  }
   const std::string ext = extensionOf(path);
+  // PCL's readers trust the header (allocation from its counts, a crash without FIELDS):
+  // the header is checked against the file first, and a bad one is one clear error.
+  if (ext == ".pcd") readPcdLayout(path);
+  else if (ext == ".ply") {
+    const PlyLayout ply = readPlyLayout(path);
+    // PCL 1.13 aborts (an assert) when a vertex list changes length from one vertex to the
+    // next; per-vertex lists are not point fields anyway.
+    const int v = ply.element("vertex");
+    if (v >= 0)
+      for (const auto& p : ply.elements[std::size_t(v)].properties)
+        if (p.count_size)
+          throw IoError("cannot read '" + path + "': vertex property '" + p.name.substr(0, 40) +
+                        "' is a list (not supported)");
+  }
+  else {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+  }
   pcl::PCLPointCloud2 cloud;
   int rc = -1;
   // PCL's readers print their own complaint to stderr; our exception is the one clear line.

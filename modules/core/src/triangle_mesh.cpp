@@ -11,6 +11,7 @@
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
 
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
 
 namespace paps {
@@ -72,8 +73,10 @@ TriangleMesh loadTriangleMesh(const std::string& path) {
   // PCL's own readers, not the VTK ones: fewer dependencies and they keep faces as written.
   pcl::PolygonMesh mesh;
   int status = -1;
-  if (ext == ".ply")
+  if (ext == ".ply") {
+    readPlyLayout(path);  // a header PCL would trust into a huge allocation is refused first
     status = pcl::io::loadPLYFile(path, mesh);
+  }
   else if (ext == ".obj")
     status = pcl::io::loadOBJFile(path, mesh);
   else

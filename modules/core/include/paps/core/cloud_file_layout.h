@@ -1,0 +1,71 @@
+#pragma once
+// What the header of a .pcd or .ply file promises, parsed strictly and checked against the
+// file's size before any reader allocates for it. PCL 1.13's readers trust the header: a
+// 1 KB file that claims two billion points makes them allocate 24 GB, and a file with no
+// FIELDS line crashes PCDReader (PCL #5854). Every check here throws IoError naming the
+// file and what is wrong; nothing here depends on PCL, so the lean codec binary can use it.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace paps {
+
+/// A PCD header (PCD v0.5 to v0.7), validated.
+struct PcdLayout {
+  enum class Data { Ascii, Binary, BinaryCompressed };
+  std::vector<std::string> fields;
+  std::vector<int> sizes;    ///< bytes per value: 1, 2, 4 or 8
+  std::vector<char> types;   ///< 'I', 'U' or 'F'
+  std::vector<int> counts;   ///< values per field (1 when the header has no COUNT)
+  std::uint64_t width = 0, height = 1, points = 0;
+  Data data = Data::Ascii;
+  std::uint64_t data_offset = 0;  ///< bytes from the start of the file to the data
+  std::uint64_t point_step = 0;   ///< bytes of one point in binary data
+  std::uint64_t file_size = 0;
+
+  /// Index of a field by name, -1 when absent.
+  int field(const std::string& name) const;
+  /// Byte offset of field `i` inside a binary point (sum of the earlier fields' bytes).
+  std::uint64_t offsetOf(int i) const;
+};
+
+/// Parses and checks a PCD header: the keyword lines, equal numbers of FIELDS, SIZE, TYPE
+/// and COUNT entries, valid sizes and types, WIDTH x HEIGHT = POINTS, and data that can fit
+/// in the rest of the file (binary: POINTS x point size bytes; binary_compressed: its two
+/// size words, a packed size within the file and an unpacked size equal to POINTS x point
+/// size; ascii: at least two characters per value).
+PcdLayout readPcdLayout(const std::string& path);
+
+/// A PLY header, validated.
+struct PlyLayout {
+  enum class Format { Ascii, BinaryLittleEndian, BinaryBigEndian };
+  struct Property {
+    std::string name;
+    int size = 0;        ///< bytes of a scalar, or of each list item
+    char kind = 'f';     ///< 'i' signed, 'u' unsigned, 'f' floating
+    int count_size = 0;  ///< bytes of a list's length (0: not a list)
+  };
+  struct Element {
+    std::string name;
+    std::uint64_t count = 0;
+    std::vector<Property> properties;
+  };
+  Format format = Format::Ascii;
+  std::vector<Element> elements;
+  std::uint64_t data_offset = 0;
+  std::uint64_t file_size = 0;
+
+  /// Index of an element by name, -1 when absent.
+  int element(const std::string& name) const;
+};
+
+/// Parses and checks a PLY header: "ply", one format line, elements with known property
+/// types, "end_header", and element counts whose smallest possible encoding fits in the rest
+/// of the file (binary: the fixed bytes of each record; ascii: two characters per value).
+PlyLayout readPlyLayout(const std::string& path);
+
+/// Size of a PLY scalar type name ("float", "uint8", ...), 0 when it is not one; `kind`
+/// receives 'i', 'u' or 'f'.
+int plyScalarSize(const std::string& type, char& kind);
+
+}  // namespace paps

@@ -1,0 +1,322 @@
+#include <paps/core/cloud_file_layout.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
+#include <set>
+#include <sstream>
+
+#include <paps/core/error.h>
+
+namespace paps {
+
+namespace {
+
+// A header longer than this is not a header: garbage with no newline must not be read whole.
+constexpr std::size_t kMaxHeaderBytes = 1 << 20;
+// More points (or records) than this in one file is a corrupt count, not a scan.
+constexpr std::uint64_t kMaxCount = std::uint64_t(1) << 40;
+
+struct HeaderText {
+  std::string bytes;  // the first kMaxHeaderBytes of the file (or all of it)
+  std::uint64_t file_size = 0;
+};
+
+HeaderText readHead(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+  HeaderText h;
+  h.file_size = std::filesystem::file_size(path, ec);
+  if (ec) throw IoError("cannot read '" + path + "': " + ec.message());
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError("cannot read '" + path + "': permission denied or unreadable");
+  h.bytes.resize(std::size_t(std::min<std::uint64_t>(h.file_size, kMaxHeaderBytes)));
+  f.read(h.bytes.data(), std::streamsize(h.bytes.size()));
+  if (std::size_t(f.gcount()) != h.bytes.size()) throw IoError("cannot read '" + path + "': read failed");
+  return h;
+}
+
+// Splits the next line off `text` at `pos` (without its "\n" or "\r\n"); false at the end of
+// the text or when the line runs past it (a header line must end inside the header bytes).
+bool nextLine(const std::string& text, std::size_t& pos, std::string& line) {
+  if (pos >= text.size()) return false;
+  const std::size_t end = text.find('\n', pos);
+  if (end == std::string::npos) return false;
+  line.assign(text, pos, end - pos);
+  if (!line.empty() && line.back() == '\r') line.pop_back();
+  pos = end + 1;
+  return true;
+}
+
+// Words of a header line split on spaces and tabs, as PCL splits them. Any other control
+// character (a form feed, a NUL...) is refused: PCL keeps it inside a word and then reads
+// past its arrays (a crash found by fuzzing).
+std::vector<std::string> tokens(const std::string& line, const std::string& path) {
+  std::vector<std::string> t;
+  std::string w;
+  for (const char ch : line) {
+    const unsigned char c = static_cast<unsigned char>(ch);
+    if (c == ' ' || c == '\t' || c == '\r') {
+      if (!w.empty()) t.push_back(std::move(w));
+      w.clear();
+    } else if (c < 0x20 || c == 0x7f) {
+      throw IoError("cannot read '" + path + "': control character " + std::to_string(int(c)) + " in the header");
+    } else {
+      w.push_back(ch);
+    }
+  }
+  if (!w.empty()) t.push_back(std::move(w));
+  return t;
+}
+
+bool parseUnsigned(const std::string& s, std::uint64_t& v) {
+  const char* b = s.data();
+  const char* e = b + s.size();
+  const auto r = std::from_chars(b, e, v);
+  return r.ec == std::errc() && r.ptr == e;
+}
+
+std::uint64_t readU32Le(const std::string& path, std::uint64_t offset) {
+  std::ifstream f(path, std::ios::binary);
+  f.seekg(std::streamoff(offset));
+  unsigned char b[4];
+  if (!f.read(reinterpret_cast<char*>(b), 4)) throw IoError("cannot read '" + path + "': truncated data");
+  return std::uint64_t(b[0]) | std::uint64_t(b[1]) << 8 | std::uint64_t(b[2]) << 16 | std::uint64_t(b[3]) << 24;
+}
+
+}  // namespace
+
+int PcdLayout::field(const std::string& name) const {
+  const auto it = std::find(fields.begin(), fields.end(), name);
+  return it == fields.end() ? -1 : int(it - fields.begin());
+}
+
+std::uint64_t PcdLayout::offsetOf(int i) const {
+  std::uint64_t off = 0;
+  for (int j = 0; j < i; ++j) off += std::uint64_t(sizes[std::size_t(j)]) * std::uint64_t(counts[std::size_t(j)]);
+  return off;
+}
+
+PcdLayout readPcdLayout(const std::string& path) {
+  const HeaderText head = readHead(path);
+  auto bad = [&](const std::string& what) { return IoError("cannot read '" + path + "': " + what); };
+  if (head.file_size == 0) throw bad("the file is empty");
+  PcdLayout L;
+  L.file_size = head.file_size;
+  bool have_width = false, have_height = false, have_points = false, have_counts = false, have_data = false;
+  std::size_t pos = 0;
+  std::string line;
+  std::set<std::string> seen;
+  while (!have_data && nextLine(head.bytes, pos, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    const std::vector<std::string> t = tokens(line, path);
+    if (t.empty()) continue;
+    const std::string& key = t[0];
+    // PCL 1.13 crashes on a line it does not know and on SIZE, TYPE or COUNT before FIELDS:
+    // only the format's keywords are let through, each once, FIELDS before its attributes.
+    static const char* const known[] = {"VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT",
+                                        "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
+    if (std::find(std::begin(known), std::end(known), key) == std::end(known))
+      throw bad("unknown PCD header line '" + line.substr(0, 80) + "'");
+    if (!seen.insert(key == "COLUMNS" ? "FIELDS" : key).second) throw bad("two " + key + " lines in the PCD header");
+    if ((key == "SIZE" || key == "TYPE" || key == "COUNT") && L.fields.empty())
+      throw bad(key + " before FIELDS in the PCD header");
+    auto count = [&](std::uint64_t& v, const char* what) {
+      if (t.size() != 2 || !parseUnsigned(t[1], v) || v > kMaxCount)
+        throw bad(std::string("bad ") + what + " line '" + line.substr(0, 80) + "'");
+    };
+    if (key == "FIELDS" || key == "COLUMNS") {
+      L.fields.assign(t.begin() + 1, t.end());
+    } else if (key == "SIZE") {
+      L.sizes.clear();
+      for (std::size_t i = 1; i < t.size(); ++i) {
+        std::uint64_t s = 0;
+        if (!parseUnsigned(t[i], s) || (s != 1 && s != 2 && s != 4 && s != 8))
+          throw bad("SIZE '" + t[i] + "' is not 1, 2, 4 or 8");
+        L.sizes.push_back(int(s));
+      }
+    } else if (key == "TYPE") {
+      L.types.clear();
+      for (std::size_t i = 1; i < t.size(); ++i) {
+        if (t[i] != "I" && t[i] != "U" && t[i] != "F") throw bad("TYPE '" + t[i] + "' is not I, U or F");
+        L.types.push_back(t[i][0]);
+      }
+    } else if (key == "COUNT") {
+      L.counts.clear();
+      have_counts = true;
+      for (std::size_t i = 1; i < t.size(); ++i) {
+        std::uint64_t c = 0;
+        if (!parseUnsigned(t[i], c) || c < 1 || c > (1u << 20)) throw bad("COUNT '" + t[i] + "' is out of range");
+        L.counts.push_back(int(c));
+      }
+    } else if (key == "WIDTH") {
+      count(L.width, "WIDTH");
+      have_width = true;
+    } else if (key == "HEIGHT") {
+      count(L.height, "HEIGHT");
+      have_height = true;
+    } else if (key == "POINTS") {
+      count(L.points, "POINTS");
+      have_points = true;
+    } else if (key == "DATA") {
+      if (t.size() != 2) throw bad("bad DATA line '" + line.substr(0, 80) + "'");
+      if (t[1] == "ascii") L.data = PcdLayout::Data::Ascii;
+      else if (t[1] == "binary") L.data = PcdLayout::Data::Binary;
+      else if (t[1] == "binary_compressed") L.data = PcdLayout::Data::BinaryCompressed;
+      else throw bad("DATA '" + t[1].substr(0, 40) + "' is not ascii, binary or binary_compressed");
+      have_data = true;
+    }
+    // VERSION, VIEWPOINT and unknown keywords are left to the reader, as PCL does.
+  }
+  if (!have_data) throw bad("no PCD header (no DATA line in its first bytes)");
+  L.data_offset = pos;
+  const std::size_t n = L.fields.size();
+  if (n == 0) throw bad("the PCD header has no FIELDS");
+  if (n > 4096) throw bad("the PCD header has more than 4096 fields");
+  if (L.sizes.size() != n) throw bad("SIZE has " + std::to_string(L.sizes.size()) + " entries for " + std::to_string(n) + " fields");
+  if (L.types.size() != n) throw bad("TYPE has " + std::to_string(L.types.size()) + " entries for " + std::to_string(n) + " fields");
+  if (!have_counts) L.counts.assign(n, 1);
+  if (L.counts.size() != n) throw bad("COUNT has " + std::to_string(L.counts.size()) + " entries for " + std::to_string(n) + " fields");
+  std::uint64_t values = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (L.types[i] == 'F' && L.sizes[i] != 4 && L.sizes[i] != 8)
+      throw bad("field '" + L.fields[i] + "' is a float of " + std::to_string(L.sizes[i]) + " bytes");
+    L.point_step += std::uint64_t(L.sizes[i]) * std::uint64_t(L.counts[i]);
+    values += std::uint64_t(L.counts[i]);
+  }
+  if (!have_width && !have_points) throw bad("the PCD header has neither WIDTH nor POINTS");
+  if (!have_height) L.height = 1;
+  if (!have_width) L.width = L.height ? L.points / L.height : 0;
+  if (L.height != 0 && L.width > kMaxCount / L.height) throw bad("WIDTH x HEIGHT is out of range");
+  if (!have_points) L.points = L.width * L.height;
+  if (L.width * L.height != L.points)
+    throw bad("WIDTH x HEIGHT (" + std::to_string(L.width) + " x " + std::to_string(L.height) +
+              ") is not POINTS (" + std::to_string(L.points) + ")");
+  const std::uint64_t left = L.file_size - L.data_offset;
+  const std::string claim = "the header promises " + std::to_string(L.points) + " points";
+  switch (L.data) {
+    case PcdLayout::Data::Binary:
+      if (L.points > left / L.point_step)
+        throw bad(claim + " of " + std::to_string(L.point_step) + " bytes but the file holds " +
+                  std::to_string(left) + " bytes of data (truncated or corrupt)");
+      break;
+    case PcdLayout::Data::BinaryCompressed: {
+      if (L.points == 0) break;
+      if (left < 8) throw bad("truncated binary_compressed data");
+      const std::uint64_t packed = readU32Le(path, L.data_offset);
+      const std::uint64_t unpacked = readU32Le(path, L.data_offset + 4);
+      if (packed > left - 8) throw bad("truncated binary_compressed data");
+      if (L.points > std::numeric_limits<std::uint32_t>::max() / L.point_step || unpacked != L.points * L.point_step)
+        throw bad("binary_compressed size does not match POINTS");
+      // LZF turns 3 bytes into at most 264 (a back reference of maximal length).
+      if (unpacked > packed * 88 + 1024) throw bad("corrupt binary_compressed data");
+      break;
+    }
+    case PcdLayout::Data::Ascii:
+      // A value takes at least a character and a separator.
+      if (L.points > (left + 1) / (2 * values))
+        throw bad(claim + " of " + std::to_string(values) + " values but the file holds " +
+                  std::to_string(left) + " bytes of text (truncated or corrupt)");
+      break;
+  }
+  return L;
+}
+
+int plyScalarSize(const std::string& t, char& kind) {
+  static const struct { const char* name; int size; char kind; } types[] = {
+      {"char", 1, 'i'},   {"int8", 1, 'i'},   {"uchar", 1, 'u'},  {"uint8", 1, 'u'},    {"short", 2, 'i'},
+      {"int16", 2, 'i'},  {"ushort", 2, 'u'}, {"uint16", 2, 'u'}, {"int", 4, 'i'},      {"int32", 4, 'i'},
+      {"uint", 4, 'u'},   {"uint32", 4, 'u'}, {"float", 4, 'f'},  {"float32", 4, 'f'}, {"double", 8, 'f'},
+      {"float64", 8, 'f'}};
+  for (const auto& x : types)
+    if (t == x.name) {
+      kind = x.kind;
+      return x.size;
+    }
+  return 0;
+}
+
+int PlyLayout::element(const std::string& name) const {
+  for (std::size_t i = 0; i < elements.size(); ++i)
+    if (elements[i].name == name) return int(i);
+  return -1;
+}
+
+PlyLayout readPlyLayout(const std::string& path) {
+  const HeaderText head = readHead(path);
+  auto bad = [&](const std::string& what) { return IoError("cannot read '" + path + "': " + what); };
+  if (head.file_size == 0) throw bad("the file is empty");
+  PlyLayout L;
+  L.file_size = head.file_size;
+  std::size_t pos = 0;
+  std::string line;
+  if (!nextLine(head.bytes, pos, line) || line != "ply") throw bad("not a PLY file (no 'ply' first line)");
+  bool have_format = false, ended = false;
+  while (!ended && nextLine(head.bytes, pos, line)) {
+    const std::vector<std::string> t = tokens(line, path);
+    if (t.empty()) continue;
+    const std::string& key = t[0];
+    const std::string shown = "'" + line.substr(0, 80) + "'";
+    if (key == "comment" || key == "obj_info") continue;
+    if (key == "format") {
+      if (have_format || t.size() != 3) throw bad("bad format line " + shown);
+      if (t[1] == "ascii") L.format = PlyLayout::Format::Ascii;
+      else if (t[1] == "binary_little_endian") L.format = PlyLayout::Format::BinaryLittleEndian;
+      else if (t[1] == "binary_big_endian") L.format = PlyLayout::Format::BinaryBigEndian;
+      else throw bad("unknown PLY format " + shown);
+      have_format = true;
+    } else if (key == "element") {
+      PlyLayout::Element e;
+      if (t.size() != 3 || !parseUnsigned(t[2], e.count) || e.count > kMaxCount) throw bad("bad element line " + shown);
+      e.name = t[1];
+      L.elements.push_back(e);
+    } else if (key == "property") {
+      if (L.elements.empty()) throw bad("a property before any element: " + shown);
+      PlyLayout::Property p;
+      if (t.size() == 3) {
+        p.size = plyScalarSize(t[1], p.kind);
+        p.name = t[2];
+      } else if (t.size() == 5 && t[1] == "list") {
+        char count_kind = 'f';
+        p.count_size = plyScalarSize(t[2], count_kind);
+        if (p.count_size == 0 || count_kind == 'f') throw bad("a list's length is not an integer type: " + shown);
+        p.size = plyScalarSize(t[3], p.kind);
+        p.name = t[4];
+      } else {
+        throw bad("bad property line " + shown);
+      }
+      if (p.size == 0) throw bad("unknown property type in " + shown);
+      L.elements.back().properties.push_back(p);
+    } else if (key == "end_header") {
+      ended = true;
+    } else {
+      throw bad("unknown PLY header line " + shown);
+    }
+  }
+  if (!ended) throw bad("no end_header line in the PLY header");
+  if (!have_format) throw bad("no format line in the PLY header");
+  L.data_offset = pos;
+  // The fewest bytes the elements can take: binary, each record's scalars and list lengths
+  // (a list may be empty); ascii, two characters per value.
+  const std::uint64_t left = L.file_size - L.data_offset;
+  std::uint64_t need = 0;
+  for (const auto& e : L.elements) {
+    if (e.count == 0) continue;
+    if (e.properties.empty()) throw bad("element '" + e.name + "' has no properties");
+    std::uint64_t record = 0;
+    for (const auto& p : e.properties)
+      record += L.format == PlyLayout::Format::Ascii ? 2 : std::uint64_t(p.count_size ? p.count_size : p.size);
+    if (e.count > (left + 1) / record)
+      throw bad("the header promises " + std::to_string(e.count) + " " + e.name + " records but the file holds " +
+                std::to_string(left) + " bytes of data (truncated or corrupt)");
+    need += e.count * record;
+  }
+  if (need > left + 1) throw bad("the header promises more data than the file holds (truncated or corrupt)");
+  return L;
+}
+
+}  // namespace paps

@@ -99,6 +99,21 @@ TEST(SelfSimilarityCodec, BadInputGivesClearErrors) {
   Positions line;
   for (int i = 0; i < 1000; ++i) line.emplace_back(float(i), 2.f * i, 0.f);
   EXPECT_THROW(compressPositions(line, p), InvalidInput);
+  // A surface with one stray point far away is not called a line: the error says what to do.
+  Positions stray = engraved().points;
+  stray.emplace_back(1e30f, 0.f, 0.f);
+  try {
+    compressPositions(stray, p);
+    ADD_FAILURE() << "a stray point 1e30 m away was accepted";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("1 of the"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("remove the far points"), std::string::npos) << e.what();
+  }
+  try {
+    compressPositions(line, p);
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("lie on a line"), std::string::npos) << e.what();
+  }
   Positions nan(1000, Eigen::Vector3f(NAN, NAN, NAN));
   EXPECT_THROW(compressPositions(nan, p), InvalidInput);
   auto expectParam = [&](CompressionParameters q, const std::string& name) {

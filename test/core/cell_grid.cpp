@@ -122,10 +122,54 @@ TEST(CellGrid, HugeAndTinyRadius) {
     grid.radiusSearch(p[i], 1e-7f, idx);
     EXPECT_EQ(idx, bruteBall(p, p[i], 1e-7f));
   }
-  // A cell far too small for the extent: build refuses, the graph helper throws.
-  Positions wide = {Eigen::Vector3f(0, 0, 0), Eigen::Vector3f(1e6f, 0, 0)};
+  // A cell far too small for the extent of many points: build refuses, the graph helper
+  // throws (two clusters of 5,000 points a million cells apart).
+  Positions wide = randomCloud(5000, 4);
+  for (int i = 0; i < 5000; ++i) wide.push_back(wide[std::size_t(i)] + Eigen::Vector3f(1e6f, 0, 0));
   EXPECT_FALSE(grid.build(wide, 1e-3f));
   EXPECT_THROW(paps::gridRadiusGraph(wide, 1e-3f), paps::InvalidParameter);
+}
+
+TEST(CellGrid, FarOutliersShareTheBorderCellsAndBallsStayExact) {
+  // A scan with a few stray points far beyond 2^21 cells, on every side (one at 1e30, two
+  // 3e5 m away and 0.031 m apart, which must still find each other).
+  Positions p = randomCloud(1500, 9);
+  const float far = 3e5f;
+  for (const Eigen::Vector3f& q :
+       {Eigen::Vector3f(far, 0.5f, 0.5f), Eigen::Vector3f(std::nextafter(far, 1e6f), 0.5f, 0.5f),
+        Eigen::Vector3f(-2e5f, 0.5f, 0.5f), Eigen::Vector3f(0.5f, -1e7f, 0.5f), Eigen::Vector3f(1e30f, 1e30f, 1e30f),
+        Eigen::Vector3f(-1e30f, 0.f, 0.f), Eigen::Vector3f(0.5f, 0.5f, 4e6f)})
+    p.push_back(q);
+  const float r = 0.05f;
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  std::vector<int> idx;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) continue;
+    grid.radiusSearch(p[i], r, idx);
+    ASSERT_EQ(idx, bruteBall(p, p[i], r)) << "point " << i;
+  }
+  grid.radiusSearch(p[1500], r, idx);
+  EXPECT_EQ(idx.size(), 2u);  // the two stray points 3e5 m away see each other
+  // Queries that are not points of the grid, far outside it too.
+  for (const Eigen::Vector3f& q : {Eigen::Vector3f(far, 0.5f, 0.52f), Eigen::Vector3f(-5e29f, 1, 1)}) {
+    grid.radiusSearch(q, r, idx);
+    EXPECT_EQ(idx, bruteBall(p, q, r));
+  }
+  const NeighbourGraph g = paps::gridRadiusGraph(p, r);
+  const paps::SpatialIndex index(p);
+  const NeighbourGraph by_radius = NeighbourGraph::byRadius(p, index, r);
+  std::vector<int> kd;
+  std::vector<float> d2;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) continue;
+    std::vector<int> want = bruteBall(p, p[i], r);
+    std::rotate(want.begin(), std::find(want.begin(), want.end(), int(i)), std::find(want.begin(), want.end(), int(i)) + 1);
+    ASSERT_EQ(std::vector<int>(g.begin(i), g.end(i)), want) << "point " << i;
+    index.radiusSearch(p[i], r, kd, d2);
+    std::rotate(kd.begin(), std::find(kd.begin(), kd.end(), int(i)), std::find(kd.begin(), kd.end(), int(i)) + 1);
+    ASSERT_EQ(std::vector<int>(by_radius.begin(i), by_radius.end(i)), kd) << "point " << i;
+  }
 }
 
 TEST(CellGrid, EmptyAndAllNaN) {

@@ -2,6 +2,7 @@
 // graphs, the automatic radius, errors and determinism across thread counts.
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <limits>
 #include <set>
 #include <vector>
@@ -432,6 +433,26 @@ TEST(RadiusForNeighbourCount, Errors) {
   EXPECT_THROW(paps::radiusForNeighbourCount(nan, SpatialIndex(nan), 10), paps::InvalidInput);
   const Positions same(10, Eigen::Vector3f(1, 1, 1));
   EXPECT_THROW(paps::radiusForNeighbourCount(same, SpatialIndex(same), 3), paps::InvalidInput);
+  // Spacings whose squares overflow or underflow a float are named as such, not as a bad
+  // radius or as identical points.
+  auto message = [](const Positions& p) -> std::string {
+    try {
+      paps::radiusForNeighbourCount(p, SpatialIndex(p), 5);
+    } catch (const paps::InvalidInput& e) {
+      return e.what();
+    }
+    return "";
+  };
+  Positions huge, tiny;
+  paps::Random rng(3);
+  for (int i = 0; i < 200; ++i) {
+    const Eigen::Vector3f u(float(rng.uniform()), float(rng.uniform()), 0.f);
+    huge.push_back(1e30f * u);
+    tiny.push_back(1e-30f * u);
+  }
+  EXPECT_NE(message(huge).find("overflow"), std::string::npos) << message(huge);
+  EXPECT_NE(message(tiny).find("underflow"), std::string::npos) << message(tiny);
+  EXPECT_NE(message(same).find("identical"), std::string::npos) << message(same);
   const Positions two = {{0, 0, 0}, {1, 0, 0}};
   EXPECT_GT(paps::radiusForNeighbourCount(two, SpatialIndex(two), 2), 0.f);
   try {

@@ -634,12 +634,45 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   const float extent = (hi - lo).maxCoeff();
   if (!(extent > 0)) throw InvalidInput("all points are identical");
   {
-    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-    for (const auto& p : pts)
-      if (isFinite(p)) { const Eigen::Vector3d d = p.cast<double>() - mean; cov += d * d.transpose(); }
-    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
-    if (es.eigenvalues()[1] <= 1e-10 * es.eigenvalues()[2])
+    // Spread of the points around `centre`: false when they lie on a line.
+    auto spansAPlane = [&pts](const Eigen::Vector3d& centre, double reach2) {
+      Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+      for (const auto& p : pts)
+        if (isFinite(p)) {
+          const Eigen::Vector3d d = p.cast<double>() - centre;
+          if (d.squaredNorm() <= reach2) cov += d * d.transpose();
+        }
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+      return es.eigenvalues()[1] > 1e-10 * es.eigenvalues()[2];
+    };
+    if (!spansAPlane(mean, INFINITY)) {
+      // A few points far from the rest (a stray return, a second scan far away) also make
+      // the whole cloud look like a line: say so when the nearest quarter of the points
+      // around the median point, and four times their reach, do span a surface.
+      Eigen::Vector3d median;
+      std::vector<double> v;
+      for (int a = 0; a < 3; ++a) {
+        v.clear();
+        for (const auto& p : pts)
+          if (isFinite(p)) v.push_back(double(p[a]));
+        std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
+        median[a] = v[v.size() / 2];
+      }
+      v.clear();
+      for (const auto& p : pts)
+        if (isFinite(p)) v.push_back((p.cast<double>() - median).squaredNorm());
+      std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 4), v.end());
+      const double reach2 = 16 * v[v.size() / 4];
+      std::size_t far = 0;
+      for (const double d2 : v) far += d2 > reach2;
+      if (reach2 > 0 && spansAPlane(median, reach2))
+        throw InvalidInput(std::to_string(far) + " of the " + std::to_string(finite) + " points lie more than " +
+                           paps::detail::toString(std::sqrt(reach2)) +
+                           " m from the median point and make the cloud span " + paps::detail::toString(extent) +
+                           " m along one line; the codec quantizes over the whole extent: remove the far points "
+                           "first (e.g. pcl::StatisticalOutlierRemoval or pcl::CropBox)");
       throw InvalidInput("the points lie on a line; a surface codec needs a surface");
+    }
   }
 
   // Radius and spacing, on a deterministic sample of the finite points.

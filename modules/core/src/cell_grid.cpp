@@ -28,9 +28,9 @@ bool CellGrid::build(const Positions& points, float cell) {
   if (!(lo.x() <= hi.x())) return true;  // no finite point: an empty grid
   // Two cells of margin: every occupied coordinate is >= 1 even after rounding.
   origin_ = lo.cast<double>() - Eigen::Vector3d::Constant(2 * cell_);
+  if (((hi.cast<double>() - origin_) * inv_).maxCoeff() > kMaxCell && !buildWindow(points)) return false;
   const Eigen::Vector3d top = (hi.cast<double>() - origin_) * inv_;
-  if (top.maxCoeff() > double((1 << 21) - 4)) return false;
-  for (int a = 0; a < 3; ++a) top_[a] = static_cast<std::int64_t>(top[a]);
+  for (int a = 0; a < 3; ++a) top_[a] = static_cast<std::int64_t>(std::clamp(top[a], 0.0, kMaxCell));
   std::vector<std::pair<std::uint64_t, int>> keyed;
   keyed.reserve(points.size());
   for (std::size_t i = 0; i < points.size(); ++i)
@@ -50,8 +50,38 @@ bool CellGrid::build(const Positions& points, float cell) {
   return true;
 }
 
+bool CellGrid::buildWindow(const Positions& points) {
+  // A few far points (a stray LiDAR return kilometres away) would make the grid too wide to
+  // key. The grid is then a window of kMaxCell cells centred on the median point, and points
+  // outside it are filed in its border cells: clamping is monotone, so every point within
+  // reach of a query still lies in the (clamped) box of cells the query scans, and the exact
+  // distance test keeps the results those of the full grid. Only the time grows with the
+  // points outside, hence the limit.
+  constexpr std::size_t kMaxOutside = 4096;
+  std::vector<float> axis;
+  axis.reserve(points.size());
+  for (int a = 0; a < 3; ++a) {
+    axis.clear();
+    for (const auto& p : points)
+      if (isFinite(p)) axis.push_back(p[a]);
+    std::nth_element(axis.begin(), axis.begin() + std::ptrdiff_t(axis.size() / 2), axis.end());
+    origin_[a] = std::max(double(axis[axis.size() / 2]) - 0.5 * kMaxCell * cell_,
+                          origin_[a]);  // no lower than the full grid's origin
+  }
+  std::size_t outside = 0;
+  for (const auto& p : points) {
+    if (!isFinite(p)) continue;
+    const Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+    outside += c.minCoeff() < 0 || c.maxCoeff() > kMaxCell;
+    if (outside > kMaxOutside) return false;
+  }
+  windowed_ = true;
+  return true;
+}
+
 std::uint64_t CellGrid::keyOf(const Eigen::Vector3f& p) const {
-  const Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+  Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+  if (windowed_) c = c.cwiseMax(0.0).cwiseMin(kMaxCell);
   return pack(std::uint64_t(c.x()), std::uint64_t(c.y()), std::uint64_t(c.z()));
 }
 
@@ -63,8 +93,10 @@ void CellGrid::prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) co
   for (int a = 0; a < 3; ++a) {
     const double lo = std::floor((double(q[a]) - slack - origin_[a]) * inv_);
     const double hi = std::floor((double(q[a]) + slack - origin_[a]) * inv_);
-    box[2 * a] = static_cast<std::int64_t>(std::clamp(lo, -1.0, double(top_[a]) + 1));
-    box[2 * a + 1] = static_cast<std::int64_t>(std::clamp(hi, -1.0, double(top_[a]) + 1));
+    // Windowed: the box is clamped like the keys (a query outside scans the border cells).
+    const double floor_at = windowed_ ? 0.0 : -1.0, ceil_at = double(top_[a]) + (windowed_ ? 0 : 1);
+    box[2 * a] = static_cast<std::int64_t>(std::clamp(lo, floor_at, ceil_at));
+    box[2 * a + 1] = static_cast<std::int64_t>(std::clamp(hi, floor_at, ceil_at));
     box[2 * a] = std::max<std::int64_t>(box[2 * a], 0);
     box[2 * a + 1] = std::min<std::int64_t>(box[2 * a + 1], top_[a]);
   }
@@ -192,7 +224,9 @@ NeighbourGraph gridRadiusGraph(const Positions& points, float radius, const Prog
   requirePositive("radius", radius);
   CellGrid grid;
   if (!grid.build(points, radius))
-    throw InvalidParameter("radius", detail::toString(radius), "at least extent / 2^21 of the points");
+    throw InvalidParameter("radius", detail::toString(radius),
+                           "at least extent / 2^21 of the points, or fewer than 4096 points that far from the "
+                           "median point; remove far outliers first");
   return grid.radiusGraph(points.size(), radius, false, progress, max_count);
 }
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -169,8 +170,16 @@ PcdLayout readPcdLayout(const std::string& path) {
       else if (t[1] == "binary_compressed") L.data = PcdLayout::Data::BinaryCompressed;
       else throw bad("DATA '" + t[1].substr(0, 40) + "' is not ascii, binary or binary_compressed");
       have_data = true;
+    } else if (key == "VIEWPOINT") {
+      bool numbers = t.size() == 8;
+      for (std::size_t i = 1; numbers && i < t.size(); ++i) {
+        char* end = nullptr;
+        std::strtod(t[i].c_str(), &end);
+        numbers = end == t[i].c_str() + t[i].size();
+      }
+      if (!numbers) throw bad("bad VIEWPOINT line '" + line.substr(0, 80) + "' (expected 7 numbers)");
     }
-    // VERSION, VIEWPOINT and unknown keywords are left to the reader, as PCL does.
+    // VERSION is left to the reader.
   }
   if (!have_data) throw bad("no PCD header (no DATA line in its first bytes)");
   L.data_offset = pos;
@@ -205,7 +214,7 @@ PcdLayout readPcdLayout(const std::string& path) {
                   std::to_string(left) + " bytes of data (truncated or corrupt)");
       break;
     case PcdLayout::Data::BinaryCompressed: {
-      if (L.points == 0) break;
+      // PCL reads the two size words even for an empty cloud, and allocates the second.
       if (left < 8) throw bad("truncated binary_compressed data");
       const std::uint64_t packed = readU32Le(path, L.data_offset);
       const std::uint64_t unpacked = readU32Le(path, L.data_offset + 4);

@@ -185,11 +185,31 @@ float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index
   // The median of the k-th neighbour distances: half of the points have at least
   // target_count points within it.
   std::nth_element(kth.begin(), kth.begin() + kth.size() / 2, kth.end());
-  float r = kth[kth.size() / 2];
+  float r = kth.empty() ? 0.f : kth[kth.size() / 2];
+  // Squared distances are floats: spacings beyond about 1e19 m overflow them and spacings
+  // below about 1e-19 m underflow them. Said in those words rather than as a bad radius.
+  auto extent = [&points] {
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+    for (const auto& p : points)
+      if (isFinite(p)) { lo = lo.cwiseMin(p.cast<double>()); hi = hi.cwiseMax(p.cast<double>()); }
+    return (hi - lo).maxCoeff();
+  };
+  auto overflow = [&] {
+    return InvalidInput("the points span " + detail::toString(extent()) +
+                        " m: their squared distances overflow float arithmetic; scale the cloud down");
+  };
+  if (!std::isfinite(r)) throw overflow();
   if (!(r > 0)) {
     // Duplicates dominate: fall back to a fraction of the extent.
     r = boundingBoxDiagonal(points) * 1e-3f;
-    if (!(r > 0)) throw InvalidInput("all points are identical: cannot choose a radius");
+    if (!(r > 0)) {
+      const double e = extent();
+      if (e > 0)
+        throw InvalidInput("the points span only " + detail::toString(e) +
+                           " m: their squared distances underflow float arithmetic; scale the cloud up");
+      throw InvalidInput("all points are identical: cannot choose a radius");
+    }
+    if (!std::isfinite(r)) throw overflow();
   }
   if (statistic == NeighbourCountStatistic::Mean) {
     // The k-th neighbour distance overshoots the mean count near borders and undershoots in

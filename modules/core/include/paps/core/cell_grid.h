@@ -25,8 +25,10 @@ class CellGrid {
   CellGrid() = default;
 
   /// Grids the finite points of `points` in cells of side `cell`. Throws InvalidParameter
-  /// when `cell` is not finite and > 0. Returns false (grid left empty) when the extent
-  /// would need more than 2^21 - 4 cells along an axis; an empty cloud is a valid grid.
+  /// when `cell` is not finite and > 0. When the extent needs more than 2^21 - 4 cells along
+  /// an axis, the grid is a window of that many cells around the median point and at most
+  /// 4096 points outside it share its border cells (queries return the same points);
+  /// returns false (grid left empty) when more lie outside. An empty cloud is a valid grid.
   bool build(const Positions& points, float cell);
 
   float cell() const { return static_cast<float>(cell_); }
@@ -79,11 +81,14 @@ class CellGrid {
                              const Overflow& overflow = {}) const;
 
  private:
+  static constexpr double kMaxCell = double((1 << 21) - 4);  // largest cell coordinate
   static std::uint64_t pack(std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | (y << 21) | (z << 42); }
+  bool buildWindow(const Positions& points);
   std::uint64_t keyOf(const Eigen::Vector3f& p) const;
   void prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) const;
 
   double cell_ = 0, inv_ = 0;
+  bool windowed_ = false;  // far points clamped into the border cells (see build)
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
   std::int64_t top_[3] = {0, 0, 0};  // largest occupied cell coordinate per axis
   std::vector<std::uint64_t> keys_;   // occupied cells, ascending

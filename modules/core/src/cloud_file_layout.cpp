@@ -65,7 +65,9 @@ std::vector<std::string> tokens(const std::string& line, const std::string& path
       if (!w.empty()) t.push_back(std::move(w));
       w.clear();
     } else if (c < 0x20 || c == 0x7f) {
-      throw IoError("cannot read '" + path + "': control character " + std::to_string(int(c)) + " in the header");
+      static const char* hex = "0123456789abcdef";
+      throw IoError("cannot read '" + path + "': control byte 0x" + hex[c >> 4] + hex[c & 15] +
+                    " in the header (not a PCD or PLY header)");
     } else {
       w.push_back(ch);
     }

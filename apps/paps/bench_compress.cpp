@@ -226,7 +226,7 @@ int runBenchCompress(int argc, char** argv) {
   const std::string data = samplesDir();
   const std::string mesh_path = a.text("mesh", data + "/rs1_normals.ply");
   const std::string scan_path = a.text("scan", data + "/table_scene_lms400.pcd");
-  const long n = long(a.number("points", 1000000));
+  const long n = long(a.count("points", 1000000));
   requireInRange("points", n, 1000L, 100000000L);
   const double noise = a.number("noise", 0.3);
   const std::string out = a.text("out", "bench_compress");

@@ -527,14 +527,14 @@ int runBenchCurvature(int argc, char** argv) {
     b = e + 1;
   }
   auto skipped = [&](const char* part) { return skip.find("," + std::string(part) + ",") != std::string::npos; };
-  const std::size_t npts = static_cast<std::size_t>(a.number("points", 20000));
-  const int neighbours = static_cast<int>(a.number("neighbours", 50));
-  const int order = static_cast<int>(a.number("order", 4));
-  const std::size_t speed_points = static_cast<std::size_t>(a.number("speed-points", 1000000));
+  const std::size_t npts = a.count("points", 20000);
+  const int neighbours = a.integer("neighbours", 50);
+  const int order = a.integer("order", 4);
+  const std::size_t speed_points = a.count("speed-points", 1000000);
   const std::string out_dir = a.text("out", ".");
   std::filesystem::create_directories(out_dir);
   const std::string scan = a.text("scan", samplesDir() + "/rs1_normals.ply");
-  const int scan_step = static_cast<int>(a.number("scan-step", 4));
+  const int scan_step = a.integer("scan-step", 4);
   requireInRange("points", static_cast<double>(npts), 1000.0, 1e7);
   requireInRange("order", order, 2, 10);
   requireInRange("scan-step", scan_step, 1, 1000);

@@ -95,8 +95,8 @@ int runBenchDenoise(int argc, char** argv) {
   const std::string out_dir = a.text("out", "bench_out");
   const std::string samples = a.text("samples", samplesDir());
   const bool quick = a.has("quick");
-  const std::size_t n_points = static_cast<std::size_t>(a.number("points", quick ? 50000 : 200000));
-  const std::size_t n_large = static_cast<std::size_t>(a.number("large", quick ? 0 : 1000000));
+  const std::size_t n_points = a.count("points", quick ? 50000 : 200000);
+  const std::size_t n_large = a.count("large", quick ? 0 : 1000000);
   std::filesystem::create_directories(out_dir);
   const std::string rs1 = samples + "/rs1_normals.ply", table = samples + "/table_scene_lms400.pcd";
 

@@ -293,14 +293,14 @@ int runBenchSuperres(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
   a.allowOnly({"out", "samples", "points", "speed", "speed-repeat", "speed-only", "quick", "shapes", "noises", "methods"});
   const bool speed_only = a.has("speed-only");
-  const int speed_repeat = static_cast<int>(a.number("speed-repeat", 1));
+  const int speed_repeat = a.integer("speed-repeat", 1);
   if (speed_repeat < 1 || speed_repeat > 100)
     throw InvalidParameter("speed-repeat", std::to_string(speed_repeat), "1 to 100");
   const bool quick = a.has("quick");
   const std::string out_dir = a.text("out", "bench_out");
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
-  const std::size_t n_dense = static_cast<std::size_t>(a.number("points", quick ? 100000 : 700000));
-  const std::size_t n_speed = static_cast<std::size_t>(a.number("speed", quick ? 30000 : 100000));
+  const std::size_t n_dense = a.count("points", quick ? 100000 : 700000);
+  const std::size_t n_speed = a.count("speed", quick ? 30000 : 100000);
   if (n_dense < 1000) throw InvalidParameter("points", std::to_string(n_dense), "at least 1000");
   std::filesystem::create_directories(out_dir);
   const std::vector<std::string> all_methods = {"qsr",           "qsr-narrow",     "qsr-even",       "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",

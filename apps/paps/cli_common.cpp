@@ -1,4 +1,6 @@
 #include "cli_common.h"
+#include <limits>
+#include <cmath>
 
 #include <algorithm>
 #include <cstdio>
@@ -37,6 +39,22 @@ double Arguments::number(const std::string& name, double fallback) const {
   const double v = std::strtod(it->second.c_str(), &end);
   if (end == it->second.c_str() || *end != '\0') throw InvalidParameter(name, it->second, "a number");
   return v;
+}
+
+int Arguments::integer(const std::string& name, int fallback) const {
+  if (!has(name)) return fallback;
+  const double v = number(name, fallback);
+  if (!(v == std::floor(v)) || v < double(std::numeric_limits<int>::min()) || v > double(std::numeric_limits<int>::max()))
+    throw InvalidParameter(name, options.at(name), "a whole number");
+  return int(v);
+}
+
+std::size_t Arguments::count(const std::string& name, std::size_t fallback) const {
+  if (!has(name)) return fallback;
+  const double v = number(name, double(fallback));
+  if (!(v == std::floor(v)) || v < 0 || v > 1099511627776.0)
+    throw InvalidParameter(name, options.at(name), "a whole number in [0, 2^40]");
+  return std::size_t(v);
 }
 
 std::string Arguments::text(const std::string& name, const std::string& fallback) const {

@@ -1,5 +1,6 @@
 #pragma once
 // Small shared pieces of the `paps` command line: argument parsing and a progress bar.
+#include <cstddef>
 #include <map>
 #include <string>
 #include <vector>
@@ -17,6 +18,11 @@ struct Arguments {
   bool has(const std::string& name) const { return options.count(name) > 0; }
   /// Value of --name as a number; throws paps::InvalidParameter when it is not one.
   double number(const std::string& name, double fallback) const;
+  /// Value of --name as a whole number in the range of int (counts, orders, bits); throws
+  /// paps::InvalidParameter naming the option otherwise ("1e12" is not silently wrapped).
+  int integer(const std::string& name, int fallback) const;
+  /// Value of --name as a point count in [0, 2^40]; throws paps::InvalidParameter otherwise.
+  std::size_t count(const std::string& name, std::size_t fallback) const;
   std::string text(const std::string& name, const std::string& fallback) const;
   /// Throws paps::InvalidParameter for an option not in `known`.
   void allowOnly(const std::vector<std::string>& known) const;

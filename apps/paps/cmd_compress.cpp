@@ -299,16 +299,16 @@ int runCompress(int argc, char** argv) {
   using namespace paps::compression;
   CompressionParameters p = compressionPreset(a.text("preset", "balanced"));
   p.patch_radius = float(a.number("radius", p.patch_radius));
-  p.patch_points = int(a.number("patch-points", p.patch_points));
-  p.bins = int(a.number("bins", p.bins));
-  p.atoms = int(a.number("atoms", p.atoms));
-  p.sparsity = int(a.number("sparsity", p.sparsity));
-  p.seed_bits = int(a.number("seed-bits", p.seed_bits));
-  p.coefficient_bits = int(a.number("coefficient-bits", p.coefficient_bits));
-  p.angle_bits = int(a.number("angle-bits", p.angle_bits));
-  p.dictionary_bits = int(a.number("dictionary-bits", p.dictionary_bits));
+  p.patch_points = a.integer("patch-points", p.patch_points);
+  p.bins = a.integer("bins", p.bins);
+  p.atoms = a.integer("atoms", p.atoms);
+  p.sparsity = a.integer("sparsity", p.sparsity);
+  p.seed_bits = a.integer("seed-bits", p.seed_bits);
+  p.coefficient_bits = a.integer("coefficient-bits", p.coefficient_bits);
+  p.angle_bits = a.integer("angle-bits", p.angle_bits);
+  p.dictionary_bits = a.integer("dictionary-bits", p.dictionary_bits);
   p.seed_spacing = float(a.number("seed-spacing", p.seed_spacing));
-  p.ksvd_iterations = int(a.number("ksvd-iterations", p.ksvd_iterations));
+  p.ksvd_iterations = a.integer("ksvd-iterations", p.ksvd_iterations);
   p.output_spacing = float(a.number("spacing", p.output_spacing));
   p.validate();
 

@@ -133,10 +133,10 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
 
 WavejetParameters wavejetParameters(const Arguments& a, const char* default_policy) {
   WavejetParameters w;
-  w.order = static_cast<int>(a.number("order", w.order));
+  w.order = a.integer("order", w.order);
   w.beta = static_cast<float>(a.number("beta", w.beta));
-  w.irls_iterations = static_cast<int>(a.number("irls", w.irls_iterations));
-  w.max_refits = static_cast<int>(a.number("refits", w.max_refits));
+  w.irls_iterations = a.integer("irls", w.irls_iterations);
+  w.max_refits = a.integer("refits", w.max_refits);
   w.refit_angle = static_cast<float>(a.number("refit-angle", w.refit_angle));
   w.select_order = a.has("select-order");
   // The noise-aware policy decides unless the user set the order, beta or the policy.
@@ -154,7 +154,7 @@ WavejetParameters wavejetParameters(const Arguments& a, const char* default_poli
   // as given); --fixed-radius turns it off (docs/wavejets.md, "Real scans").
   w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
   // The cap of narrowing (0: 4 x --neighbours).
-  w.narrowed_neighbours = static_cast<int>(a.number("max-neighbours", w.narrowed_neighbours));
+  w.narrowed_neighbours = a.integer("max-neighbours", w.narrowed_neighbours);
   w.validate();
   return w;
 }
@@ -244,7 +244,7 @@ int runCurvature(int argc, char** argv) {
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   const WavejetParameters params = wavejetParameters(a, "auto");
   const float radius = static_cast<float>(a.number("radius", 0));
-  const int neighbours = static_cast<int>(a.number("neighbours", 50));
+  const int neighbours = a.integer("neighbours", 50);
   const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0]);
   const Positions p = positionsOf(cloud);
   std::printf("read %s: %zu points (%zu finite)\n", a.positional[0].c_str(), p.size(), countFinite(p));
@@ -307,7 +307,7 @@ int runEnhance(int argc, char** argv) {
   // Enhancement keeps the fixed order unless asked (WavejetEnhancementParameters::wavejet).
   params.wavejet = wavejetParameters(a, "fixed");
   params.radius = static_cast<float>(a.number("radius", 0));
-  params.target_neighbours = static_cast<int>(a.number("neighbours", params.target_neighbours));
+  params.target_neighbours = a.integer("neighbours", params.target_neighbours);
   params.max_motion = static_cast<float>(a.number("max-motion", params.max_motion));
   if (a.has("alpha0")) params.alpha0 = static_cast<float>(a.number("alpha0", 1));
   if (a.has("alpha1")) {

@@ -71,15 +71,15 @@ int runDenoise(int argc, char** argv) {
   if (method == "similarity") {
     SimilarityDenoisingParameters p;
     p.radius = static_cast<float>(a.number("radius", 0));
-    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
-    p.grid_size = static_cast<int>(a.number("grid", p.grid_size));
+    p.target_neighbours = a.integer("neighbours", p.target_neighbours);
+    p.grid_size = a.integer("grid", p.grid_size);
     p.sigma = static_cast<float>(a.number("sigma", 0));
     p.sigma_scale = static_cast<float>(a.number("sigma-scale", p.sigma_scale));
-    p.smoothing_iterations = static_cast<int>(a.number("smoothing", p.smoothing_iterations));
-    p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
-    p.search_checks = static_cast<int>(a.number("checks", p.search_checks));
-    p.descriptor_smoothing = static_cast<int>(a.number("guide", p.descriptor_smoothing));
-    p.passes = static_cast<int>(a.number("passes", p.passes));
+    p.smoothing_iterations = a.integer("smoothing", p.smoothing_iterations);
+    p.similar_patches = a.integer("patches", p.similar_patches);
+    p.search_checks = a.integer("checks", p.search_checks);
+    p.descriptor_smoothing = a.integer("guide", p.descriptor_smoothing);
+    p.passes = a.integer("passes", p.passes);
     p.guided_passes = !a.has("refilter");
     p.own_weight = static_cast<float>(a.number("own-weight", p.own_weight));
     const std::string aggregate = a.text("aggregate", "patch");
@@ -120,8 +120,8 @@ int runDenoise(int argc, char** argv) {
   } else {
     PointBilateralParameters p;
     p.radius = static_cast<float>(a.number("radius", 0));
-    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
-    p.iterations = static_cast<int>(a.number("iterations", p.iterations));
+    p.target_neighbours = a.integer("neighbours", p.target_neighbours);
+    p.iterations = a.integer("iterations", p.iterations);
     PointBilateralReport r;
     out = bilateralFilterPositions(in, p, &r, {}, progress);
     std::printf("bilateral filter: radius %g m%s, %d passes; moved %zu points\n", r.radius,

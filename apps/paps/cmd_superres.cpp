@@ -80,23 +80,23 @@ int runSuperres(int argc, char** argv) {
                   countFinite(scans.back()));
     }
   };
-  const double count = a.number("count", 0);
-  if (count < 0 || count > 4e9) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
+  const std::size_t count = a.count("count", 0);
+  if (count > 4000000000u) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   Positions out;
   if (method == "qsr") {
     QuadricSuperResolutionParameters p;
     p.factor = static_cast<float>(a.number("factor", p.factor));
-    p.output_count = static_cast<std::size_t>(count);
+    p.output_count = count;
     p.patch_radius = static_cast<float>(a.number("radius", 0));
-    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.similarity_radius = static_cast<float>(a.number("similarity", 0));
-    p.grid_lr = static_cast<int>(a.number("grid-lr", 0));
-    p.grid_sr = static_cast<int>(a.number("grid-sr", 0));
-    p.similar_patches = static_cast<int>(a.number("patches", p.similar_patches));
+    p.grid_lr = a.integer("grid-lr", 0);
+    p.grid_sr = a.integer("grid-sr", 0);
+    p.similar_patches = a.integer("patches", p.similar_patches);
     p.kernel_scale = static_cast<float>(a.number("kernel", p.kernel_scale));
     p.similarity_scale = static_cast<float>(a.number("similarity-scale", p.similarity_scale));
-    p.irls_iterations = static_cast<int>(a.number("irls", p.irls_iterations));
+    p.irls_iterations = a.integer("irls", p.irls_iterations);
     p.noise_sigma = static_cast<float>(a.number("noise", 0));
     p.seed_disc = static_cast<float>(a.number("seed-disc", p.seed_disc));
     p.thin_disc = static_cast<float>(a.number("thin-disc", p.thin_disc));
@@ -155,11 +155,11 @@ int runSuperres(int argc, char** argv) {
   } else {
     MlsUpsamplingParameters p;
     p.factor = static_cast<float>(a.number("factor", p.factor));
-    p.output_count = static_cast<std::size_t>(count);
+    p.output_count = count;
     p.radius = static_cast<float>(a.number("radius", 0));
-    p.target_neighbours = static_cast<int>(a.number("neighbours", p.target_neighbours));
+    p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.fit_per_input_point = !a.has("refit");
-    p.max_neighbours = static_cast<int>(a.number("max-neighbours", 0));
+    p.max_neighbours = a.integer("max-neighbours", 0);
     if (a.has("seed-disc")) {
       const double disc = a.number("seed-disc", 0);
       requireInRange("seed-disc", disc, 0.1, 10.0);

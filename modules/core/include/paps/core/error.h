@@ -53,11 +53,11 @@ std::string toString(const T& v) {
 }
 }  // namespace detail
 
-/// Throws InvalidParameter unless value > 0 (and finite).
+/// Throws InvalidParameter unless 0 < value < 1e30 (beyond, squares overflow a float).
 template <typename T>
 void requirePositive(const char* name, T value) {
   const double v = static_cast<double>(value);  // no T(1e30) overflow for integer T; NaN fails
-  if (!(v > 0) || !(v < 1e30)) throw InvalidParameter(name, detail::toString(value), "a finite value > 0");
+  if (!(v > 0) || !(v < 1e30)) throw InvalidParameter(name, detail::toString(value), "a value > 0 and below 1e30");
 }
 
 /// Throws InvalidParameter unless value >= 0 and finite; `zero` says what 0 means ("automatic",

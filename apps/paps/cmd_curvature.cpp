@@ -167,13 +167,17 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
     nc[i].curvature = 0.f;
   }
   if (!hasField(cloud, "normal_x")) {
-    pcl::PCLPointCloud2 nb, out;
+    pcl::PCLPointCloud2 nb;
     pcl::toPCLPointCloud2(nc, nb);
     nb.fields.erase(std::remove_if(nb.fields.begin(), nb.fields.end(),
                                    [](const pcl::PCLPointField& f) { return f.name == "curvature"; }),
                     nb.fields.end());
-    pcl::concatenateFields(cloud, nb, out);
-    cloud = out;
+    nb.width = cloud.width;  // same points, in the input's organisation
+    nb.height = cloud.height;
+    nb.row_step = nb.point_step * nb.width;
+    const bool dense = cloud.is_dense;
+    cloud = appendFields(cloud, nb);
+    cloud.is_dense = dense;
     return;
   }
   std::size_t off[3] = {0, 0, 0};
@@ -276,18 +280,17 @@ int runCurvature(int argc, char** argv) {
                                        : params.widening == WavejetParameters::Widening::never
                                            ? " (--fixed-radius: without it, sparse balls are widened)" : "");
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);
-  pcl::PointCloud<pcl::PointXYZ> xyz;
+  // The input's own fields (intensity, colour...) and its width x height are kept; the
+  // Wavejet fields are added (input normals are replaced by the corrected ones).
   pcl::PointCloud<PointWavejet> wj;
-  xyz.resize(p.size());
   wj.resize(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) {
-    xyz[i].getVector3fMap() = p[i];
-    toPoint(res[i], wj[i]);
-  }
-  pcl::PCLPointCloud2 b1, b2, out;
-  pcl::toPCLPointCloud2(xyz, b1);
+  for (std::size_t i = 0; i < p.size(); ++i) toPoint(res[i], wj[i]);
+  pcl::PCLPointCloud2 b2;
   pcl::toPCLPointCloud2(wj, b2);
-  pcl::concatenateFields(b1, b2, out);
+  b2.width = cloud.width;
+  b2.height = cloud.height;
+  b2.row_step = b2.point_step * b2.width;
+  pcl::PCLPointCloud2 out = appendFields(cloud, b2);
   out.is_dense = r.fitted == p.size();
   saveCloudAtomic(a.positional[1], out);
   std::printf("wrote %s\n", a.positional[1].c_str());

@@ -1,16 +1,20 @@
 // Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
 // its input (same number of points, same fields in the same order, only x y z moved).
-//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii]
+//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
+//   paps_test_cloud_tool keeps IN.pcd OUT.pcd FIELD... (same width x height, FIELDs present)
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <algorithm>
 #include <string>
 #include <vector>
 
 #include <pcl/PCLPointCloud2.h>
+#include <pcl/common/io.h>
 #include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
@@ -41,6 +45,15 @@ int write(const std::string& path, int count, const std::string& format) {
     p.z = 0.1f * std::sin(3.f * p.x) * std::cos(2.f * p.y) + noise();
     p.intensity = static_cast<float>(k);
     cloud.push_back(p);
+  }
+  if (format == "organized") {  // side x (count / side) rows, a tenth of the points NaN
+    cloud.width = static_cast<std::uint32_t>(side);
+    cloud.height = static_cast<std::uint32_t>(count / side);
+    cloud.resize(std::size_t(cloud.width) * cloud.height);
+    cloud.width = static_cast<std::uint32_t>(side);
+    cloud.height = static_cast<std::uint32_t>(count / side);
+    for (std::size_t k = 3; k < cloud.size(); k += 10) cloud[k].x = cloud[k].y = cloud[k].z = NAN;
+    cloud.is_dense = false;
   }
   const bool ply = path.size() > 4 && path.compare(path.size() - 4, 4, ".ply") == 0;
   const int rc = ply ? (format == "ascii" ? pcl::io::savePLYFileASCII(path, cloud) : pcl::io::savePLYFileBinary(path, cloud))
@@ -82,6 +95,31 @@ int check(const std::string& in_path, const std::string& out_path) {
   return 0;
 }
 
+// OUT has IN's width x height, and each named field with IN's values where IN has it (the
+// fields a stage adds are only required to be there).
+int keeps(const std::string& in_path, const std::string& out_path, const std::vector<std::string>& names) {
+  pcl::PCLPointCloud2 in, out;
+  if (pcl::io::loadPCDFile(in_path, in) != 0) return fail("cannot read " + in_path);
+  if (pcl::io::loadPCDFile(out_path, out) != 0) return fail("cannot read " + out_path);
+  if (in.width != out.width || in.height != out.height)
+    return fail("organisation " + std::to_string(out.width) + " x " + std::to_string(out.height) + " != " +
+                std::to_string(in.width) + " x " + std::to_string(in.height));
+  for (const std::string& name : names) {
+    const pcl::PCLPointField *a = nullptr, *b = nullptr;
+    for (const auto& f : in.fields) if (f.name == name) a = &f;
+    for (const auto& f : out.fields) if (f.name == name) b = &f;
+    if (!b) return fail("output has no field '" + name + "'");
+    if (!a) continue;
+    if (a->datatype != b->datatype || a->count != b->count) return fail("field '" + name + "' changed type");
+    const std::size_t bytes = pcl::getFieldSize(a->datatype) * std::max<std::uint32_t>(a->count, 1);
+    for (std::size_t i = 0; i < std::size_t(in.width) * in.height; ++i)
+      if (std::memcmp(&in.data[i * in.point_step + a->offset], &out.data[i * out.point_step + b->offset], bytes))
+        return fail("field '" + name + "' of point " + std::to_string(i) + " changed");
+  }
+  std::printf("%u x %u, %zu fields checked\n", out.width, out.height, names.size());
+  return 0;
+}
+
 int unhex(const std::string& in_path, const std::string& out_path) {
   std::FILE* in = std::fopen(in_path.c_str(), "rb");
   if (!in) return fail("cannot read " + in_path);
@@ -105,5 +143,6 @@ int main(int argc, char** argv) {
   if (mode == "write" && (argc == 4 || argc == 5)) return write(argv[2], std::atoi(argv[3]), argc == 5 ? argv[4] : "binary");
   if (mode == "check" && argc == 4) return check(argv[2], argv[3]);
   if (mode == "unhex" && argc == 4) return unhex(argv[2], argv[3]);
+  if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

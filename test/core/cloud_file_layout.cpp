@@ -11,6 +11,7 @@
 
 #include <gtest/gtest.h>
 
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
@@ -212,6 +213,50 @@ TEST(CloudFileLayout, EveryHeaderByteFlipLoadsOrThrows) {
       }
     }
   }
+}
+
+TEST(CloudIo, AppendFieldsKeepsTheOrganisationAndReplacesNamesakes) {
+  pcl::PointCloud<pcl::PointXYZI> a = smallCloud(12);
+  a.width = 4;
+  a.height = 3;
+  pcl::PointCloud<pcl::Normal> n(4, 3);
+  pcl::PointCloud<pcl::Intensity> again(4, 3);
+  for (std::size_t i = 0; i < 12; ++i) {
+    n[i].normal_x = float(i);
+    n[i].curvature = -float(i);
+    again[i].intensity = 100.f + float(i);
+  }
+  pcl::PCLPointCloud2 ba, bn, bi;
+  pcl::toPCLPointCloud2(a, ba);
+  pcl::toPCLPointCloud2(n, bn);
+  pcl::toPCLPointCloud2(again, bi);
+  const pcl::PCLPointCloud2 out = paps::appendFields(ba, bn);
+  EXPECT_EQ(out.width, 4u);
+  EXPECT_EQ(out.height, 3u);
+  std::vector<std::string> names;
+  for (const auto& f : out.fields) names.push_back(f.name);
+  EXPECT_EQ(names, (std::vector<std::string>{"x", "y", "z", "intensity", "normal_x", "normal_y", "normal_z", "curvature"}));
+  pcl::PointCloud<pcl::PointXYZINormal> back;
+  pcl::fromPCLPointCloud2(out, back);
+  for (std::size_t i = 0; i < 12; ++i) {
+    EXPECT_EQ(back[i].getVector3fMap(), a[i].getVector3fMap());
+    EXPECT_EQ(back[i].intensity, a[i].intensity);
+    EXPECT_EQ(back[i].normal_x, float(i));
+    EXPECT_EQ(back[i].curvature, -float(i));
+  }
+  // A field of the same name is replaced, not doubled.
+  const pcl::PCLPointCloud2 replaced = paps::appendFields(ba, bi);
+  EXPECT_EQ(replaced.fields.size(), 4u);
+  pcl::PointCloud<pcl::PointXYZI> r;
+  pcl::fromPCLPointCloud2(replaced, r);
+  for (std::size_t i = 0; i < 12; ++i) {
+    EXPECT_EQ(r[i].intensity, 100.f + float(i));
+    EXPECT_EQ(r[i].getVector3fMap(), a[i].getVector3fMap());
+  }
+  pcl::PointCloud<pcl::Normal> wrong(5, 1);
+  pcl::PCLPointCloud2 bw;
+  pcl::toPCLPointCloud2(wrong, bw);
+  EXPECT_THROW(paps::appendFields(ba, bw), paps::InvalidInput);
 }
 
 // The fuzzing corpus (test/core/cloud_io_corpus, see fuzz_cloud_io.cpp): the seeds are five

@@ -5,9 +5,11 @@
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
+#include <vector>
 
 #include <unistd.h>
 
+#include <pcl/common/io.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
 
@@ -175,5 +177,48 @@ void writePositions(const Positions& p, pcl::PCLPointCloud2& cloud) {
 }
 
 Positions loadPositions(const std::string& path) { return positionsOf(loadCloud(path)); }
+
+pcl::PCLPointCloud2 appendFields(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointCloud2& extra) {
+  const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
+  if (static_cast<std::size_t>(extra.width) * extra.height != n)
+    throw InvalidInput("appendFields: the clouds differ in size");
+  // Fields of `cloud` that `extra` does not replace (padding "_" fields are dropped: they
+  // carry nothing), packed one after the other; then every field of `extra` but its padding.
+  std::vector<const pcl::PCLPointField*> keep, add;
+  auto named = [](const pcl::PCLPointCloud2& c, const std::string& name) {
+    for (const auto& f : c.fields)
+      if (f.name == name) return true;
+    return false;
+  };
+  for (const auto& f : cloud.fields)
+    if (f.name != "_" && !named(extra, f.name)) keep.push_back(&f);
+  for (const auto& f : extra.fields)
+    if (f.name != "_") add.push_back(&f);
+  pcl::PCLPointCloud2 out;
+  out.header = cloud.header;
+  out.width = cloud.width;
+  out.height = cloud.height;
+  out.is_bigendian = cloud.is_bigendian;
+  out.is_dense = cloud.is_dense && extra.is_dense;
+  struct Copy { const pcl::PCLPointCloud2* from; std::uint32_t src, dst, bytes; };
+  std::vector<Copy> copies;
+  std::uint32_t step = 0;
+  for (const auto* list : {&keep, &add})
+    for (const pcl::PCLPointField* f : *list) {
+      const std::uint32_t bytes = std::uint32_t(pcl::getFieldSize(f->datatype)) * std::max<std::uint32_t>(f->count, 1);
+      pcl::PCLPointField g = *f;
+      g.offset = step;
+      out.fields.push_back(g);
+      copies.push_back({list == &keep ? &cloud : &extra, f->offset, step, bytes});
+      step += bytes;
+    }
+  out.point_step = step;
+  out.row_step = step * out.width;
+  out.data.resize(std::size_t(step) * n);
+  for (std::size_t i = 0; i < n; ++i)
+    for (const Copy& c : copies)
+      std::memcpy(out.data.data() + i * step + c.dst, c.from->data.data() + i * c.from->point_step + c.src, c.bytes);
+  return out;
+}
 
 }  // namespace paps

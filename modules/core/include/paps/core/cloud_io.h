@@ -24,6 +24,12 @@ Positions positionsOf(const pcl::PCLPointCloud2& cloud);
 /// Writes positions back into the x, y, z fields of a blob of the same size; is_dense follows.
 void writePositions(const Positions& p, pcl::PCLPointCloud2& cloud);
 
+/// `cloud` with the fields of `extra` (a blob of the same number of points) added, in its
+/// width x height: a field of `cloud` that `extra` also has is replaced, padding fields are
+/// dropped. How a stage that computes new per-point values (normals, curvatures) keeps the
+/// input's own fields (intensity, colour...) and organisation.
+pcl::PCLPointCloud2 appendFields(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointCloud2& extra);
+
 /// Loads a cloud straight into positions (any file loadCloud accepts).
 Positions loadPositions(const std::string& path);
 

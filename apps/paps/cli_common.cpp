@@ -3,6 +3,7 @@
 #include <cmath>
 
 #include <algorithm>
+#include <filesystem>
 #include <cstdio>
 #include <cstdlib>
 #include <chrono>
@@ -66,6 +67,19 @@ void Arguments::allowOnly(const std::vector<std::string>& known) const {
   for (const auto& [name, value] : options)
     if (std::find(known.begin(), known.end(), name) == known.end())
       throw InvalidParameter(name, value, "a known option (see paps --help)");
+}
+
+void Arguments::requireOutputApart() const {
+  if (positional.size() < 2) return;
+  namespace fs = std::filesystem;
+  const fs::path out = positional.back();
+  std::error_code ec;
+  for (std::size_t i = 0; i + 1 < positional.size(); ++i) {
+    const fs::path in = positional[i];
+    const bool same = fs::exists(out, ec) ? fs::equivalent(in, out, ec)
+                                          : fs::weakly_canonical(in, ec) == fs::weakly_canonical(out, ec);
+    if (same) throw InvalidParameter("OUT", out.string(), "a file other than the input (inputs are never overwritten)");
+  }
 }
 
 std::vector<std::string> splitList(const std::string& s) {

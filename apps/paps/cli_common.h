@@ -26,6 +26,9 @@ struct Arguments {
   std::string text(const std::string& name, const std::string& fallback) const;
   /// Throws paps::InvalidParameter for an option not in `known`.
   void allowOnly(const std::vector<std::string>& known) const;
+  /// Throws paps::InvalidParameter when the output (the last positional argument) is one of
+  /// the inputs (the others): inputs are never overwritten, not even on request.
+  void requireOutputApart() const;
 };
 
 /// "a,b,,c" -> {"a", "b", "c"}.

@@ -296,6 +296,7 @@ int runCompress(int argc, char** argv) {
   a.allowOnly({"preset", "radius", "patch-points", "bins", "atoms", "sparsity", "seed-bits", "coefficient-bits",
                "angle-bits", "dictionary-bits", "seed-spacing", "ksvd-iterations", "spacing", "error", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT.paps");
+  a.requireOutputApart();
   using namespace paps::compression;
   CompressionParameters p = compressionPreset(a.text("preset", "balanced"));
   p.patch_radius = float(a.number("radius", p.patch_radius));
@@ -365,6 +366,7 @@ int runDecompress(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kDecompressUsage, stdout); return 0; }
   a.allowOnly({"no-consolidate", "no-regularise", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN.paps and OUT");
+  a.requireOutputApart();
   using namespace paps::compression;
   const std::string& out_path = a.positional[1];
   const std::string ext = std::filesystem::path(out_path).extension().string();

@@ -246,6 +246,7 @@ int runCurvature(int argc, char** argv) {
   a.allowOnly({"radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle", "orient", "quiet",
                "timings", "select-order", "fixed-radius", "max-neighbours", "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
+  a.requireOutputApart();
   const WavejetParameters params = wavejetParameters(a, "auto");
   const float radius = static_cast<float>(a.number("radius", 0));
   const int neighbours = a.integer("neighbours", 50);
@@ -304,6 +305,7 @@ int runEnhance(int argc, char** argv) {
                "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius", "max-neighbours",
                "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
+  a.requireOutputApart();
   if (a.has("alpha0") == a.has("alpha1"))
     throw InvalidParameter("alpha0/alpha1", "both or neither", "exactly one of --alpha0 A or --alpha1 RE[,IM]");
   WavejetEnhancementParameters params;

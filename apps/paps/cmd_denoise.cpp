@@ -56,6 +56,7 @@ int runDenoise(int argc, char** argv) {
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
                "refilter", "aggregate", "own-weight", "noise", "no-adapt"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
+  a.requireOutputApart();
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
   const std::string method = a.text("method", "similarity");

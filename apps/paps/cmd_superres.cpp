@@ -65,6 +65,7 @@ int runSuperres(int argc, char** argv) {
                "refit", "max-neighbours", "seed-disc", "thin-disc"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
+  a.requireOutputApart();
   const std::string method = a.text("method", "qsr");
   if (method != "qsr" && method != "apss" && method != "rimls")
     throw InvalidParameter("method", method, "qsr, apss or rimls");

@@ -291,6 +291,14 @@ TEST(WavejetEstimation, BadParametersThrow) {
   wj.setRadiusSearch(0.3);
   wj.setKSearch(10);
   EXPECT_THROW(wj.compute(out), paps::InvalidParameter);  // both
+  wj.setKSearch(0);
+  wj.setIndices(pcl::IndicesPtr(new pcl::Indices{0, 5, 100}));  // 100 points: 100 is past the end
+  try {
+    wj.compute(out);
+    ADD_FAILURE() << "an index past the cloud was accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "indices");
+  }
   Positions p(10, Eigen::Vector3f::Zero());
   EXPECT_THROW(paps::estimateWavejets(p, NAN, paps::WavejetParameters()), paps::InvalidParameter);
   EXPECT_THROW(paps::estimateWavejets(Positions(3, Eigen::Vector3f::Constant(NAN)), 0.1f, paps::WavejetParameters()),

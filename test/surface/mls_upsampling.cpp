@@ -101,6 +101,18 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
   for (std::size_t i = 0; i < got.size(); ++i) ASSERT_EQ(got[i], expected[i]) << i;
   EXPECT_THROW(apss.setUpsamplingFactor(0), InvalidParameter);
   EXPECT_THROW(apss.setRadius(NAN), InvalidParameter);
+  // An index past the cloud (or negative) is named, not read past the end.
+  for (const int bad_index : {-1, 2000, 1000000}) {
+    RIMLSUpsampling<pcl::PointXYZ> rimls;
+    rimls.setInputCloud(cloud);
+    rimls.setIndices(pcl::IndicesPtr(new pcl::Indices{0, 1, 2, bad_index}));
+    try {
+      rimls.process(out);
+      ADD_FAILURE() << "index " << bad_index << " accepted";
+    } catch (const InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "indices");
+    }
+  }
   EXPECT_THROW(upsampleMls({}, MlsSurface::Rimls, {}), InvalidInput);
   EXPECT_THROW(upsampleMls(Positions(10, Eigen::Vector3f::Constant(NAN)), MlsSurface::Apss, {}), InvalidInput);
   MlsUpsamplingParameters bad;

@@ -165,6 +165,19 @@ TEST(QuadricSuperResolution, BadInput) {
   EXPECT_THROW(superResolveQuadric({}, {}), InvalidInput);
   EXPECT_THROW(superResolveQuadric({Positions{}}, {}), InvalidInput);
   EXPECT_THROW(superResolveQuadric({Positions(100, Eigen::Vector3f::Constant(NAN))}, {}), InvalidInput);
+  {
+    auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>(20, 1);
+    QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ> qsr;
+    qsr.setInputCloud(cloud);
+    qsr.setIndices(pcl::IndicesPtr(new pcl::Indices{0, 19, 20}));
+    pcl::PointCloud<pcl::PointXYZ> out;
+    try {
+      qsr.process(out);
+      ADD_FAILURE() << "an index past the cloud was accepted";
+    } catch (const InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "indices");
+    }
+  }
   QuadricSuperResolutionParameters p;
   p.factor = -3;
   EXPECT_THROW(superResolveQuadric({Positions(100, Eigen::Vector3f::Zero())}, p), InvalidParameter);

@@ -69,6 +69,24 @@ inline std::size_t checkMovableInput(const Positions& points, const std::vector<
   return finite;
 }
 
+/// Throws InvalidParameter unless every index is a point of a cloud of `size` points (PCL's
+/// own classes read past the cloud on a bad index; ours say which one is wrong).
+inline void checkIndices(const pcl::Indices& indices, std::size_t size) {
+  for (const auto i : indices)
+    if (i < 0 || static_cast<std::size_t>(i) >= size)
+      throw InvalidParameter("indices", detail::toString(i), "indices in [0, " + detail::toString(size) + ")");
+}
+
+/// Positions of the points of `input` at `indices` (checked).
+template <typename PointT>
+Positions positionsAt(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices) {
+  checkIndices(indices, input.size());
+  Positions out;
+  out.reserve(indices.size());
+  for (const auto i : indices) out.push_back(input[static_cast<std::size_t>(i)].getVector3fMap());
+  return out;
+}
+
 /// The shape every point-moving pcl::Filter shares: copy the input (all fields, organisation),
 /// let `move(positions, movable)` return new positions for the points in `indices`, write
 /// them back and keep is_dense honest. Input empty -> InvalidInput (thrown by the caller's
@@ -76,13 +94,9 @@ inline std::size_t checkMovableInput(const Positions& points, const std::vector<
 template <typename PointT, typename MoveFn>
 void applyPositionFilter(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices,
                          pcl::PointCloud<PointT>& output, MoveFn move) {
+  checkIndices(indices, input.size());
   std::vector<std::uint8_t> movable(input.size(), 0);
-  for (const auto i : indices) {
-    if (i < 0 || static_cast<std::size_t>(i) >= input.size())
-      throw InvalidParameter("indices", detail::toString(i),
-                             "indices in [0, " + detail::toString(input.size()) + ")");
-    movable[i] = 1;
-  }
+  for (const auto i : indices) movable[static_cast<std::size_t>(i)] = 1;
   const Positions out = move(positionsOf(input), movable);
   output = input;
   bool dense = true;

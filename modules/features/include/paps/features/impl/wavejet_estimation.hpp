@@ -4,6 +4,7 @@
 #include <cstdint>
 
 #include <paps/core/error.h>
+#include <paps/core/positions.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/features/wavejet_estimation.h>
 #include <paps/features/wavejet_noise.h>
@@ -28,6 +29,7 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
     throw InvalidParameter("orientation_hints", detail::toString(orientation_->size()), "one per input point");
   (void)n;
   if (!Base::initCompute()) throw InvalidInput("pcl::Feature::initCompute failed (see PCL's message)");
+  checkIndices(*this->indices_, this->input_->size());
   return true;
 }
 

@@ -1,5 +1,6 @@
 #pragma once
 #include <paps/core/error.h>
+#include <paps/core/positions.h>
 #include <paps/surface/quadric_super_resolution.h>
 
 namespace paps {
@@ -7,9 +8,7 @@ namespace paps {
 template <typename PointIn, typename PointOut>
 void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointCloud<PointOut>& output) {
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
-  std::vector<Positions> scans(1);
-  scans[0].reserve(this->indices_->size());
-  for (const auto i : *this->indices_) scans[0].push_back((*this->input_)[i].getVector3fMap());
+  std::vector<Positions> scans(1, positionsAt(*this->input_, *this->indices_));
   for (const auto& s : extra_) {
     if (!s) throw InvalidInput("a null scan was added");
     scans.push_back(positionsOf(*s));

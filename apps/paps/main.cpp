@@ -1,7 +1,10 @@
 // The `paps` command line: one subcommand per algorithm, one clear error line on failure.
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <exception>
+
+#include <omp.h>
 
 #include <paps/core/error.h>
 
@@ -21,10 +24,37 @@ const char* kUsage =
     "  bench curvature [options]     Wavejets vs PCL and CGAL jets on analytic surfaces and a scan\n"
     "  superres IN [IN2..] OUT --factor F   QSR super-resolution (or --method apss|rimls)\n"
     "  bench superres [options]      QSR vs APSS, RIMLS and PCL MLS upsampling (Table 2.2 protocol)\n"
-    "Run 'paps COMMAND --help' for the options of a command.\n";
+    "Run 'paps COMMAND --help' for the options of a command.\n"
+    "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
 }
 
+namespace {
+// `--threads N` anywhere on the line bounds every command (and the bench workers it starts,
+// through OMP_NUM_THREADS); it is taken out before the command parses its options.
+void takeThreadsOption(int& argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--threads") != 0) continue;
+    if (i + 1 >= argc) throw paps::InvalidParameter("threads", "(missing)", "a thread count in [1, 4096]");
+    char* end = nullptr;
+    const long n = std::strtol(argv[i + 1], &end, 10);
+    if (end == argv[i + 1] || *end != '\0' || n < 1 || n > 4096)
+      throw paps::InvalidParameter("threads", argv[i + 1], "a thread count in [1, 4096]");
+    ::setenv("OMP_NUM_THREADS", argv[i + 1], 1);
+    omp_set_num_threads(static_cast<int>(n));
+    for (int j = i; j + 2 <= argc; ++j) argv[j] = argv[j + 2];
+    argc -= 2;
+    --i;
+  }
+}
+}  // namespace
+
 int main(int argc, char** argv) {
+  try {
+    takeThreadsOption(argc, argv);
+  } catch (const paps::Error& e) {
+    std::fprintf(stderr, "paps: error: %s\n", e.what());
+    return 1;
+  }
   if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
     std::fputs(kUsage, argc < 2 ? stderr : stdout);
     return argc < 2 ? 2 : 0;

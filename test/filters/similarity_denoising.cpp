@@ -464,6 +464,26 @@ TEST(SimilarityDenoising, SameOutputWithOneOrTwoThreads) {
   EXPECT_EQ(r1.sigma, r2.sigma);
 }
 
+// setNumberOfThreads, as on PCL's OMP classes: the same output with 1 or 2 threads, and the
+// caller's OpenMP count untouched after the stage.
+TEST(SimilarityDenoising, SetNumberOfThreadsGivesTheSameOutputAndRestoresTheCount) {
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  for (const auto& q : smallNoisyPlane(4000)) cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
+  const int before = omp_get_max_threads();
+  pcl::PointCloud<pcl::PointXYZ> out[2];
+  for (unsigned t = 1; t <= 2; ++t) {
+    paps::SimilarityDenoising<pcl::PointXYZ> f;
+    f.setNumberOfThreads(t);
+    EXPECT_EQ(f.getNumberOfThreads(), t);
+    f.setInputCloud(cloud);
+    f.filter(out[t - 1]);
+    EXPECT_EQ(omp_get_max_threads(), before);
+  }
+  ASSERT_EQ(out[0].size(), out[1].size());
+  for (std::size_t i = 0; i < out[0].size(); ++i)
+    ASSERT_TRUE(sameBits(out[0][i].getVector3fMap(), out[1][i].getVector3fMap())) << i;
+}
+
 TEST(SimilarityDenoising, ProgressReachesTheEndAndCancels) {
   const Positions p = smallNoisyPlane(2000);
   std::vector<std::string> finished;

@@ -19,13 +19,14 @@
 
 #include <pcl/features/feature.h>
 
+#include <paps/core/thread_count.h>
 #include <paps/features/point_types.h>
 #include <paps/features/wavejet.h>
 
 namespace paps {
 
 template <typename PointInT, typename PointOutT = PointWavejet>
-class WavejetEstimation : public pcl::Feature<PointInT, PointOutT> {
+class WavejetEstimation : public pcl::Feature<PointInT, PointOutT>, public ThreadCountOption {
   using Base = pcl::Feature<PointInT, PointOutT>;
 
  public:

@@ -7,6 +7,7 @@
 // w_s = exp(-h^2 / 2 sigma_s^2) (feature preservation).
 #include <pcl/filters/filter.h>
 
+#include <paps/core/thread_count.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -38,7 +39,7 @@ Positions bilateralFilterPositions(const Positions& points, const PointBilateral
                                    const ProgressCallback& progress = {});
 
 template <typename PointT>
-class PointBilateralFilter : public pcl::Filter<PointT> {
+class PointBilateralFilter : public pcl::Filter<PointT>, public ThreadCountOption {
   using Base = pcl::Filter<PointT>;
   using PointCloud = typename Base::PointCloud;
 

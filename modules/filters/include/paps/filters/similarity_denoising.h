@@ -11,6 +11,7 @@
 
 #include <pcl/filters/filter.h>
 
+#include <paps/core/thread_count.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -124,7 +125,7 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
 /// cloud's sensor_origin_ is set (non-zero) and no viewpoint was given, normals are oriented
 /// towards it.
 template <typename PointT>
-class SimilarityDenoising : public pcl::Filter<PointT> {
+class SimilarityDenoising : public pcl::Filter<PointT>, public ThreadCountOption {
   using Base = pcl::Filter<PointT>;
   using PointCloud = typename Base::PointCloud;
 

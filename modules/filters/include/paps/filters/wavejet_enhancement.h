@@ -22,6 +22,7 @@
 
 #include <pcl/filters/filter.h>
 
+#include <paps/core/thread_count.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 #include <paps/features/wavejet.h>
@@ -97,7 +98,7 @@ Normals enhanceNormals(const Positions& points, const WavejetEnhancementParamete
 /// 2.22 (the point type must have normals). Input normals, when present and finite, orient
 /// the output; otherwise the viewpoint does.
 template <typename PointT>
-class WavejetEnhancement : public pcl::Filter<PointT> {
+class WavejetEnhancement : public pcl::Filter<PointT>, public ThreadCountOption {
   using Base = pcl::Filter<PointT>;
   using PointCloud = typename Base::PointCloud;
 

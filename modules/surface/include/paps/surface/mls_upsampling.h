@@ -9,6 +9,7 @@
 
 #include <pcl/surface/processing.h>
 
+#include <paps/core/thread_count.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
@@ -109,7 +110,7 @@ std::vector<int> thinSeedCandidates(const Positions& points, const Positions& ca
 
 /// The pcl::CloudSurfaceProcessing stages. Indices are honoured (only those points are used).
 template <typename PointIn, typename PointOut, MlsSurface S>
-class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut> {
+class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption {
  public:
   void setParameters(const MlsUpsamplingParameters& p) { p.validate(); params_ = p; }
   const MlsUpsamplingParameters& getParameters() const { return params_; }

@@ -35,6 +35,7 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
 
 template <typename PointInT, typename PointOutT>
 void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& output) {
+  const ScopedThreadCount threads(this->threads_);
   const Positions surface = positionsOf(*this->surface_);
   const pcl::Indices& indices = *this->indices_;
   const std::int64_t count = static_cast<std::int64_t>(indices.size());

@@ -6,6 +6,7 @@ namespace paps {
 
 template <typename PointT>
 void PointBilateralFilter<PointT>::applyFilter(PointCloud& output) {
+  const ScopedThreadCount threads(this->threads_);
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
   applyPositionFilter(*this->input_, *this->indices_, output,
                       [&](const Positions& in, const std::vector<std::uint8_t>& movable) {

@@ -31,6 +31,7 @@ template <typename PointT> void SimilarityDenoising<PointT>::setSimilarPatches(i
 
 template <typename PointT>
 void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {
+  const ScopedThreadCount threads(this->threads_);
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
   // A cloud that knows where its sensor was gets its normals oriented towards it (2.1.2);
   // otherwise orientation is propagated over the neighbour graph.

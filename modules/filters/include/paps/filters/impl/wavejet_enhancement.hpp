@@ -31,6 +31,7 @@ void writeNormal(PointT& p, const Eigen::Vector3f& n) {
 
 template <typename PointT>
 void WavejetEnhancement<PointT>::applyFilter(PointCloud& output) {
+  const ScopedThreadCount threads(this->threads_);
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
   Normals hints;
   const bool have_hints = detail::inputNormals(*this->input_, hints);

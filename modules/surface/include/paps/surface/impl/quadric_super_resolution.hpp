@@ -7,6 +7,7 @@ namespace paps {
 
 template <typename PointIn, typename PointOut>
 void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointCloud<PointOut>& output) {
+  const ScopedThreadCount threads(this->threads_);
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
   std::vector<Positions> scans(1, positionsAt(*this->input_, *this->indices_));
   for (const auto& s : extra_) {

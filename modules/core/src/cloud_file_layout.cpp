@@ -33,6 +33,7 @@ HeaderText readHead(const std::string& path) {
   HeaderText h;
   h.file_size = std::filesystem::file_size(path, ec);
   if (ec) throw IoError("cannot read '" + path + "': " + ec.message());
+  if (h.file_size == 0) throw IoError("cannot read '" + path + "': the file is empty");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw IoError("cannot read '" + path + "': permission denied or unreadable");
   h.bytes.resize(std::size_t(std::min<std::uint64_t>(h.file_size, kMaxHeaderBytes)));
@@ -107,7 +108,6 @@ std::uint64_t PcdLayout::offsetOf(int i) const {
 PcdLayout readPcdLayout(const std::string& path) {
   const HeaderText head = readHead(path);
   auto bad = [&](const std::string& what) { return IoError("cannot read '" + path + "': " + what); };
-  if (head.file_size == 0) throw bad("the file is empty");
   PcdLayout L;
   L.file_size = head.file_size;
   bool have_width = false, have_height = false, have_points = false, have_counts = false, have_data = false;
@@ -260,7 +260,6 @@ int PlyLayout::element(const std::string& name) const {
 PlyLayout readPlyLayout(const std::string& path) {
   const HeaderText head = readHead(path);
   auto bad = [&](const std::string& what) { return IoError("cannot read '" + path + "': " + what); };
-  if (head.file_size == 0) throw bad("the file is empty");
   PlyLayout L;
   L.file_size = head.file_size;
   std::size_t pos = 0;

@@ -149,6 +149,12 @@ TEST(PointCloudCompression, StreamsLikeTheOctreeCoder) {
   EXPECT_TRUE(out->is_dense);
   std::stringstream junk("not a compressed cloud at all");
   EXPECT_THROW(decoder.decodePointCloud(junk, out), CorruptStream);
+  // One thread or two: the same bytes (setNumberOfThreads, as on the other stages).
+  PointCloudCompression<pcl::PointXYZ> one(compressionPreset("compact"));
+  one.setNumberOfThreads(1);
+  std::stringstream single;
+  one.encodePointCloud(cloud, single);
+  EXPECT_EQ(single.str(), stream.str());
 }
 
 // Seeds farther apart than R (the bench's 1.25 R): fewer seeds and bytes, and the patches

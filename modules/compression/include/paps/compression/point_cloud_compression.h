@@ -15,11 +15,12 @@
 #include <pcl/point_cloud.h>
 
 #include <paps/compression/self_similarity_codec.h>
+#include <paps/core/thread_count.h>
 
 namespace paps::compression {
 
 template <typename PointT>
-class PointCloudCompression {
+class PointCloudCompression : public ThreadCountOption {
  public:
   using PointCloudConstPtr = typename pcl::PointCloud<PointT>::ConstPtr;
   using PointCloudPtr = typename pcl::PointCloud<PointT>::Ptr;
@@ -35,6 +36,7 @@ class PointCloudCompression {
   /// Throws InvalidInput / InvalidParameter (see compressPositions), IoError when writing fails.
   void encodePointCloud(const PointCloudConstPtr& cloud, std::ostream& out) {
     if (!cloud) throw InvalidInput("no input cloud");
+    const ScopedThreadCount threads(threads_);
     const std::vector<std::uint8_t> b = compressPositions(positionsOf(*cloud), parameters_, &encode_report_, progress_);
     const std::uint64_t n = b.size();
     char len[8];
@@ -62,6 +64,7 @@ class PointCloudCompression {
       b.insert(b.end(), chunk, chunk + got);
       if (got < want) throw CorruptStream("the stream is truncated");
     }
+    const ScopedThreadCount threads(threads_);
     const Positions p = decompressPositions(b.data(), b.size(), decode_options_, &decode_report_, progress_);
     if (!cloud) cloud.reset(new pcl::PointCloud<PointT>);
     writePositions(p, *cloud);

@@ -125,7 +125,10 @@ PcdLayout readPcdLayout(const std::string& path) {
                                         "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
     if (std::find(std::begin(known), std::end(known), key) == std::end(known))
       throw bad("unknown PCD header line '" + line.substr(0, 80) + "'");
-    if (!seen.insert(key == "COLUMNS" ? "FIELDS" : key).second) throw bad("two " + key + " lines in the PCD header");
+    // A repeated WIDTH, HEIGHT, POINTS, VERSION or VIEWPOINT replaces the earlier one (PCL
+    // reads such files); a second FIELDS, SIZE, TYPE or COUNT list is refused.
+    const bool list = key == "FIELDS" || key == "COLUMNS" || key == "SIZE" || key == "TYPE" || key == "COUNT";
+    if (list && !seen.insert(key == "COLUMNS" ? "FIELDS" : key).second) throw bad("two " + key + " lines in the PCD header");
     if ((key == "SIZE" || key == "TYPE" || key == "COUNT") && L.fields.empty())
       throw bad(key + " before FIELDS in the PCD header");
     auto count = [&](std::uint64_t& v, const char* what) {

@@ -8,7 +8,7 @@
 #include <fstream>
 #include <iterator>
 #include <limits>
-#include <set>
+#include <map>
 #include <sstream>
 
 #include <paps/core/error.h>
@@ -113,7 +113,7 @@ PcdLayout readPcdLayout(const std::string& path) {
   bool have_width = false, have_height = false, have_points = false, have_counts = false, have_data = false;
   std::size_t pos = 0;
   std::string line;
-  std::set<std::string> seen;
+  std::map<std::string, std::string> seen;  // list keyword -> its words
   while (!have_data && nextLine(head.bytes, pos, line)) {
     if (line.empty() || line[0] == '#') continue;
     const std::vector<std::string> t = tokens(line, path);
@@ -125,10 +125,17 @@ PcdLayout readPcdLayout(const std::string& path) {
                                         "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
     if (std::find(std::begin(known), std::end(known), key) == std::end(known))
       throw bad("unknown PCD header line '" + line.substr(0, 80) + "'");
-    // A repeated WIDTH, HEIGHT, POINTS, VERSION or VIEWPOINT replaces the earlier one (PCL
-    // reads such files); a second FIELDS, SIZE, TYPE or COUNT list is refused.
+    // A repeated WIDTH, HEIGHT, POINTS, VERSION or VIEWPOINT replaces the earlier one, and a
+    // FIELDS, SIZE, TYPE or COUNT line may be repeated word for word (PCL reads such files);
+    // a list that changes is refused (PCL would size its fields from one and read another).
     const bool list = key == "FIELDS" || key == "COLUMNS" || key == "SIZE" || key == "TYPE" || key == "COUNT";
-    if (list && !seen.insert(key == "COLUMNS" ? "FIELDS" : key).second) throw bad("two " + key + " lines in the PCD header");
+    if (list) {
+      const std::string name = key == "COLUMNS" ? "FIELDS" : key;
+      std::string words;
+      for (std::size_t i = 1; i < t.size(); ++i) words += t[i] + " ";
+      const auto [it, first] = seen.emplace(name, words);
+      if (!first && it->second != words) throw bad("two different " + name + " lines in the PCD header");
+    }
     if ((key == "SIZE" || key == "TYPE" || key == "COUNT") && L.fields.empty())
       throw bad(key + " before FIELDS in the PCD header");
     auto count = [&](std::uint64_t& v, const char* what) {

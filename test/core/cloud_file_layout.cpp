@@ -130,6 +130,7 @@ TEST(CloudFileLayout, RefusesEmptyForeignAndInconsistentHeaders) {
       {"empty.pcd", "", "empty"},
       {"text.pcd", "hello\nworld\n", "unknown PCD header line 'hello'"},
       {"binary.pcd", std::string(3000, '\x01'), "no PCD header"},
+      {"blank.pcd", "FIELDS x y z\n\t \nSIZE 4 4 4\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n0 0 0\n", "only spaces"},
       {"order.pcd", "SIZE 4 4 4\nFIELDS x y z\nTYPE F F F\nWIDTH 1\nPOINTS 1\nDATA ascii\n0 0 0\n", "SIZE before FIELDS"},
       {"twice.pcd", head + "SIZE 4 4 8\nWIDTH 1\nPOINTS 1\nDATA ascii\n0 0 0\n", "two different SIZE lines"},
       {"nofields.pcd", "VERSION 0.7\nWIDTH 1\nPOINTS 1\nDATA ascii\n0 0 0\n", "no FIELDS"},

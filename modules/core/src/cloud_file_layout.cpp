@@ -114,10 +114,13 @@ PcdLayout readPcdLayout(const std::string& path) {
   std::size_t pos = 0;
   std::string line;
   std::map<std::string, std::string> seen;  // list keyword -> its words
-  while (!have_data && nextLine(head.bytes, pos, line)) {
+  for (std::size_t start = pos; !have_data && nextLine(head.bytes, pos, line); start = pos) {
+    // An empty line is skipped, but PCL 1.13 crashes on a line of only spaces, tabs or a CR.
+    const std::size_t raw_end = pos - 1;  // the '\n'
+    if (raw_end > start && head.bytes.find_first_not_of(" \t\r", start) >= raw_end)
+      throw bad("a line of only spaces, tabs or CR in the PCD header");
     if (line.empty() || line[0] == '#') continue;
     const std::vector<std::string> t = tokens(line, path);
-    if (t.empty()) continue;
     const std::string& key = t[0];
     // PCL 1.13 crashes on a line it does not know and on SIZE, TYPE or COUNT before FIELDS:
     // only the format's keywords are let through, each once, FIELDS before its attributes.

@@ -7,10 +7,12 @@
 #include <exception>
 
 #include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
 
 #include "../paps/commands.h"
 
 int main(int argc, char** argv) {
+  paps::installInterruptCleanup();  // an interrupted write leaves no temporary file
   const char* usage =
       "usage: paps-codec compress IN.pcd OUT.paps [options]   (binary PCD, float x y z)\n"
       "       paps-codec decompress IN.paps OUT.{pcd,ply} [options]\n"

@@ -17,6 +17,7 @@
 #endif
 #include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
 
 #include "cli_common.h"
 #include "commands.h"
@@ -77,6 +78,7 @@ void requireOutputPath(const std::string& path) {
 void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b) {
   requireOutputPath(path);
   const std::string tmp = path + ".tmp-paps";
+  const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
     f.write(reinterpret_cast<const char*>(b.data()), std::streamsize(b.size()));
@@ -272,6 +274,7 @@ void writeXyzAtomic(const std::string& path, const Positions& pts) {
              "\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
   }
   const std::string tmp = path + ".tmp-paps";
+  const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C
   bool ok = true;
   {
     std::ofstream f(tmp, std::ios::binary | std::ios::trunc);

@@ -7,6 +7,7 @@
 #include <omp.h>
 
 #include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
 
 #include "bench_worker.h"
 #include "commands.h"
@@ -49,6 +50,7 @@ void takeThreadsOption(int& argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  paps::installInterruptCleanup();  // an interrupted write leaves no temporary file
   try {
     takeThreadsOption(argc, argv);
   } catch (const paps::Error& e) {

@@ -15,6 +15,7 @@
 
 #include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
 
 namespace paps {
 
@@ -113,6 +114,7 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) 
   // The temporary keeps the extension: PCL's writers choose the format from it.
   const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" +
                                   std::to_string(::getpid()) + ext)).string();
+  const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C (installInterruptCleanup)
   int rc = -1;
   const Eigen::Vector4f origin = Eigen::Vector4f::Zero();
   const Eigen::Quaternionf orient = Eigen::Quaternionf::Identity();

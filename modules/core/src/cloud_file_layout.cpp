@@ -121,9 +121,10 @@ PcdLayout readPcdLayout(const std::string& path) {
       throw bad("a line of only spaces, tabs or CR in the PCD header");
     if (line.empty() || line[0] == '#') continue;
     const std::vector<std::string> t = tokens(line, path);
+    if (t.empty()) continue;  // cannot happen after the blank-line check; kept for safety
     const std::string& key = t[0];
-    // PCL 1.13 crashes on a line it does not know and on SIZE, TYPE or COUNT before FIELDS:
-    // only the format's keywords are let through, each once, FIELDS before its attributes.
+    // PCL 1.13 crashes on a line it does not know: only the format's keywords are let
+    // through, and FIELDS before its attributes (PCL refuses them before it).
     static const char* const known[] = {"VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT",
                                         "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA"};
     if (std::find(std::begin(known), std::end(known), key) == std::end(known))

@@ -1,9 +1,9 @@
 #include "cli_common.h"
-#include <limits>
-#include <cmath>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
+#include <limits>
 #include <cstdio>
 #include <cstdlib>
 #include <chrono>
@@ -71,15 +71,11 @@ void Arguments::allowOnly(const std::vector<std::string>& known) const {
 
 void Arguments::requireOutputApart() const {
   if (positional.size() < 2) return;
-  namespace fs = std::filesystem;
-  const fs::path out = positional.back();
+  // An output that does not exist yet cannot be an (existing) input.
   std::error_code ec;
-  for (std::size_t i = 0; i + 1 < positional.size(); ++i) {
-    const fs::path in = positional[i];
-    const bool same = fs::exists(out, ec) ? fs::equivalent(in, out, ec)
-                                          : fs::weakly_canonical(in, ec) == fs::weakly_canonical(out, ec);
-    if (same) throw InvalidParameter("OUT", out.string(), "a file other than the input (inputs are never overwritten)");
-  }
+  for (std::size_t i = 0; i + 1 < positional.size(); ++i)
+    if (std::filesystem::equivalent(positional[i], positional.back(), ec))
+      throw InvalidParameter("OUT", positional.back(), "a file other than the input (inputs are never overwritten)");
 }
 
 std::vector<std::string> splitList(const std::string& s) {

@@ -65,18 +65,8 @@ std::vector<std::uint8_t> readFile(const std::string& path) {
   return b;
 }
 
-// Says clearly why `path` cannot be an output file (empty, a folder, in a missing folder).
-void requireOutputPath(const std::string& path) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  if (path.empty()) throw IoError("cannot write '': the output path is empty");
-  if (fs::is_directory(path, ec)) throw IoError("cannot write '" + path + "': it is a folder");
-  const fs::path dir = fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
-  if (!fs::is_directory(dir, ec)) throw IoError("cannot write '" + path + "': folder '" + dir.string() + "' does not exist");
-}
-
 void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b) {
-  requireOutputPath(path);
+  checkOutputPath(path);
   const std::string tmp = path + ".tmp-paps";
   const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C
   {
@@ -262,7 +252,7 @@ bool readPlyXyz(const std::string& path, Positions& out) {
 // Writes float x y z as binary PCD or PLY straight from Positions (no PCL copies of the
 // cloud), atomically: a temporary file renamed at the end, removed on failure.
 void writeXyzAtomic(const std::string& path, const Positions& pts) {
-  requireOutputPath(path);
+  checkOutputPath(path);
   const bool pcd = std::filesystem::path(path).extension() == ".pcd";
   std::string header;
   const std::string n = std::to_string(pts.size());

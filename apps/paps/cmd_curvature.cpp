@@ -172,12 +172,7 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
     nb.fields.erase(std::remove_if(nb.fields.begin(), nb.fields.end(),
                                    [](const pcl::PCLPointField& f) { return f.name == "curvature"; }),
                     nb.fields.end());
-    nb.width = cloud.width;  // same points, in the input's organisation
-    nb.height = cloud.height;
-    nb.row_step = nb.point_step * nb.width;
-    const bool dense = cloud.is_dense;
-    cloud = appendFields(cloud, nb);
-    cloud.is_dense = dense;
+    cloud = appendFields(cloud, nb);  // in the input's width x height
     return;
   }
   std::size_t off[3] = {0, 0, 0};
@@ -288,9 +283,6 @@ int runCurvature(int argc, char** argv) {
   for (std::size_t i = 0; i < p.size(); ++i) toPoint(res[i], wj[i]);
   pcl::PCLPointCloud2 b2;
   pcl::toPCLPointCloud2(wj, b2);
-  b2.width = cloud.width;
-  b2.height = cloud.height;
-  b2.row_step = b2.point_step * b2.width;
   pcl::PCLPointCloud2 out = appendFields(cloud, b2);
   out.is_dense = r.fitted == p.size();
   saveCloudAtomic(a.positional[1], out);

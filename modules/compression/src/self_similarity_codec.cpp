@@ -649,16 +649,8 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
       // A few points far from the rest (a stray return, a second scan far away) also make
       // the whole cloud look like a line: say so when the nearest quarter of the points
       // around the median point, and four times their reach, do span a surface.
-      Eigen::Vector3d median;
+      const Eigen::Vector3d median = medianPoint(pts);
       std::vector<double> v;
-      for (int a = 0; a < 3; ++a) {
-        v.clear();
-        for (const auto& p : pts)
-          if (isFinite(p)) v.push_back(double(p[a]));
-        std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 2), v.end());
-        median[a] = v[v.size() / 2];
-      }
-      v.clear();
       for (const auto& p : pts)
         if (isFinite(p)) v.push_back((p.cast<double>() - median).squaredNorm());
       std::nth_element(v.begin(), v.begin() + std::ptrdiff_t(v.size() / 4), v.end());

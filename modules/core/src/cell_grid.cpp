@@ -58,16 +58,8 @@ bool CellGrid::buildWindow(const Positions& points) {
   // distance test keeps the results those of the full grid. Only the time grows with the
   // points outside, hence the limit.
   constexpr std::size_t kMaxOutside = 4096;
-  std::vector<float> axis;
-  axis.reserve(points.size());
-  for (int a = 0; a < 3; ++a) {
-    axis.clear();
-    for (const auto& p : points)
-      if (isFinite(p)) axis.push_back(p[a]);
-    std::nth_element(axis.begin(), axis.begin() + std::ptrdiff_t(axis.size() / 2), axis.end());
-    origin_[a] = std::max(double(axis[axis.size() / 2]) - 0.5 * kMaxCell * cell_,
-                          origin_[a]);  // no lower than the full grid's origin
-  }
+  // No lower than the full grid's origin.
+  origin_ = origin_.cwiseMax(medianPoint(points) - Eigen::Vector3d::Constant(0.5 * kMaxCell * cell_));
   std::size_t outside = 0;
   for (const auto& p : points) {
     if (!isFinite(p)) continue;

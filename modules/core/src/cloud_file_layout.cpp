@@ -9,7 +9,6 @@
 #include <iterator>
 #include <limits>
 #include <map>
-#include <sstream>
 
 #include <paps/core/error.h>
 
@@ -29,6 +28,7 @@ struct HeaderText {
 
 HeaderText readHead(const std::string& path) {
   std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw IoError("cannot read '" + path + "': it is a folder");
   if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
   HeaderText h;
   h.file_size = std::filesystem::file_size(path, ec);
@@ -90,6 +90,22 @@ std::uint64_t readU32Le(const std::string& path, std::uint64_t offset) {
   unsigned char b[4];
   if (!f.read(reinterpret_cast<char*>(b), 4)) throw IoError("cannot read '" + path + "': truncated data");
   return std::uint64_t(b[0]) | std::uint64_t(b[1]) << 8 | std::uint64_t(b[2]) << 16 | std::uint64_t(b[3]) << 24;
+}
+
+// Size of a PLY scalar type name ("float", "uint8", ...), 0 when it is not one; `kind`
+// receives 'i', 'u' or 'f'.
+int plyScalarSize(const std::string& t, char& kind) {
+  static const struct { const char* name; int size; char kind; } types[] = {
+      {"char", 1, 'i'},   {"int8", 1, 'i'},   {"uchar", 1, 'u'},  {"uint8", 1, 'u'},    {"short", 2, 'i'},
+      {"int16", 2, 'i'},  {"ushort", 2, 'u'}, {"uint16", 2, 'u'}, {"int", 4, 'i'},      {"int32", 4, 'i'},
+      {"uint", 4, 'u'},   {"uint32", 4, 'u'}, {"float", 4, 'f'},  {"float32", 4, 'f'}, {"double", 8, 'f'},
+      {"float64", 8, 'f'}};
+  for (const auto& x : types)
+    if (t == x.name) {
+      kind = x.kind;
+      return x.size;
+    }
+  return 0;
 }
 
 }  // namespace
@@ -251,20 +267,6 @@ PcdLayout readPcdLayout(const std::string& path) {
   return L;
 }
 
-int plyScalarSize(const std::string& t, char& kind) {
-  static const struct { const char* name; int size; char kind; } types[] = {
-      {"char", 1, 'i'},   {"int8", 1, 'i'},   {"uchar", 1, 'u'},  {"uint8", 1, 'u'},    {"short", 2, 'i'},
-      {"int16", 2, 'i'},  {"ushort", 2, 'u'}, {"uint16", 2, 'u'}, {"int", 4, 'i'},      {"int32", 4, 'i'},
-      {"uint", 4, 'u'},   {"uint32", 4, 'u'}, {"float", 4, 'f'},  {"float32", 4, 'f'}, {"double", 8, 'f'},
-      {"float64", 8, 'f'}};
-  for (const auto& x : types)
-    if (t == x.name) {
-      kind = x.kind;
-      return x.size;
-    }
-  return 0;
-}
-
 int PlyLayout::element(const std::string& name) const {
   for (std::size_t i = 0; i < elements.size(); ++i)
     if (elements[i].name == name) return int(i);
@@ -341,6 +343,26 @@ PlyLayout readPlyLayout(const std::string& path) {
   }
   if (need > left + 1) throw bad("the header promises more data than the file holds (truncated or corrupt)");
   return L;
+}
+
+PlyLayout readPlyLayoutForPcl(const std::string& path) {
+  PlyLayout ply = readPlyLayout(path);
+  const int v = ply.element("vertex");
+  if (v >= 0)
+    for (const auto& p : ply.elements[std::size_t(v)].properties)
+      if (p.count_size)
+        throw IoError("cannot read '" + path + "': vertex property '" + p.name.substr(0, 40) +
+                      "' is a list (not supported)");
+  return ply;
+}
+
+void checkOutputPath(const std::string& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (path.empty()) throw IoError("cannot write '': the output path is empty");
+  if (fs::is_directory(path, ec)) throw IoError("cannot write '" + path + "': it is a folder");
+  const fs::path dir = fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
+  if (!fs::is_directory(dir, ec)) throw IoError("cannot write '" + path + "': folder '" + dir.string() + "' does not exist");
 }
 
 }  // namespace paps

@@ -56,17 +56,7 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   // PCL's readers trust the header (allocation from its counts, a crash without FIELDS):
   // the header is checked against the file first, and a bad one is one clear error.
   if (ext == ".pcd") readPcdLayout(path);
-  else if (ext == ".ply") {
-    const PlyLayout ply = readPlyLayout(path);
-    // PCL 1.13 aborts (an assert) when a vertex list changes length from one vertex to the
-    // next; per-vertex lists are not point fields anyway.
-    const int v = ply.element("vertex");
-    if (v >= 0)
-      for (const auto& p : ply.elements[std::size_t(v)].properties)
-        if (p.count_size)
-          throw IoError("cannot read '" + path + "': vertex property '" + p.name.substr(0, 40) +
-                        "' is a list (not supported)");
-  }
+  else if (ext == ".ply") readPlyLayoutForPcl(path);
   else {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
@@ -103,14 +93,13 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
 }
 
 void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) {
+  checkOutputPath(path);
   const std::string ext = extensionOf(path);
   if (ext != ".pcd" && ext != ".ply")
     throw IoError("cannot write '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
   const std::filesystem::path target(path);
   const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
   std::error_code ec;
-  if (!std::filesystem::is_directory(dir, ec))
-    throw IoError("cannot write '" + path + "': folder '" + dir.string() + "' does not exist");
   // The temporary keeps the extension: PCL's writers choose the format from it.
   const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" +
                                   std::to_string(::getpid()) + ext)).string();

@@ -74,7 +74,7 @@ TriangleMesh loadTriangleMesh(const std::string& path) {
   pcl::PolygonMesh mesh;
   int status = -1;
   if (ext == ".ply") {
-    readPlyLayout(path);  // a header PCL would trust into a huge allocation is refused first
+    readPlyLayoutForPcl(path);  // a header PCL would crash on or trust into a huge allocation
     status = pcl::io::loadPLYFile(path, mesh);
   }
   else if (ext == ".obj")

@@ -2,8 +2,9 @@
 // What the header of a .pcd or .ply file promises, parsed strictly and checked against the
 // file's size before any reader allocates for it. PCL 1.13's readers trust the header: a
 // 1 KB file that claims two billion points makes them allocate 24 GB, and a file with no
-// FIELDS line crashes PCDReader (PCL #5854). Every check here throws IoError naming the
-// file and what is wrong; nothing here depends on PCL, so the lean codec binary can use it.
+// FIELDS line crashes PCDReader (PCL #5854). Also the check of an output path. Every check
+// here throws IoError naming the file and what is wrong; nothing here depends on PCL, so
+// the lean codec binary can use it.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -64,8 +65,12 @@ struct PlyLayout {
 /// of the file (binary: the fixed bytes of each record; ascii: two characters per value).
 PlyLayout readPlyLayout(const std::string& path);
 
-/// Size of a PLY scalar type name ("float", "uint8", ...), 0 when it is not one; `kind`
-/// receives 'i', 'u' or 'f'.
-int plyScalarSize(const std::string& type, char& kind);
+/// readPlyLayout, then what PCL 1.13's PLYReader needs on top: no list property on the
+/// vertices (it asserts when a list changes length from one vertex to the next).
+PlyLayout readPlyLayoutForPcl(const std::string& path);
+
+/// Throws IoError naming what is wrong when `path` cannot be an output file: empty, a
+/// folder, or in a folder that does not exist.
+void checkOutputPath(const std::string& path);
 
 }  // namespace paps

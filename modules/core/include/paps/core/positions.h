@@ -2,6 +2,7 @@
 // Positions: the one representation of point coordinates inside the non-template core.
 // Template stages copy xyz from pcl::PointCloud<PointT> into it, run the compiled core, and
 // write positions back, so the heavy code is compiled once, not once per point type.
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -44,6 +45,23 @@ inline float boundingBoxDiagonal(const Positions& p) {
   for (const auto& x : p)
     if (isFinite(x)) { lo = lo.cwiseMin(x); hi = hi.cwiseMax(x); any = true; }
   return any ? (hi - lo).norm() : 0.f;
+}
+
+/// Per-axis median of the finite points (0 if none): a centre that a few far points cannot
+/// move, unlike the mean or the bounding box.
+inline Eigen::Vector3d medianPoint(const Positions& p) {
+  Eigen::Vector3d m = Eigen::Vector3d::Zero();
+  std::vector<double> axis;
+  axis.reserve(p.size());
+  for (int a = 0; a < 3; ++a) {
+    axis.clear();
+    for (const auto& x : p)
+      if (isFinite(x)) axis.push_back(double(x[a]));
+    if (axis.empty()) return m;
+    std::nth_element(axis.begin(), axis.begin() + std::ptrdiff_t(axis.size() / 2), axis.end());
+    m[a] = axis[axis.size() / 2];
+  }
+  return m;
 }
 
 /// Writes positions into the xyz of a cloud, resizing it (other fields of new points are

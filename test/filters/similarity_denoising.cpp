@@ -464,6 +464,33 @@ TEST(SimilarityDenoising, SameOutputWithOneOrTwoThreads) {
   EXPECT_EQ(r1.sigma, r2.sigma);
 }
 
+// The filter runs in spatial order (a shuffled cloud was memory-bound): a side effect is that
+// the output no longer depends on the order of the input. Shuffled, NaN included, with the
+// default noise-adapted parameters: every point ends where it ended in input order.
+TEST(SimilarityDenoising, OutputDoesNotDependOnTheInputOrder) {
+  Positions p = smallNoisyPlane(6000);
+  p[10] = Eigen::Vector3f::Constant(payloadNaN());
+  std::vector<int> perm(p.size());
+  for (std::size_t i = 0; i < perm.size(); ++i) perm[i] = static_cast<int>(i);
+  paps::Random rng(5);
+  for (std::size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[rng.below(i + 1)]);
+  Positions shuffled(p.size());
+  for (std::size_t k = 0; k < p.size(); ++k) shuffled[k] = p[perm[k]];
+  SimilarityDenoisingReport r1, r2;
+  const Positions a = paps::denoiseBySimilarity(p, {}, &r1);
+  const Positions b = paps::denoiseBySimilarity(shuffled, {}, &r2);
+  std::size_t differ = 0, moved = 0;
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    differ += !sameBits(b[k], a[perm[k]]);
+    moved += paps::isFinite(p[perm[k]]) && b[k] != p[perm[k]];
+  }
+  EXPECT_EQ(differ, 0u) << "points whose output changed with the input order";
+  EXPECT_GT(moved, p.size() / 2);
+  EXPECT_TRUE(sameBits(b[std::find(perm.begin(), perm.end(), 10) - perm.begin()], p[10]));
+  EXPECT_EQ(r1.sigma, r2.sigma);
+  EXPECT_EQ(r1.noise_sigma, r2.noise_sigma);
+}
+
 // setNumberOfThreads, as on PCL's OMP classes: the same output with 1 or 2 threads, and the
 // caller's OpenMP count untouched after the stage.
 TEST(SimilarityDenoising, SetNumberOfThreadsGivesTheSameOutputAndRestoresTheCount) {

@@ -1,4 +1,5 @@
 #include <paps/core/local_frame.h>
+#include <paps/core/spatial_order.h>
 
 #include <algorithm>
 #include <cmath>
@@ -146,31 +147,15 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
   // Fixed blocks of space: the points in Morton order (10 bits per axis over the bounding box,
   // ties by index), cut into runs of kOrientBlock. They depend on the points only, never on
   // the thread count.
-  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
-  for (const int i : order) { lo = lo.cwiseMin(points[i]); hi = hi.cwiseMax(points[i]); }
-  const float extent = std::max((hi - lo).maxCoeff(), 1e-30f);
-  auto spread = [](std::uint64_t v) {  // 10 bits -> every third bit
-    v = (v | (v << 16)) & 0x030000FFull;
-    v = (v | (v << 8)) & 0x0300F00Full;
-    v = (v | (v << 4)) & 0x030C30C3ull;
-    v = (v | (v << 2)) & 0x09249249ull;
-    return v;
-  };
-  std::vector<std::pair<std::uint64_t, int>> keyed(order.size());
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    const Eigen::Vector3f q = (points[order[k]] - lo) / extent * 1023.f;
-    std::uint64_t key = 0;
-    for (int a = 0; a < 3; ++a)
-      key |= spread(static_cast<std::uint64_t>(std::clamp(q[a], 0.f, 1023.f))) << a;
-    keyed[k] = {key, order[k]};
-  }
-  std::sort(keyed.begin(), keyed.end());
-  const int blocks = static_cast<int>((keyed.size() + kOrientBlock - 1) / kOrientBlock);
+  std::vector<int> sorted;
+  sorted.reserve(order.size());
+  for (const int k : spatialOrder(gathered(points, order), 10)) sorted.push_back(order[k]);
+  const int blocks = static_cast<int>((sorted.size() + kOrientBlock - 1) / kOrientBlock);
   std::vector<int> block_of(n, -1);
   std::vector<std::vector<int>> members(blocks);
-  for (std::size_t k = 0; k < keyed.size(); ++k) {
-    block_of[keyed[k].second] = static_cast<int>(k / kOrientBlock);
-    members[k / kOrientBlock].push_back(keyed[k].second);
+  for (std::size_t k = 0; k < sorted.size(); ++k) {
+    block_of[sorted[k]] = static_cast<int>(k / kOrientBlock);
+    members[k / kOrientBlock].push_back(sorted[k]);
   }
   auto higher = [&](int a, int b) {  // highest first; ties broken by index
     return points[a].z() != points[b].z() ? points[a].z() > points[b].z() : a < b;

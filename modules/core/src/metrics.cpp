@@ -10,6 +10,7 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/spatial_order.h>
 
 namespace paps {
 
@@ -265,48 +266,6 @@ double PointToMeshDistance::distance(const Eigen::Vector3f& p, Eigen::Vector3f* 
   return impl_->query(p, closest, triangle);
 }
 
-namespace {
-
-/// Spreads the low 21 bits of v so that two zero bits separate each (Morton interleaving).
-std::uint64_t spreadBits(std::uint64_t v) {
-  v &= 0x1fffff;
-  v = (v | v << 32) & 0x1f00000000ffffULL;
-  v = (v | v << 16) & 0x1f0000ff0000ffULL;
-  v = (v | v << 8) & 0x100f00f00f00f00fULL;
-  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-  v = (v | v << 2) & 0x1249249249249249ULL;
-  return v;
-}
-
-/// Indices of the finite points sorted along a Z-order curve over their bounding box.
-std::vector<int> spatialOrder(const Positions& points) {
-  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
-  for (const auto& p : points)
-    if (isFinite(p)) {
-      lo = lo.cwiseMin(p);
-      hi = hi.cwiseMax(p);
-    }
-  const Eigen::Vector3f scale =
-      (hi - lo).cwiseMax(1e-30f).cwiseInverse() * static_cast<float>((1 << 21) - 1);
-  std::vector<std::pair<std::uint64_t, int>> keyed;
-  keyed.reserve(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    if (!isFinite(points[i])) continue;
-    // Clamped: rounding may push the top corner a hair past the last cell.
-    const Eigen::Vector3f u =
-        (points[i] - lo).cwiseProduct(scale).cwiseMin(static_cast<float>((1 << 21) - 1));
-    const std::uint64_t code = spreadBits(static_cast<std::uint64_t>(u.x())) |
-                               spreadBits(static_cast<std::uint64_t>(u.y())) << 1 |
-                               spreadBits(static_cast<std::uint64_t>(u.z())) << 2;
-    keyed.emplace_back(code, static_cast<int>(i));
-  }
-  std::sort(keyed.begin(), keyed.end());
-  std::vector<int> order(keyed.size());
-  for (std::size_t i = 0; i < keyed.size(); ++i) order[i] = keyed[i].second;
-  return order;
-}
-
-}  // namespace
 
 std::vector<double> PointToMeshDistance::distances(const Positions& points) const {
   std::vector<double> out(points.size(), kNaN);

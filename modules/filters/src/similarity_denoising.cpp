@@ -1,9 +1,12 @@
 #include <paps/filters/similarity_denoising.h>
+#include <paps/core/spatial_order.h>
+#include <paps/core/random.h>
 #include <paps/filters/impl/similarity_denoising.hpp>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include <Eigen/Cholesky>
@@ -175,10 +178,14 @@ std::vector<PatchMoments<float>> patchMoments(const Positions& points, const Pos
 #pragma omp parallel for schedule(dynamic, 1024)
   for (std::int64_t i = 0; i < n; ++i) {
     if (!usable[i]) continue;
+    // Summed in a local double patch and stored once: adding into the stored float patch
+    // kept 27 loads and stores per sample in the loop (a fifth of the filter's time).
+    PatchMoments<double> sums;
     for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
       const Eigen::Vector3d l = frames[i].toLocal(points[*j] - smooth[i]).cast<double>() * inv_r;
-      out[i].addSample(l.x(), l.y(), l.z(), std::exp(-(l.x() * l.x() + l.y() * l.y())));
+      sums.addSample(l.x(), l.y(), l.z(), std::exp(-(l.x() * l.x() + l.y() * l.y())));
     }
+    for (int e = 0; e < 27; ++e) out[i].m[e] = static_cast<float>(sums.m[e]);
   }
   return out;
 }
@@ -186,7 +193,8 @@ std::vector<PatchMoments<float>> patchMoments(const Positions& points, const Pos
 }  // namespace
 
 namespace {
-Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParameters& params,
+Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& side,
+                      const SimilarityDenoisingParameters& params,
                       SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
                       const ProgressCallback& progress, const Positions* estimate = nullptr,
                       std::unique_ptr<SpatialIndex> spatial_index = nullptr) {
@@ -224,8 +232,8 @@ Positions denoiseOnce(const Positions& points, const SimilarityDenoisingParamete
   // The guide the descriptors are built from: the points split in two halves, each half
   // lightly smoothed on its own. A point is described from the other half only, so no trace of
   // its own noise enters its descriptor (otherwise the most similar patches are those that
-  // share that noise, and averaging them keeps it).
-  auto half = [](int i) { return i & 1; };
+  // share that noise, and averaging them keeps it). `side` says which half (halvesOf).
+  auto half = [&](int i) { return side[i]; };
   Positions guide = points;
   if (estimate) {
     // A first estimate guides (as in two-stage non-local means, e.g. BM3D): it is far less
@@ -493,21 +501,36 @@ SimilarityDenoisingParameters noiseResolvedParameters(const Positions& points,
   return resolveNoise(points, params, report, nullptr);
 }
 
-Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
-                              SimilarityDenoisingReport* report_out,
-                              const std::vector<std::uint8_t>& movable,
-                              const ProgressCallback& progress) {
+namespace {
+// The two halves of the guide (denoiseOnce), drawn from the bits of the input coordinates:
+// copies of a point (scans stored twice) fall in the same half, the split depends on neither
+// the input order nor the spatial order the filter runs in (index parity there would put a
+// point and its copy, adjacent, in opposite halves), and every pass keeps the same split.
+std::vector<std::uint8_t> halvesOf(const Positions& points) {
+  std::vector<std::uint8_t> side(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    std::uint32_t b[3];
+    std::memcpy(b, points[i].data(), sizeof b);
+    side[i] = Random((std::uint64_t{b[0]} << 32 | b[1]) ^ (b[2] * 0x9e3779b97f4a7c15ULL)).next() & 1;
+  }
+  return side;
+}
+
+Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisingParameters& params,
+                                SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
+                                const ProgressCallback& progress) {
   SimilarityDenoisingReport choice;
   std::unique_ptr<SpatialIndex> index;  // built on `points` by the noise measurement, reused by pass 1
   const SimilarityDenoisingParameters run = resolveNoise(points, params, &choice, &index);
   Positions cur = points;
+  const std::vector<std::uint8_t> side = halvesOf(points);
   SimilarityDenoisingReport report;
   for (int pass = 0; pass < run.passes; ++pass) {
     // Later passes keep the radius of the first, so the scale does not drift.
     SimilarityDenoisingParameters p = run;
     if (pass > 0) p.radius = report.radius;
-    if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, p, &report, movable, progress, &cur);
-    else cur = denoiseOnce(cur, p, &report, movable, progress, nullptr, pass == 0 ? std::move(index) : nullptr);
+    if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, side, p, &report, movable, progress, &cur);
+    else cur = denoiseOnce(cur, side, p, &report, movable, progress, nullptr, pass == 0 ? std::move(index) : nullptr);
   }
   report.noise_sigma = choice.noise_sigma;
   report.noise_estimated = choice.noise_estimated;
@@ -517,6 +540,26 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   report.own_weight = run.own_weight;
   if (report_out) *report_out = report;
   return cur;
+}
+}  // namespace
+
+Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
+                              SimilarityDenoisingReport* report_out,
+                              const std::vector<std::uint8_t>& movable,
+                              const ProgressCallback& progress) {
+  params.validate();
+  checkMovableInput(points, movable);
+  // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory
+  // (1M points: 60 s in input order, 33 s in Z order). The filter runs in Z order, non-finite
+  // points last, so its output no longer depends on the order of the input either.
+  std::vector<int> order = spatialOrder(points);
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (!isFinite(points[i])) order.push_back(static_cast<int>(i));
+  const Positions sorted_out = denoiseInSpatialOrder(gathered(points, order), params, report_out,
+                                                     movable.empty() ? movable : gathered(movable, order), progress);
+  Positions out(points.size());
+  for (std::size_t k = 0; k < order.size(); ++k) out[order[k]] = sorted_out[k];
+  return out;
 }
 
 template class SimilarityDenoising<pcl::PointXYZ>;

@@ -1,0 +1,24 @@
+#pragma once
+// Spatial order: points that are close in space made close in memory.
+#include <vector>
+
+#include <paps/core/positions.h>
+
+namespace paps {
+
+/// Indices of the finite points sorted along a Z-order (Morton) curve over their bounding
+/// cube, cut in 2^bits_per_axis - 1 steps per axis (bits 1 to 21), ties by index. Loops over neighbourhoods
+/// of a shuffled cloud are memory-bound; in this order they stay in cache. The order depends
+/// on the points only, never on the thread count.
+std::vector<int> spatialOrder(const Positions& points, int bits_per_axis = 21);
+
+/// `values` rearranged as `order` says: out[k] = points[order[k]].
+template <typename T>
+std::vector<T> gathered(const std::vector<T>& values, const std::vector<int>& order) {
+  std::vector<T> out;
+  out.reserve(order.size());
+  for (const int i : order) out.push_back(values[i]);
+  return out;
+}
+
+}  // namespace paps

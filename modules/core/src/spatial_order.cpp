@@ -1,0 +1,49 @@
+#include <paps/core/spatial_order.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <utility>
+
+namespace paps {
+
+namespace {
+/// Spreads the low 21 bits of v so that two zero bits separate each (Morton interleaving).
+std::uint64_t spreadBits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+}  // namespace
+
+std::vector<int> spatialOrder(const Positions& points, int bits_per_axis) {
+  if (bits_per_axis < 1 || bits_per_axis > 21)
+    throw InvalidParameter("bits_per_axis", std::to_string(bits_per_axis), "1 to 21");
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
+  for (const auto& p : points)
+    if (isFinite(p)) {
+      lo = lo.cwiseMin(p);
+      hi = hi.cwiseMax(p);
+    }
+  const float top = static_cast<float>((1 << bits_per_axis) - 1);
+  const float extent = std::max((hi - lo).maxCoeff(), 1e-30f);
+  std::vector<std::pair<std::uint64_t, int>> keyed;
+  keyed.reserve(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(points[i])) continue;
+    // Clamped: rounding may push the top corner a hair past the last cell.
+    const Eigen::Vector3f q = (points[i] - lo) / extent * top;
+    std::uint64_t key = 0;
+    for (int a = 0; a < 3; ++a) key |= spreadBits(static_cast<std::uint64_t>(std::clamp(q[a], 0.f, top))) << a;
+    keyed.emplace_back(key, static_cast<int>(i));
+  }
+  std::sort(keyed.begin(), keyed.end());
+  std::vector<int> order(keyed.size());
+  for (std::size_t k = 0; k < keyed.size(); ++k) order[k] = keyed[k].second;
+  return order;
+}
+
+}  // namespace paps

@@ -305,6 +305,40 @@ TEST(WavejetEstimation, BadParametersThrow) {
                paps::InvalidInput);
 }
 
+// Points are fitted in spatial order (a shuffled cloud waited on memory): the output of every
+// point is the same whatever the order of the input, at the defaults (noise pilot, widening)
+// and with copies of points and a NaN in the cloud.
+TEST(WavejetEstimation, OutputDoesNotDependOnTheInputOrder) {
+  Positions p = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; }, 4000, 1.0, 8);
+  paps::Random rng(2);
+  for (auto& x : p) x.z() += static_cast<float>(0.004 * rng.gaussian());
+  for (int i = 0; i < 100; ++i) p.push_back(p[i * 7]);
+  p[5] = Eigen::Vector3f::Constant(NAN);
+  std::vector<int> perm = iota(p.size());
+  for (std::size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[rng.below(i + 1)]);
+  Positions shuffled(p.size());
+  for (std::size_t k = 0; k < p.size(); ++k) shuffled[k] = p[perm[k]];
+  paps::WavejetReport ra, rb;
+  const auto a = paps::estimateWavejets(p, 0.f, paps::WavejetParameters(), &ra);
+  const auto b = paps::estimateWavejets(shuffled, 0.f, paps::WavejetParameters(), &rb);
+  EXPECT_EQ(ra.radius, rb.radius);
+  EXPECT_EQ(ra.noise_sigma, rb.noise_sigma);
+  EXPECT_EQ(ra.duplicates, 100u);
+  std::size_t valid = 0;
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    const auto& x = a[perm[k]];
+    const auto& y = b[k];
+    ASSERT_EQ(x.valid(), y.valid()) << k;
+    if (!x.valid()) continue;
+    ++valid;
+    ASSERT_EQ(x.k1, y.k1) << k;
+    ASSERT_EQ(x.k2, y.k2) << k;
+    ASSERT_EQ(x.normal, y.normal) << k;
+    ASSERT_EQ(x.radius, y.radius) << k;
+  }
+  EXPECT_EQ(valid, p.size() - 1);
+}
+
 TEST(WavejetEstimation, DeterministicAcrossThreadCounts) {
   Positions p = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; }, 4000, 1.0, 8);
   paps::Random rng(2);

@@ -1,4 +1,5 @@
 #include <paps/core/neighbourhood.h>
+#include <paps/core/spatial_order.h>
 
 #include <algorithm>
 #include <cmath>
@@ -73,12 +74,15 @@ void putSelfFirst(std::vector<int>& idx, int self_index) {
 
 // Builds the compressed rows in parallel: each thread fills per-point lists, then one pass
 // concatenates them in point order, so the result does not depend on the thread count.
+// Queries run in spatial order: consecutive queries walk the same tree nodes and points,
+// which a shuffled cloud otherwise fetches from memory each time (each list is the same).
 class NeighbourGraphBuilder {
  public:
   template <typename Query>
   static NeighbourGraph build(const Positions& points, const ProgressCallback& progress,
                               const char* stage, Query query) {
-    const std::int64_t n = static_cast<std::int64_t>(points.size());
+    const std::vector<int> order = spatialOrder(points);
+    const std::int64_t n = static_cast<std::int64_t>(order.size());
     std::vector<std::vector<int>> lists(points.size());
     ProgressReporter report(progress, stage, points.size());
 #pragma omp parallel
@@ -86,16 +90,16 @@ class NeighbourGraphBuilder {
       std::vector<int> idx;
       std::vector<float> d2;
 #pragma omp for schedule(dynamic, 256)
-      for (std::int64_t i = 0; i < n; ++i) {
+      for (std::int64_t k = 0; k < n; ++k) {
         if (report.cancelled()) continue;
-        if (isFinite(points[i])) {
-          query(points[i], idx, d2);
-          putSelfFirst(idx, static_cast<int>(i));
-          lists[i] = idx;
-        }
+        const int i = order[k];
+        query(points[i], idx, d2);
+        putSelfFirst(idx, i);
+        lists[i] = idx;
         report.advance();
       }
     }
+    report.advance(points.size() - order.size());
     report.throwIfCancelled();
     report.finish();
     NeighbourGraph g;

@@ -11,6 +11,7 @@
 #include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/core/spatial_order.h>
 #include <paps/features/wavejet_noise.h>
 
 namespace paps {
@@ -656,7 +657,10 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   auto widenAt = [&](int i, std::vector<int>& idx, std::vector<float>& d2) -> float {
     const int n = index->nearestK(points[i], widen_to, idx, d2);
     if (n < need) return 0.f;  // the whole cloud holds too few: NaN outputs as before
-    return std::max(radius, std::sqrt(d2[n - 1]));
+    // A ball one short by the grid's float test but full by the kd-tree's (its last point on
+    // the sphere): the ball itself, as it would be without widening.
+    const float r = std::sqrt(d2[n - 1]);
+    return r > radius ? r : 0.f;
   };
   // A ball with more than `narrow_to` positions (`found` indices into `pts` in idx, squared
   // distances to q in d2, filled here when empty): keeps its `narrow_to` nearest, ties broken
@@ -773,27 +777,25 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   const bool target_was_automatic = radius == 0;
   // Exact duplicates: each position is fitted once and counted once as a neighbour (a copy
   // adds no geometry, only weight, and would fake the neighbour count that sets the order);
-  // every copy then gets its position's output. Without duplicates nothing is copied.
+  // every copy then gets its position's output. The distinct positions are fitted in spatial
+  // order: the fits of a shuffled cloud waited on memory (1M points 9.4 s -> 7.1 s), and the
+  // output no longer depends on the order of the input.
   std::size_t duplicates = 0;
   const std::vector<int> rep = exactDuplicateRepresentatives(points, &duplicates);
-  std::vector<int> slot;  // input index -> index among the distinct positions (-1: non-finite)
+  std::vector<int> slot(points.size(), -1);  // input index -> index among the distinct positions
   Positions distinct;
   Normals d_initial, d_orientation;
-  if (duplicates > 0) {
-    slot.assign(points.size(), -1);
-    distinct.reserve(points.size() - duplicates);
-    for (std::size_t i = 0; i < points.size(); ++i)
-      if (rep[i] == static_cast<int>(i)) {
-        slot[i] = static_cast<int>(distinct.size());
-        distinct.push_back(points[i]);
-        if (initial_normals) d_initial.push_back((*initial_normals)[i]);
-        if (orientation) d_orientation.push_back((*orientation)[i]);
-      }
-    for (std::size_t i = 0; i < points.size(); ++i)
-      if (rep[i] >= 0) slot[i] = slot[rep[i]];
-  }
-  const bool copy = duplicates > 0;
-  const Positions& fitted = copy ? distinct : points;
+  distinct.reserve(points.size() - duplicates);
+  for (const int i : spatialOrder(points))
+    if (rep[i] == i) {
+      slot[i] = static_cast<int>(distinct.size());
+      distinct.push_back(points[i]);
+      if (initial_normals) d_initial.push_back((*initial_normals)[i]);
+      if (orientation) d_orientation.push_back((*orientation)[i]);
+    }
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (rep[i] >= 0) slot[i] = slot[rep[i]];
+  const Positions& fitted = distinct;
   // Order policy (WavejetParameters::order_policy): automatic measures the noise with a
   // pilot of fixed-order fits and chooses (wavejet_noise.h); the index is shared with the run.
   const bool widens = params.widening == WavejetParameters::Widening::always ||
@@ -843,29 +845,19 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   std::vector<std::uint8_t> d_support;
   std::vector<WavejetCoefficients> d_coefficients;
   std::vector<WavejetResult> d_out =
-      estimateDistinct(fitted, radius, run, coefficients ? (copy ? &d_coefficients : coefficients) : nullptr,
-                       initial_normals ? (copy ? &d_initial : initial_normals) : nullptr,
-                       orientation ? (copy ? &d_orientation : orientation) : nullptr, progress,
+      estimateDistinct(fitted, radius, run, coefficients ? &d_coefficients : nullptr,
+                       initial_normals ? &d_initial : nullptr, orientation ? &d_orientation : nullptr, progress,
                        target_neighbours, d_count, d_support, std::move(index), radius_scale);
-  std::vector<WavejetResult> out;
-  std::vector<int> neighbour_count;
-  std::vector<std::uint8_t> support;
-  if (copy) {
-    out.resize(points.size());
-    neighbour_count.assign(points.size(), 0);
-    support.assign(points.size(), kBall);
-    if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      if (slot[i] < 0) continue;
-      out[i] = d_out[slot[i]];
-      neighbour_count[i] = d_count[slot[i]];
-      support[i] = d_support[slot[i]];
-      if (coefficients) (*coefficients)[i] = d_coefficients[slot[i]];
-    }
-  } else {
-    out = std::move(d_out);
-    neighbour_count = std::move(d_count);
-    support = std::move(d_support);
+  std::vector<WavejetResult> out(points.size());
+  std::vector<int> neighbour_count(points.size(), 0);
+  std::vector<std::uint8_t> support(points.size(), kBall);
+  if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (slot[i] < 0) continue;
+    out[i] = d_out[slot[i]];
+    neighbour_count[i] = d_count[slot[i]];
+    support[i] = d_support[slot[i]];
+    if (coefficients) (*coefficients)[i] = d_coefficients[slot[i]];
   }
   if (report) {
     *report = WavejetReport();

@@ -263,6 +263,21 @@ TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
   EXPECT_EQ(run(MlsSurface::Rimls, true, 1), run(MlsSurface::Rimls, true, 2));
 }
 
+// Run in spatial order: the same output whatever the order of the input points.
+TEST(MlsUpsampling, OutputDoesNotDependOnTheInputOrder) {
+  const Positions in = spherePoints(2000, 1.f, 4);
+  Positions shuffled = in;
+  paps::Random rng(9);
+  for (std::size_t i = shuffled.size() - 1; i > 0; --i) std::swap(shuffled[i], shuffled[rng.below(i + 1)]);
+  for (const MlsSurface s : {MlsSurface::Apss, MlsSurface::Rimls}) {
+    MlsUpsamplingParameters p;
+    p.factor = 3;
+    const Positions a = upsampleMls(in, s, p);
+    ASSERT_EQ(a.size(), 6000u);
+    EXPECT_EQ(a, upsampleMls(shuffled, s, p));
+  }
+}
+
 TEST(MlsUpsampling, NeighbourGraphFromRows) {
   // The compressed rows that the upsampling builds with its grid search.
   const NeighbourGraph g = NeighbourGraph::fromRows({0, 2, 3, 3}, {0, 1, 1});

@@ -46,4 +46,11 @@ std::vector<int> spatialOrder(const Positions& points, int bits_per_axis) {
   return order;
 }
 
+std::vector<int> spatialOrderAll(const Positions& points) {
+  std::vector<int> order = spatialOrder(points);
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (!isFinite(points[i])) order.push_back(static_cast<int>(i));
+  return order;
+}
+
 }  // namespace paps

@@ -552,9 +552,7 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory
   // (1M points: 60 s in input order, 33 s in Z order). The filter runs in Z order, non-finite
   // points last, so its output no longer depends on the order of the input either.
-  std::vector<int> order = spatialOrder(points);
-  for (std::size_t i = 0; i < points.size(); ++i)
-    if (!isFinite(points[i])) order.push_back(static_cast<int>(i));
+  const std::vector<int> order = spatialOrderAll(points);
   const Positions sorted_out = denoiseInSpatialOrder(gathered(points, order), params, report_out,
                                                      movable.empty() ? movable : gathered(movable, order), progress);
   Positions out(points.size());

@@ -1,4 +1,5 @@
 #include <paps/surface/mls_upsampling.h>
+#include <paps/core/spatial_order.h>
 #include <paps/surface/impl/mls_upsampling.hpp>
 
 #include <algorithm>
@@ -964,9 +965,9 @@ PAPS_AVX2_CLONE __attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float 
 
 }  // namespace
 
-Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
-                      MlsUpsamplingReport* report, const ProgressCallback& progress) {
-  params.validate();
+namespace {
+Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
+                                 MlsUpsamplingReport* report, const ProgressCallback& progress) {
   const std::size_t finite = countFinite(points);
   if (finite < 3) throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
   // Kernel support h, then neighbour lists reaching past h by the seed disc radius, so that
@@ -1092,6 +1093,14 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
     report->disc_radius = disc;
   }
   return out;
+}
+}  // namespace
+
+Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
+                      MlsUpsamplingReport* report, const ProgressCallback& progress) {
+  params.validate();
+  // In Z order, as QSR: neighbourhood loops stay in cache, the output ignores the input order.
+  return upsampleInSpatialOrder(gathered(points, spatialOrderAll(points)), surface, params, report, progress);
 }
 
 template class MlsUpsampling<pcl::PointXYZ, pcl::PointXYZ, MlsSurface::Apss>;

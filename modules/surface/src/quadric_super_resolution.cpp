@@ -1,4 +1,5 @@
 #include <paps/surface/quadric_super_resolution.h>
+#include <paps/core/spatial_order.h>
 #include <paps/surface/impl/quadric_super_resolution.hpp>
 
 #include <algorithm>
@@ -153,9 +154,9 @@ struct Similar {
 
 }  // namespace
 
-Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
-                              QuadricSuperResolutionReport* report, const ProgressCallback& progress) {
-  params.validate();
+namespace {
+Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                                     QuadricSuperResolutionReport* report, const ProgressCallback& progress) {
   if (scans.empty()) throw InvalidInput("no scan to super-resolve");
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
@@ -223,7 +224,9 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
       // creases, 7.595e-1 / 7.851e-1 (protocol / to the surface) against 6.949e-1 / 7.365e-1.
       dp = noiseResolvedParameters(scans[s], dp);
       dp.passes = 1;
-      denoised[s] = denoiseBySimilarity(scans[s], dp, nullptr, {}, progress);
+      // Sorted again on the denoised positions: the run is then the one on a denoised input.
+      const Positions d = denoiseBySimilarity(scans[s], dp, nullptr, {}, progress);
+      denoised[s] = gathered(d, spatialOrderAll(d));
       sc[s].points = &denoised[s];
       sc[s].nh = buildRadiusNeighbourhood(denoised[s], R, params.target_neighbours, 4 * params.target_neighbours, progress);
     }
@@ -723,6 +726,18 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
   rep.output = out.size();
   if (report) *report = rep;
   return out;
+}
+}  // namespace
+
+Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                              QuadricSuperResolutionReport* report, const ProgressCallback& progress) {
+  params.validate();
+  // Every stage loops over neighbourhoods: the scans run in Z order (in input order a shuffled
+  // scan waits on memory), which also makes the output independent of the input order.
+  std::vector<Positions> sorted;
+  sorted.reserve(scans.size());
+  for (const Positions& scan : scans) sorted.push_back(gathered(scan, spatialOrderAll(scan)));
+  return superResolveInSpatialOrder(sorted, params, report, progress);
 }
 
 template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ>;

@@ -12,6 +12,10 @@ namespace paps {
 /// on the points only, never on the thread count.
 std::vector<int> spatialOrder(const Positions& points, int bits_per_axis = 21);
 
+/// Every index of `points`: the finite ones in spatialOrder, then the non-finite ones in
+/// input order. A stage run on gathered(points, order) sees every point.
+std::vector<int> spatialOrderAll(const Positions& points);
+
 /// `values` rearranged as `order` says: out[k] = points[order[k]].
 template <typename T>
 std::vector<T> gathered(const std::vector<T>& values, const std::vector<int>& order) {

@@ -778,8 +778,8 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   // Exact duplicates: each position is fitted once and counted once as a neighbour (a copy
   // adds no geometry, only weight, and would fake the neighbour count that sets the order);
   // every copy then gets its position's output. The distinct positions are fitted in spatial
-  // order: the fits of a shuffled cloud waited on memory (1M points 9.4 s -> 7.1 s), and the
-  // output no longer depends on the order of the input.
+  // order: on a shuffled cloud the loops waited on memory, and the output no longer depends
+  // on the order of the input.
   std::size_t duplicates = 0;
   const std::vector<int> rep = exactDuplicateRepresentatives(points, &duplicates);
   std::vector<int> slot(points.size(), -1);  // input index -> index among the distinct positions

@@ -178,8 +178,8 @@ std::vector<PatchMoments<float>> patchMoments(const Positions& points, const Pos
 #pragma omp parallel for schedule(dynamic, 1024)
   for (std::int64_t i = 0; i < n; ++i) {
     if (!usable[i]) continue;
-    // Summed in a local double patch and stored once: adding into the stored float patch
-    // kept 27 loads and stores per sample in the loop (a fifth of the filter's time).
+    // Summed in a local double patch and stored once (adding into the stored float patch
+    // cost 27 loads and stores per sample).
     PatchMoments<double> sums;
     for (const int* j = graph.begin(i); j != graph.end(i); ++j) {
       const Eigen::Vector3d l = frames[i].toLocal(points[*j] - smooth[i]).cast<double>() * inv_r;

@@ -7,16 +7,16 @@
 namespace paps {
 
 /// Indices of the finite points sorted along a Z-order (Morton) curve over their bounding
-/// cube, cut in 2^bits_per_axis - 1 steps per axis (bits 1 to 21), ties by index. Loops over neighbourhoods
-/// of a shuffled cloud are memory-bound; in this order they stay in cache. The order depends
-/// on the points only, never on the thread count.
+/// cube, cut in 2^bits_per_axis - 1 steps per axis (bits 1 to 21), ties by index. Loops over
+/// neighbourhoods of a shuffled cloud are memory-bound; in this order they stay in cache.
+/// The order depends on the points only, never on the thread count.
 std::vector<int> spatialOrder(const Positions& points, int bits_per_axis = 21);
 
 /// Every index of `points`: the finite ones in spatialOrder, then the non-finite ones in
 /// input order. A stage run on gathered(points, order) sees every point.
 std::vector<int> spatialOrderAll(const Positions& points);
 
-/// `values` rearranged as `order` says: out[k] = points[order[k]].
+/// `values` rearranged as `order` says: out[k] = values[order[k]].
 template <typename T>
 std::vector<T> gathered(const std::vector<T>& values, const std::vector<int>& order) {
   std::vector<T> out;

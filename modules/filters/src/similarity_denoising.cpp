@@ -247,8 +247,6 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
     guide = meanCurvatureMotion(points, half_graph, half_normals, half_usable, params.descriptor_smoothing,
                                 progress, "guide");
   }
-  const NeighbourGraph describe_graph =
-      estimate ? graph : graph.filtered([&](int i, int j) { return half(i) != half(j); });
   normals = smooth_normals;
   // Heights are read above this base, in descriptors and in the patch fits alike.
   const bool patch_mode = params.aggregation == SimilarityDenoisingParameters::Aggregation::Patch;
@@ -294,20 +292,25 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
 #pragma omp parallel
     {
       std::vector<std::uint8_t> valid(dims);
+      std::vector<int> row;
 #pragma omp for schedule(dynamic, 1024)
       for (std::int64_t i = 0; i < sn; ++i) {
         rep.advance();
         if (!usable[i] || rep.cancelled()) continue;
         float* d0 = &desc[rows_of_point[i] * dims];
         // The point itself is left out of its descriptor: otherwise patches that share its
-        // own noise would look most similar and the average would keep that noise.
-        patch.describe(frames[i], base[i], guide, describe_graph.begin(i) + 1, describe_graph.count(i) - 1,
-                       d0, valid.data());
+        // own noise would look most similar and the average would keep that noise. Without
+        // an estimate, only the other half is read (see the guide above); the row is
+        // filtered here rather than kept as a second graph (memory).
+        row.clear();
+        for (const int* j = graph.begin(i) + 1; j != graph.end(i); ++j)
+          if (estimate || half(static_cast<int>(i)) != half(*j)) row.push_back(*j);
+        const int count = static_cast<int>(row.size());
+        patch.describe(frames[i], base[i], guide, row.data(), count, d0, valid.data());
         if (orientations == 2) {
           float* d1 = d0 + dims;
           if (!perm.empty()) for (std::size_t s = 0; s < dims; ++s) d1[s] = d0[perm[s]];
-          else patch.describe(frames[i].rotatedHalfTurn(), base[i], guide, describe_graph.begin(i) + 1,
-                              describe_graph.count(i) - 1, d1, valid.data());
+          else patch.describe(frames[i].rotatedHalfTurn(), base[i], guide, row.data(), count, d1, valid.data());
         }
       }
     }

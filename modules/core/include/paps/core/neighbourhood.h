@@ -60,14 +60,20 @@ class NeighbourGraph {
   /// point stays first in its own list.
   template <typename Keep>
   NeighbourGraph filtered(Keep keep) const {
+    // Counted first, then filled: reserving the full size kept the whole graph's memory
+    // for half of it (the denoiser's half graphs).
     NeighbourGraph g;
     g.offsets_.assign(offsets_.size(), 0);
-    g.indices_.reserve(indices_.size());
+    auto kept = [&](std::size_t i, int j) { return j == static_cast<int>(i) || keep(static_cast<int>(i), j); };
     for (std::size_t i = 0; i < size(); ++i) {
-      for (const int* j = begin(i); j != end(i); ++j)
-        if (*j == static_cast<int>(i) || keep(static_cast<int>(i), *j)) g.indices_.push_back(*j);
-      g.offsets_[i + 1] = static_cast<std::int64_t>(g.indices_.size());
+      std::int64_t c = 0;
+      for (const int* j = begin(i); j != end(i); ++j) c += kept(i, *j);
+      g.offsets_[i + 1] = g.offsets_[i] + c;
     }
+    g.indices_.reserve(static_cast<std::size_t>(g.offsets_.back()));
+    for (std::size_t i = 0; i < size(); ++i)
+      for (const int* j = begin(i); j != end(i); ++j)
+        if (kept(i, *j)) g.indices_.push_back(*j);
     return g;
   }
   /// Mean neighbour count over points that have any.

@@ -318,43 +318,6 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
     rep.finish();
   }
 
-  // 4. The k most similar patches of every movable point (its own rows excluded: the point
-  //    itself enters with the largest weight of the others, as in non-local means).
-  const int k = params.similar_patches - 1;
-  const DescriptorIndex index(desc.data(), rows, dims, params.search_checks);
-  std::vector<int> match(n * std::max(k, 1), -1);
-  std::vector<float> match_d2(n * std::max(k, 1), 0.f);
-  auto isMoving = [&](std::size_t i) { return usable[i] && (movable.empty() || movable[i]); };
-  if (k > 0) {
-    ProgressReporter rep(progress, "similarity search", rows);
-    // Queries in the tree's storage order: consecutive queries are alike and walk the same
-    // branches, which keeps the search in cache (3x faster than point order on real scans).
-    const std::vector<int>& order = index.storageOrder();
-    const std::int64_t srows = static_cast<std::int64_t>(rows);
-#pragma omp parallel
-    {
-      std::vector<int> idx;
-      std::vector<float> d2;
-#pragma omp for schedule(dynamic, 256)
-      for (std::int64_t t = 0; t < srows; ++t) {
-        rep.advance();
-        const int row = order[t];
-        const std::size_t i = static_cast<std::size_t>(point_of_row[row]);
-        if (rows_of_point[i] != row || !isMoving(i) || rep.cancelled()) continue;
-        index.nearestK(&desc[rows_of_point[i] * dims], k + orientations, idx, d2);
-        int m = 0;
-        for (std::size_t c = 0; c < idx.size() && m < k; ++c) {
-          if (point_of_row[idx[c]] == static_cast<int>(i)) continue;
-          match[i * k + m] = idx[c];
-          match_d2[i * k + m] = d2[c];
-          ++m;
-        }
-      }
-    }
-    rep.throwIfCancelled();
-    rep.finish();
-  }
-
   // sigma^2 from the data: two adjacent points see almost the same geometry, so the distance
   // between their descriptors is what noise alone does to a descriptor. Its median over the
   // points (times sigma_scale) is the scale at which patches count as alike. (The distance to
@@ -389,7 +352,9 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   }
   report.sigma = std::sqrt(sigma2);
 
-  // 5. The update, in one of two ways (see Aggregation):
+  // 4. The k most similar patches of every movable point (its own rows excluded: the point
+  //    itself enters with the largest weight of the others, as in non-local means), and
+  // 5. the update, in one of two ways (see Aggregation):
   //  - Patch, a non-local MLS: the weighted normal equations of every patch (its points'
   //    heights over its own tangent plane, in units of the radius, Gaussian weights) are
   //    computed once; a point's fit sums those of its similar patches, so the union of about
@@ -397,51 +362,75 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   //  - Centre, the three sums of 2.2.2: V of the similar points, read in their own frames
   //    (turned by half a turn for the second orientation), averaged and re-expressed in p's
   //    frame.
+  // Each point's matches are used as soon as they are found: keeping all of them (k ints and
+  // floats per point) was the largest array of the filter after the neighbour graph.
+  const int k = params.similar_patches - 1;
+  const DescriptorIndex index(desc.data(), rows, dims, params.search_checks);
+  auto isMoving = [&](std::size_t i) { return usable[i] && (movable.empty() || movable[i]); };
   std::vector<PatchMoments<float>> moments;
   if (patch_mode) moments = patchMoments(points, base, frames, graph, usable, nb.radius);
   Positions out = points;
   std::size_t moved = 0;
-  // Points in the descriptor tree's order: consecutive points share most of their similar
-  // patches, so the data they read stay in cache (random order was memory-bound).
+  // Points in the descriptor tree's storage order: consecutive queries are alike and walk the
+  // same branches, and consecutive points share most of their similar patches, so both the
+  // search and the data the update reads stay in cache (3x faster than point order).
   const std::vector<int>& tree_order = index.storageOrder();
   const std::int64_t srows = static_cast<std::int64_t>(rows);
-#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved)
-  for (std::int64_t t = 0; t < srows; ++t) {
-    const int own_row = tree_order[t];
-    const std::int64_t i = point_of_row[own_row];
-    if (rows_of_point[i] != own_row || !isMoving(i)) continue;
-    PatchMoments<double> fit;
-    Eigen::Vector3d residual = Eigen::Vector3d::Zero();
-    double w_max = 0, w_sum = 0;
-    for (int m = 0; m < k; ++m) {
-      const int row = match[i * k + m];
-      if (row < 0) break;
-      const int q = point_of_row[row];
-      const bool turned = orientations == 2 && (row & 1);
-      const double w = std::exp(-static_cast<double>(match_d2[i * k + m]) / sigma2);
-      if (patch_mode) {
-        fit.add(moments[q], w, turned);
-      } else {
-        const LocalFrame fq = turned ? frames[q].rotatedHalfTurn() : frames[q];
-        residual += w * fq.toLocal(points[q] - smooth[q]).cast<double>();
+  ProgressReporter search_rep(progress, "similarity search", rows);
+#pragma omp parallel reduction(+ : moved)
+  {
+    std::vector<int> idx, match;
+    std::vector<float> d2, match_d2;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t t = 0; t < srows; ++t) {
+      search_rep.advance();
+      const int own_row = tree_order[t];
+      const std::int64_t i = point_of_row[own_row];
+      if (rows_of_point[i] != own_row || !isMoving(i) || search_rep.cancelled()) continue;
+      match.clear();
+      match_d2.clear();
+      if (k > 0) {
+        index.nearestK(&desc[rows_of_point[i] * dims], k + orientations, idx, d2);
+        for (std::size_t c = 0; c < idx.size() && static_cast<int>(match.size()) < k; ++c) {
+          if (point_of_row[idx[c]] == static_cast<int>(i)) continue;
+          match.push_back(idx[c]);
+          match_d2.push_back(d2[c]);
+        }
       }
-      w_max = std::max(w_max, w);
-      w_sum += w;
+      PatchMoments<double> fit;
+      Eigen::Vector3d residual = Eigen::Vector3d::Zero();
+      double w_max = 0, w_sum = 0;
+      for (std::size_t m = 0; m < match.size(); ++m) {
+        const int row = match[m];
+        const int q = point_of_row[row];
+        const bool turned = orientations == 2 && (row & 1);
+        const double w = std::exp(-static_cast<double>(match_d2[m]) / sigma2);
+        if (patch_mode) {
+          fit.add(moments[q], w, turned);
+        } else {
+          const LocalFrame fq = turned ? frames[q].rotatedHalfTurn() : frames[q];
+          residual += w * fq.toLocal(points[q] - smooth[q]).cast<double>();
+        }
+        w_max = std::max(w_max, w);
+        w_sum += w;
+      }
+      if (patch_mode) {
+        const double w_own = params.own_weight > 0 ? params.own_weight * w_sum : w_max;
+        fit.add(moments[i], w_own > 0 ? w_own : 1.0, false);
+        const double h = fit.heightAtCentre() * nb.radius;
+        if (!std::isfinite(h)) continue;
+        out[i] = base[i] + static_cast<float>(h) * frames[i].n;
+      } else {
+        // The point itself enters with the largest weight of the others, as in non-local means.
+        const double w_self = w_sum > 0 ? w_max : 1.0;
+        residual += w_self * frames[i].toLocal(points[i] - smooth[i]).cast<double>();
+        out[i] = smooth[i] + frames[i].toWorld((residual / (w_sum + w_self)).cast<float>());
+      }
+      ++moved;
     }
-    if (patch_mode) {
-      const double w_own = params.own_weight > 0 ? params.own_weight * w_sum : w_max;
-      fit.add(moments[i], w_own > 0 ? w_own : 1.0, false);
-      const double h = fit.heightAtCentre() * nb.radius;
-      if (!std::isfinite(h)) continue;
-      out[i] = base[i] + static_cast<float>(h) * frames[i].n;
-    } else {
-      // The point itself enters with the largest weight of the others, as in non-local means.
-      const double w_self = w_sum > 0 ? w_max : 1.0;
-      residual += w_self * frames[i].toLocal(points[i] - smooth[i]).cast<double>();
-      out[i] = smooth[i] + frames[i].toWorld((residual / (w_sum + w_self)).cast<float>());
-    }
-    ++moved;
   }
+  search_rep.throwIfCancelled();
+  search_rep.finish();
   report.moved = moved;
   if (report_out) *report_out = report;
   return out;

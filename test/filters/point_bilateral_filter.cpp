@@ -98,6 +98,32 @@ TEST(PointBilateralFilter, ReducesErrorOnEngravedPlane) {
 
 // ------------------------------------------------------------------ filter contract
 
+// Run in spatial order: a shuffled input gives every point the same output, bit for bit,
+// with the automatic radius and a NaN in the cloud.
+TEST(PointBilateralFilter, OutputDoesNotDependOnTheInputOrder) {
+  Positions p = noisySphere(4000, 0.01f, 3);
+  p[11] = Eigen::Vector3f::Constant(payloadNaN());
+  std::vector<int> perm(p.size());
+  for (std::size_t i = 0; i < perm.size(); ++i) perm[i] = static_cast<int>(i);
+  paps::Random rng(5);
+  for (std::size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[rng.below(i + 1)]);
+  Positions shuffled(p.size());
+  for (std::size_t k = 0; k < p.size(); ++k) shuffled[k] = p[perm[k]];
+  PointBilateralParameters params;
+  params.iterations = 2;
+  PointBilateralReport r1, r2;
+  const Positions a = paps::bilateralFilterPositions(p, params, &r1);
+  const Positions b = paps::bilateralFilterPositions(shuffled, params, &r2);
+  EXPECT_EQ(r1.radius, r2.radius);
+  std::size_t differ = 0, moved = 0;
+  for (std::size_t k = 0; k < p.size(); ++k) {
+    differ += !sameBits(b[k], a[perm[k]]);
+    moved += paps::isFinite(p[perm[k]]) && b[k] != p[perm[k]];
+  }
+  EXPECT_EQ(differ, 0u);
+  EXPECT_GT(moved, p.size() / 2);
+}
+
 TEST(PointBilateralFilter, NaNPassThroughAndOtherFieldsKept) {
   expectNaNPassThroughAndOtherFieldsKept<PointBilateralFilter>(smallSphere());
 }

@@ -8,6 +8,7 @@
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/core/spatial_order.h>
 
 namespace paps {
 
@@ -21,11 +22,10 @@ void PointBilateralParameters::validate() const {
   requireInRange("iterations", iterations, 1, 100);
 }
 
-Positions bilateralFilterPositions(const Positions& points, const PointBilateralParameters& params,
-                                   PointBilateralReport* report_out,
-                                   const std::vector<std::uint8_t>& movable,
-                                   const ProgressCallback& progress) {
-  params.validate();
+namespace {
+Positions bilateralInSpatialOrder(const Positions& points, const PointBilateralParameters& params,
+                                  PointBilateralReport* report_out, const std::vector<std::uint8_t>& movable,
+                                  const ProgressCallback& progress) {
   PointBilateralReport report;
   const std::size_t n = points.size();
   const std::size_t finite = checkMovableInput(points, movable);
@@ -83,6 +83,20 @@ Positions bilateralFilterPositions(const Positions& points, const PointBilateral
   rep.finish();
   if (report_out) *report_out = report;
   return cur;
+}
+}  // namespace
+
+Positions bilateralFilterPositions(const Positions& points, const PointBilateralParameters& params,
+                                   PointBilateralReport* report_out,
+                                   const std::vector<std::uint8_t>& movable,
+                                   const ProgressCallback& progress) {
+  params.validate();
+  checkMovableInput(points, movable);
+  // In Z order, as the similarity denoiser (1M shuffled points: 2.05 s in input order,
+  // 1.40 s sorted); the output then does not depend on the input order.
+  return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
+    return bilateralInSpatialOrder(p, params, report_out, m, progress);
+  });
 }
 
 template class PointBilateralFilter<pcl::PointXYZ>;

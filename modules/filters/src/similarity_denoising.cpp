@@ -544,12 +544,9 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory
   // (1M points: 60 s in input order, 33 s in Z order). The filter runs in Z order, non-finite
   // points last, so its output no longer depends on the order of the input either.
-  const std::vector<int> order = spatialOrderAll(points);
-  const Positions sorted_out = denoiseInSpatialOrder(gathered(points, order), params, report_out,
-                                                     movable.empty() ? movable : gathered(movable, order), progress);
-  Positions out(points.size());
-  for (std::size_t k = 0; k < order.size(); ++k) out[order[k]] = sorted_out[k];
-  return out;
+  return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
+    return denoiseInSpatialOrder(p, params, report_out, m, progress);
+  });
 }
 
 template class SimilarityDenoising<pcl::PointXYZ>;

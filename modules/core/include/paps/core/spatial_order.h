@@ -1,5 +1,6 @@
 #pragma once
 // Spatial order: points that are close in space made close in memory.
+#include <cstdint>
 #include <vector>
 
 #include <paps/core/positions.h>
@@ -22,6 +23,18 @@ std::vector<T> gathered(const std::vector<T>& values, const std::vector<int>& or
   std::vector<T> out;
   out.reserve(order.size());
   for (const int i : order) out.push_back(values[i]);
+  return out;
+}
+
+/// Runs a point-moving stage on the points in spatialOrderAll order and returns its output in
+/// input order. `stage(points, movable)` gets both rearranged (movable may be empty) and
+/// returns one position per point.
+template <typename Stage>
+Positions runInSpatialOrder(const Positions& points, const std::vector<std::uint8_t>& movable, Stage&& stage) {
+  const std::vector<int> order = spatialOrderAll(points);
+  const Positions sorted_out = stage(gathered(points, order), movable.empty() ? movable : gathered(movable, order));
+  Positions out(points.size());
+  for (std::size_t k = 0; k < order.size(); ++k) out[order[k]] = sorted_out[k];
   return out;
 }
 

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <pcl/point_types.h>
@@ -16,6 +17,15 @@
 #include <paps/core/random.h>
 
 namespace paps::test {
+
+/// A seeded random permutation of 0..n-1: the input order of a shuffled copy.
+inline std::vector<int> shuffledOrder(std::size_t n, std::uint64_t seed) {
+  std::vector<int> perm(n);
+  for (std::size_t i = 0; i < n; ++i) perm[i] = static_cast<int>(i);
+  paps::Random rng(seed);
+  for (std::size_t i = n; i > 1; --i) std::swap(perm[i - 1], perm[rng.below(i)]);
+  return perm;
+}
 
 /// A NaN with a payload, so that "passed through untouched" is checked bit for bit.
 inline float payloadNaN() {

@@ -18,6 +18,7 @@
 #include <paps/core/error.h>
 #include <paps/core/metrics.h>
 #include <paps/core/random.h>
+#include <paps/core/spatial_order.h>
 #include <paps/core/synthetic.h>
 #include <paps/filters/point_bilateral_filter.h>
 
@@ -103,12 +104,8 @@ TEST(PointBilateralFilter, ReducesErrorOnEngravedPlane) {
 TEST(PointBilateralFilter, OutputDoesNotDependOnTheInputOrder) {
   Positions p = noisySphere(4000, 0.01f, 3);
   p[11] = Eigen::Vector3f::Constant(payloadNaN());
-  std::vector<int> perm(p.size());
-  for (std::size_t i = 0; i < perm.size(); ++i) perm[i] = static_cast<int>(i);
-  paps::Random rng(5);
-  for (std::size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[rng.below(i + 1)]);
-  Positions shuffled(p.size());
-  for (std::size_t k = 0; k < p.size(); ++k) shuffled[k] = p[perm[k]];
+  const std::vector<int> perm = shuffledOrder(p.size(), 5);
+  const Positions shuffled = paps::gathered(p, perm);
   PointBilateralParameters params;
   params.iterations = 2;
   PointBilateralReport r1, r2;

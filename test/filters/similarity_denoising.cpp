@@ -19,6 +19,7 @@
 #include <paps/core/error.h>
 #include <paps/core/metrics.h>
 #include <paps/core/random.h>
+#include <paps/core/spatial_order.h>
 #include <paps/core/synthetic.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
@@ -470,12 +471,8 @@ TEST(SimilarityDenoising, SameOutputWithOneOrTwoThreads) {
 TEST(SimilarityDenoising, OutputDoesNotDependOnTheInputOrder) {
   Positions p = smallNoisyPlane(6000);
   p[10] = Eigen::Vector3f::Constant(payloadNaN());
-  std::vector<int> perm(p.size());
-  for (std::size_t i = 0; i < perm.size(); ++i) perm[i] = static_cast<int>(i);
-  paps::Random rng(5);
-  for (std::size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[rng.below(i + 1)]);
-  Positions shuffled(p.size());
-  for (std::size_t k = 0; k < p.size(); ++k) shuffled[k] = p[perm[k]];
+  const std::vector<int> perm = shuffledOrder(p.size(), 5);
+  const Positions shuffled = paps::gathered(p, perm);
   SimilarityDenoisingReport r1, r2;
   const Positions a = paps::denoiseBySimilarity(p, {}, &r1);
   const Positions b = paps::denoiseBySimilarity(shuffled, {}, &r2);

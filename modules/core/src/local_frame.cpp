@@ -144,7 +144,7 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
   for (std::size_t i = 0; i < n; ++i)
     if (isFinite(normals[i]) && isFinite(points[i])) order.push_back(static_cast<int>(i));
   if (order.empty()) return 0;
-  // Fixed blocks of space: the points in Morton order (10 bits per axis over the bounding box,
+  // Fixed blocks of space: the points in Morton order (10 bits per axis over the bounding cube,
   // ties by index), cut into runs of kOrientBlock. They depend on the points only, never on
   // the thread count.
   std::vector<int> sorted;

@@ -1,6 +1,4 @@
 #include <paps/filters/similarity_denoising.h>
-#include <paps/core/spatial_order.h>
-#include <paps/core/random.h>
 #include <paps/filters/impl/similarity_denoising.hpp>
 
 #include <algorithm>
@@ -18,6 +16,8 @@
 #include <paps/core/neighbourhood.h>
 #include <paps/core/noise_estimation.h>
 #include <paps/core/plane_height_patch.h>
+#include <paps/core/random.h>
+#include <paps/core/spatial_order.h>
 
 namespace paps {
 
@@ -540,7 +540,6 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
                               const std::vector<std::uint8_t>& movable,
                               const ProgressCallback& progress) {
   params.validate();
-  checkMovableInput(points, movable);
   // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory
   // (1M points: 60 s in input order, 33 s in Z order). The filter runs in Z order, non-finite
   // points last, so its output no longer depends on the order of the input either.

@@ -28,9 +28,11 @@ std::vector<T> gathered(const std::vector<T>& values, const std::vector<int>& or
 
 /// Runs a point-moving stage on the points in spatialOrderAll order and returns its output in
 /// input order. `stage(points, movable)` gets both rearranged (movable may be empty) and
-/// returns one position per point.
+/// returns one position per point. The input is checked first (checkMovableInput: an empty
+/// or all-NaN cloud, or a movable list of the wrong size, throws before anything is moved).
 template <typename Stage>
 Positions runInSpatialOrder(const Positions& points, const std::vector<std::uint8_t>& movable, Stage&& stage) {
+  checkMovableInput(points, movable);
   const std::vector<int> order = spatialOrderAll(points);
   const Positions sorted_out = stage(gathered(points, order), movable.empty() ? movable : gathered(movable, order));
   Positions out(points.size());

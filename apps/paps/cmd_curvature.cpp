@@ -14,6 +14,7 @@
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/core/spatial_order.h>
 #include <paps/features/point_types.h>
 #include <paps/features/wavejet.h>
 #include <paps/features/wavejet_estimation.h>
@@ -123,10 +124,15 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
     if (blobNormals(cloud, hints)) { std::printf("orientation: input normals\n"); return true; }
     if (mode == "input") throw InvalidParameter("orient", "input", "an input with normal_x/y/z fields");
   }
-  SpatialIndex index(p);
-  const NeighbourGraph g = NeighbourGraph::byCount(p, index, 12);
-  hints = estimateNormals(p, g);
-  orientNormalsByPropagation(p, hints, g);
+  // In Z order, as the Wavejet stage: on a shuffled cloud the normals' loop waits on memory
+  // (1M shuffled points: about 1.3 s of 8 s in input order).
+  const std::vector<int> order = spatialOrderAll(p);
+  const Positions ps = gathered(p, order);
+  const NeighbourGraph g = NeighbourGraph::byCount(ps, SpatialIndex(ps), 12);
+  Normals sorted_hints = estimateNormals(ps, g);
+  orientNormalsByPropagation(ps, sorted_hints, g);
+  hints.assign(p.size(), Eigen::Vector3f::Constant(NAN));
+  for (std::size_t k = 0; k < order.size(); ++k) hints[order[k]] = sorted_hints[k];
   std::printf("orientation: propagated over the 12-nearest-neighbour graph\n");
   return true;
 }

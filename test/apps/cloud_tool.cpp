@@ -1,11 +1,14 @@
 // Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
 // its input (same number of points, same fields in the same order, only x y z moved).
-//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized]
+//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized|rough]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
 //   paps_test_cloud_tool keeps IN.pcd OUT.pcd FIELD... (same width x height, FIELDs present)
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
+//   paps_test_cloud_tool permute IN.pcd OUT.pcd (the same points in a seeded shuffled order)
+//   paps_test_cloud_tool same-points A.pcd B.pcd (the same points, byte for byte, in any order)
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -34,9 +37,11 @@ int write(const std::string& path, int count, const std::string& format) {
   pcl::PointCloud<pcl::PointXYZI> cloud;
   const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(count))));
   unsigned state = 7u;
-  auto noise = [&state] {
+  // "rough": noise as large as the spacing, where the normals' orientation is ambiguous.
+  const float amplitude = format == "rough" ? 0.03f : 0.004f;
+  auto noise = [&state, amplitude] {
     state = state * 1664525u + 1013904223u;
-    return (static_cast<float>(state >> 8) / 16777216.f - 0.5f) * 0.004f;
+    return (static_cast<float>(state >> 8) / 16777216.f - 0.5f) * amplitude;
   };
   for (int k = 0; k < count; ++k) {
     pcl::PointXYZI p;
@@ -136,6 +141,51 @@ int unhex(const std::string& in_path, const std::string& out_path) {
   return 0;
 }
 
+// The points of IN in a shuffled order (Fisher-Yates on a fixed LCG), every field kept.
+int permute(const std::string& in_path, const std::string& out_path) {
+  pcl::PCLPointCloud2 in;
+  if (pcl::io::loadPCDFile(in_path, in) != 0) return fail("cannot read " + in_path);
+  const std::size_t n = static_cast<std::size_t>(in.width) * in.height;
+  std::vector<std::size_t> order(n);
+  for (std::size_t i = 0; i < n; ++i) order[i] = i;
+  std::uint64_t state = 12345u;
+  for (std::size_t i = n; i > 1; --i) {
+    state = state * 6364136223846793005ull + 1442695040888963407ull;
+    std::swap(order[i - 1], order[(state >> 33) % i]);
+  }
+  pcl::PCLPointCloud2 out = in;
+  out.width = static_cast<std::uint32_t>(n);
+  out.height = 1;
+  out.row_step = out.width * out.point_step;
+  for (std::size_t k = 0; k < n; ++k)
+    std::memcpy(&out.data[k * out.point_step], &in.data[order[k] * in.point_step], in.point_step);
+  if (pcl::io::savePCDFile(out_path, out, Eigen::Vector4f::Zero(), Eigen::Quaternionf::Identity(), true) != 0)
+    return fail("cannot write " + out_path);
+  return 0;
+}
+
+// A and B hold the same points (every field, byte for byte), whatever their order.
+int samePoints(const std::string& a_path, const std::string& b_path) {
+  pcl::PCLPointCloud2 a, b;
+  if (pcl::io::loadPCDFile(a_path, a) != 0) return fail("cannot read " + a_path);
+  if (pcl::io::loadPCDFile(b_path, b) != 0) return fail("cannot read " + b_path);
+  if (a.point_step != b.point_step || a.data.size() != b.data.size())
+    return fail("different layouts or point counts");
+  auto rows = [](const pcl::PCLPointCloud2& c) {
+    std::vector<std::string> r(c.data.size() / c.point_step);
+    for (std::size_t i = 0; i < r.size(); ++i)
+      r[i].assign(reinterpret_cast<const char*>(&c.data[i * c.point_step]), c.point_step);
+    std::sort(r.begin(), r.end());
+    return r;
+  };
+  const std::vector<std::string> ra = rows(a), rb = rows(b);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < ra.size(); ++i) differ += ra[i] != rb[i];
+  if (differ) return fail(std::to_string(differ) + " of " + std::to_string(ra.size()) + " sorted points differ");
+  std::printf("%zu points, the same in both\n", ra.size());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -143,6 +193,8 @@ int main(int argc, char** argv) {
   if (mode == "write" && (argc == 4 || argc == 5)) return write(argv[2], std::atoi(argv[3]), argc == 5 ? argv[4] : "binary");
   if (mode == "check" && argc == 4) return check(argv[2], argv[3]);
   if (mode == "unhex" && argc == 4) return unhex(argv[2], argv[3]);
+  if (mode == "permute" && argc == 4) return permute(argv[2], argv[3]);
+  if (mode == "same-points" && argc == 4) return samePoints(argv[2], argv[3]);
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

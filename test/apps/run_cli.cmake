@@ -307,14 +307,15 @@ elseif(CASE STREQUAL "unknown_command")
   endif()
 elseif(CASE STREQUAL "order_independent")
   # The same points in another order give the same output points (every field, byte for
-  # byte): the stages run in spatial order, and so does curvature's orientation pass.
+  # byte): the stages run in spatial order, and so do curvature and enhance's orientation pass.
   write_input(6000 rough)
   set(shuffled ${dir}/shuffled.pcd)
   execute_process(COMMAND ${TOOL} permute ${input} ${shuffled} RESULT_VARIABLE prc ERROR_VARIABLE perr)
   if(NOT prc STREQUAL "0")
     message(FATAL_ERROR "could not shuffle the test cloud: ${perr}")
   endif()
-  foreach(command "denoise" "denoise;--method;bilateral" "curvature;--orient;propagate" "superres;--factor;2")
+  foreach(command "denoise" "denoise;--method;bilateral" "curvature;--orient;propagate" "enhance;--alpha0;2"
+                  "enhance;--alpha1;1,0.5" "superres;--factor;2")
     list(GET command 0 verb)
     set(options ${command})
     list(REMOVE_AT options 0)

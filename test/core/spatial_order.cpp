@@ -1,4 +1,5 @@
-// Tests of paps/core/spatial_order.h: a Z-order over the finite points, ties by index.
+// Tests of paps/core/spatial_order.h: a Z-order over the finite points, ties by coordinates;
+// a sample of points chosen by position.
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -63,6 +64,53 @@ TEST(SpatialOrder, ConsecutivePointsAreCloseOnAShuffledSurface) {
   // Input order: about 0.5 apart; Z order: a few spacings (1 / sqrt(20000) = 0.007).
   EXPECT_GT(meanStep(input), 0.4);
   EXPECT_LT(meanStep(paps::spatialOrder(p)), 0.03);
+}
+
+Positions shuffledCopy(const Positions& p, std::uint64_t seed) {
+  Positions q = p;
+  paps::Random rng(seed);
+  for (std::size_t i = q.size(); i > 1; --i) std::swap(q[i - 1], q[rng.below(i)]);
+  return q;
+}
+
+// With one step per axis nearly every point shares its cell with hundreds of others: the
+// order among them comes from their coordinates, so a shuffled copy gives the same sequence
+// of positions.
+TEST(SpatialOrder, PointsOfOneCellAreOrderedByCoordinates) {
+  Positions p;
+  paps::Random rng(6);
+  for (int i = 0; i < 500; ++i) p.emplace_back(rng.uniform(), rng.uniform(), rng.uniform());
+  p.push_back(p[3]);  // a copy
+  const Positions q = shuffledCopy(p, 8);
+  ASSERT_NE(p, q);
+  EXPECT_EQ(paps::gathered(p, paps::spatialOrder(p, 1)), paps::gathered(q, paps::spatialOrder(q, 1)));
+  EXPECT_EQ(paps::gathered(p, paps::spatialOrder(p)), paps::gathered(q, paps::spatialOrder(q)));
+}
+
+TEST(PositionSample, DependsOnThePositionsOnly) {
+  Positions p;
+  paps::Random rng(7);
+  for (int i = 0; i < 5000; ++i) p.emplace_back(rng.uniform(), rng.uniform(), rng.uniform());
+  for (int i = 0; i < 500; ++i) p.push_back(p[static_cast<std::size_t>(i) * 3]);  // copies
+  p[10] = Eigen::Vector3f(NAN, 0, 0);
+  const Positions q = shuffledCopy(p, 9);
+  const std::vector<int> a = paps::positionSample(p, 200), b = paps::positionSample(q, 200);
+  ASSERT_EQ(a.size(), 200u);
+  EXPECT_EQ(paps::gathered(p, a), paps::gathered(q, b));
+  std::vector<int> sorted = a;
+  std::sort(sorted.begin(), sorted.end());
+  EXPECT_TRUE(std::adjacent_find(sorted.begin(), sorted.end()) == sorted.end());
+  EXPECT_EQ(std::count(a.begin(), a.end(), 10), 0);
+  // Spread over the cloud: each octant of the unit cube holds about an eighth of the sample.
+  int octant[8] = {};
+  for (const int i : a) ++octant[(p[i].x() > 0.5f) + 2 * (p[i].y() > 0.5f) + 4 * (p[i].z() > 0.5f)];
+  for (const int c : octant) EXPECT_GT(c, 10);
+  // More samples than finite points: every finite point, once.
+  EXPECT_EQ(paps::positionSample(p, 100000).size(), p.size() - 1);
+  EXPECT_TRUE(paps::positionSample(p, 0).empty());
+  // Copies of a position share its hash.
+  EXPECT_EQ(paps::positionHash(p[3]), paps::positionHash(Eigen::Vector3f(p[3])));
+  EXPECT_NE(paps::positionHash(p[3]), paps::positionHash(p[4]));
 }
 
 TEST(SpatialOrder, EdgeCases) {

@@ -115,8 +115,17 @@ class PointGrid {
     order_.resize(finite);
     for (std::size_t i = 0; i < pts.size(); ++i)
       if (cell_of[i] >= 0) order_[start_[cell_of[i]] + --count[cell_of[i]]] = int(i);
-    // Points by increasing index inside each cell (they were filled backwards).
-    for (std::size_t c = 0; c + 1 < start_.size(); ++c) std::reverse(order_.begin() + start_[c], order_.begin() + start_[c + 1]);
+    // Points of a cell by their coordinates (x, y, z; copies of a position by index), so that
+    // what is built on the grid does not depend on the order of the input.
+    for (std::size_t c = 0; c + 1 < start_.size(); ++c)
+      std::sort(order_.begin() + start_[c], order_.begin() + start_[c + 1], [&pts](int a, int b) { return before(pts, a, b); });
+  }
+
+  /// Order by coordinates (x, then y, then z), copies of a position by index.
+  static bool before(const Positions& pts, int a, int b) {
+    for (int k = 0; k < 3; ++k)
+      if (pts[a][k] != pts[b][k]) return pts[a][k] < pts[b][k];
+    return a < b;
   }
 
   float cell() const { return cell_; }
@@ -163,7 +172,7 @@ class PointGrid {
     return n;
   }
   /// Points within r of q; when there are more than max_count (> 0), the max_count nearest
-  /// (ties by index). Order: fixed (grid order, or by distance when capped).
+  /// (ties by coordinates). Order: fixed (grid order, or by distance when capped).
   int radiusSearch(const Eigen::Vector3f& q, float r, std::vector<int>& idx, std::vector<float>& d2,
                    int max_count = 0) const {
     idx.clear();
@@ -173,9 +182,12 @@ class PointGrid {
       thread_local std::vector<std::pair<float, int>> tmp;
       tmp.resize(idx.size());
       for (std::size_t j = 0; j < idx.size(); ++j) tmp[j] = {d2[j], idx[j]};
-      std::nth_element(tmp.begin(), tmp.begin() + max_count, tmp.end());
+      auto nearer = [this](const std::pair<float, int>& a, const std::pair<float, int>& b) {
+        return a.first != b.first ? a.first < b.first : before(pts_, a.second, b.second);
+      };
+      std::nth_element(tmp.begin(), tmp.begin() + max_count, tmp.end(), nearer);
       tmp.resize(max_count);
-      std::sort(tmp.begin(), tmp.end());
+      std::sort(tmp.begin(), tmp.end(), nearer);
       idx.resize(max_count);
       d2.resize(max_count);
       for (int j = 0; j < max_count; ++j) { d2[j] = tmp[j].first; idx[j] = tmp[j].second; }

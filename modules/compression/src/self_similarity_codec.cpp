@@ -20,6 +20,7 @@
 #include <paps/core/poisson_disk_sampling.h>
 #include <paps/core/random.h>
 #include <paps/core/sparse_coding.h>
+#include <paps/core/spatial_order.h>
 
 namespace paps::compression {
 namespace {
@@ -534,15 +535,17 @@ namespace {
 // shrank R until most points had only their duplicate (bun0.pcd decoded to 873 points).
 float chooseRadius(const Positions& pts, std::size_t finite, float diag, int target, const std::vector<int>& sample,
                    std::unique_ptr<detail::PointGrid>& grid) {
-  // Every stride-th point, cells holding about 4 of them.
+  // About one point in `stride`, chosen by position (positionHash, whatever the input
+  // order), cells holding about 4 of them.
   const std::size_t stride = std::max<std::size_t>(1, finite / 65536);
   const float c0 = std::max(diag * std::sqrt(4.f * float(stride) / float(finite)), diag * 1e-6f);
   detail::CellHash occupied;
   occupied.reset(std::min<std::size_t>(finite / stride, 1u << 16));
   {
     const float inv = 1.f / c0;
-    for (std::size_t i = 0; i < pts.size(); i += stride)
-      if (isFinite(pts[i]))
+    const std::uint64_t below = stride == 1 ? ~std::uint64_t(0) : ~std::uint64_t(0) / stride;
+    for (std::size_t i = 0; i < pts.size(); ++i)
+      if (isFinite(pts[i]) && positionHash(pts[i]) <= below)
         occupied.insert(detail::packCell(std::int64_t(std::floor(pts[i].x() * inv)),
                                          std::int64_t(std::floor(pts[i].y() * inv)),
                                          std::int64_t(std::floor(pts[i].z() * inv))));
@@ -668,20 +671,9 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   }
 
   // Radius and spacing, on a deterministic sample of the finite points.
-  std::vector<int> sample;
-  {
-    const std::size_t m = std::min<std::size_t>(2000, finite);
-    std::vector<int> fin;
-    fin.reserve(finite == pts.size() ? 0 : finite);
-    const double stride = double(finite) / double(m);
-    if (finite == pts.size()) {
-      for (std::size_t s = 0; s < m; ++s) sample.push_back(int(std::size_t(s * stride)));
-    } else {
-      for (std::size_t i = 0; i < pts.size(); ++i)
-        if (isFinite(pts[i])) fin.push_back(int(i));
-      for (std::size_t s = 0; s < m; ++s) sample.push_back(fin[std::size_t(s * stride)]);
-    }
-  }
+  // Chosen by position, not by index, so that the same points in another order give the
+  // same stream.
+  const std::vector<int> sample = positionSample(pts, 2000);
   std::unique_ptr<detail::PointGrid> grid;
   float R = prm.patch_radius;
   if (R == 0.f) R = chooseRadius(pts, finite, (hi - lo).norm(), prm.patch_points, sample, grid);

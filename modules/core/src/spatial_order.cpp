@@ -2,7 +2,10 @@
 
 #include <algorithm>
 #include <cstdint>
+#include <cstring>
 #include <utility>
+
+#include <paps/core/random.h>
 
 namespace paps {
 
@@ -40,10 +43,54 @@ std::vector<int> spatialOrder(const Positions& points, int bits_per_axis) {
     for (int a = 0; a < 3; ++a) key |= spreadBits(static_cast<std::uint64_t>(std::clamp(q[a], 0.f, top))) << a;
     keyed.emplace_back(key, static_cast<int>(i));
   }
-  std::sort(keyed.begin(), keyed.end());
+  // Points of one cell by their coordinates (x, then y, then z), so that the order does not
+  // depend on the input order; only copies of one position stay in index order.
+  std::sort(keyed.begin(), keyed.end(), [&points](const auto& a, const auto& b) {
+    if (a.first != b.first) return a.first < b.first;
+    const Eigen::Vector3f &p = points[a.second], &q = points[b.second];
+    for (int k = 0; k < 3; ++k)
+      if (p[k] != q[k]) return p[k] < q[k];
+    return a.second < b.second;
+  });
   std::vector<int> order(keyed.size());
   for (std::size_t k = 0; k < keyed.size(); ++k) order[k] = keyed[k].second;
   return order;
+}
+
+std::uint64_t positionHash(const Eigen::Vector3f& p) {
+  std::uint32_t b[3];
+  std::memcpy(b, p.data(), sizeof b);
+  return Random((std::uint64_t{b[0]} << 32 | b[1]) ^ (b[2] * 0x9e3779b97f4a7c15ULL)).next();
+}
+
+std::vector<int> positionSample(const Positions& points, std::size_t samples) {
+  // The `samples` smallest (hash, x, y, z, index), kept in a max-heap: one pass, no copy.
+  auto before = [&points](const std::pair<std::uint64_t, int>& a, const std::pair<std::uint64_t, int>& b) {
+    if (a.first != b.first) return a.first < b.first;
+    const Eigen::Vector3f &p = points[a.second], &q = points[b.second];
+    for (int k = 0; k < 3; ++k)
+      if (p[k] != q[k]) return p[k] < q[k];
+    return a.second < b.second;
+  };
+  std::vector<std::pair<std::uint64_t, int>> heap;
+  heap.reserve(samples);
+  if (samples == 0) return {};
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(points[i])) continue;
+    const std::pair<std::uint64_t, int> e(positionHash(points[i]), static_cast<int>(i));
+    if (heap.size() < samples) {
+      heap.push_back(e);
+      std::push_heap(heap.begin(), heap.end(), before);
+    } else if (before(e, heap.front())) {
+      std::pop_heap(heap.begin(), heap.end(), before);
+      heap.back() = e;
+      std::push_heap(heap.begin(), heap.end(), before);
+    }
+  }
+  std::sort_heap(heap.begin(), heap.end(), before);
+  std::vector<int> out(heap.size());
+  for (std::size_t k = 0; k < heap.size(); ++k) out[k] = heap[k].second;
+  return out;
 }
 
 std::vector<int> spatialOrderAll(const Positions& points) {

@@ -500,11 +500,7 @@ namespace {
 // point and its copy, adjacent, in opposite halves), and every pass keeps the same split.
 std::vector<std::uint8_t> halvesOf(const Positions& points) {
   std::vector<std::uint8_t> side(points.size());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    std::uint32_t b[3];
-    std::memcpy(b, points[i].data(), sizeof b);
-    side[i] = Random((std::uint64_t{b[0]} << 32 | b[1]) ^ (b[2] * 0x9e3779b97f4a7c15ULL)).next() & 1;
-  }
+  for (std::size_t i = 0; i < points.size(); ++i) side[i] = positionHash(points[i]) & 1;
   return side;
 }
 

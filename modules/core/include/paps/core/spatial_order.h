@@ -8,10 +8,19 @@
 namespace paps {
 
 /// Indices of the finite points sorted along a Z-order (Morton) curve over their bounding
-/// cube, cut in 2^bits_per_axis - 1 steps per axis (bits 1 to 21), ties by index. Loops over
+/// cube, cut in 2^bits_per_axis - 1 steps per axis (bits 1 to 21), ties by coordinates
+/// (x, y, z), then, for copies of one position, by index. Loops over
 /// neighbourhoods of a shuffled cloud are memory-bound; in this order they stay in cache.
 /// The order depends on the points only, never on the thread count.
 std::vector<int> spatialOrder(const Positions& points, int bits_per_axis = 21);
+
+/// A hash of a position's coordinate bits: copies of a point share it, whatever their index.
+std::uint64_t positionHash(const Eigen::Vector3f& p);
+
+/// At most `samples` finite points chosen by their positions alone (the smallest
+/// positionHash, ties by coordinates): the same positions whatever the order of the input,
+/// spread at random over the cloud. Indices into `points`, in hash order.
+std::vector<int> positionSample(const Positions& points, std::size_t samples);
 
 /// Every index of `points`: the finite ones in spatialOrder, then the non-finite ones in
 /// input order. A stage run on gathered(points, order) sees every point.

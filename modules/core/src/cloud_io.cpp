@@ -3,8 +3,10 @@
 #include <cstdio>
 #include <cstring>
 #include <algorithm>
+#include <exception>
 #include <filesystem>
 #include <fstream>
+#include <string>
 #include <vector>
 
 #include <unistd.h>
@@ -66,21 +68,32 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   // PCL's readers print their own complaint to stderr; our exception is the one clear line.
   const auto level = pcl::console::getVerbosityLevel();
   pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
-  if (ext == ".pcd") {
-    pcl::PCDReader reader;
-    Eigen::Vector4f o = Eigen::Vector4f::Zero();
-    Eigen::Quaternionf q;
-    int version = 0;
-    rc = reader.read(path, cloud, o, q, version);
-    if (origin && rc >= 0) *origin = o.head<3>();
-  } else if (ext == ".ply") {
-    pcl::PLYReader reader;
-    rc = reader.read(path, cloud);
-  } else {
+  if (ext != ".pcd" && ext != ".ply") {
     pcl::console::setVerbosityLevel(level);
     throw IoError("cannot read '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
   }
+  // PCL's readers also throw, e.g. std::out_of_range on an ASCII row with too few values:
+  // that is a damaged file too, and reaches the caller as IoError like every other.
+  std::string thrown;
+  try {
+    if (ext == ".pcd") {
+      pcl::PCDReader reader;
+      Eigen::Vector4f o = Eigen::Vector4f::Zero();
+      Eigen::Quaternionf q;
+      int version = 0;
+      rc = reader.read(path, cloud, o, q, version);
+      if (origin && rc >= 0) *origin = o.head<3>();
+    } else {
+      pcl::PLYReader reader;
+      rc = reader.read(path, cloud);
+    }
+  } catch (const std::exception& e) {
+    thrown = e.what();
+    rc = -1;
+  }
   pcl::console::setVerbosityLevel(level);
+  if (!thrown.empty())
+    throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file (" + thrown + ")");
   if (rc < 0) throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file");
   if (cloud.data.size() < static_cast<std::size_t>(cloud.row_step) * cloud.height)
     throw IoError("cannot read '" + path + "': truncated data");

@@ -239,6 +239,11 @@ PcdLayout readPcdLayout(const std::string& path) {
               ") is not POINTS (" + std::to_string(L.points) + ")");
   const std::uint64_t left = L.file_size - L.data_offset;
   const std::string claim = "the header promises " + std::to_string(L.points) + " points";
+  // PCL 1.13 reads on past DATA as header when the cloud is empty, and a keyword line there
+  // (e.g. FIELDS) makes it read past its field list (found by the fuzzer, session 16). What
+  // PCL writes for an empty cloud ends at the DATA line.
+  if (L.points == 0 && L.data != PcdLayout::Data::BinaryCompressed && left > 0)
+    throw bad(claim + " but " + std::to_string(left) + " bytes follow the header (corrupt)");
   switch (L.data) {
     case PcdLayout::Data::Binary:
       if (L.points > left / L.point_step)

@@ -147,10 +147,13 @@ TEST(CloudFileLayout, RefusesEmptyForeignAndInconsistentHeaders) {
                               std::string("\x04\x00\x00\x00\xe0\x2e\x00\x00\x01\x02\x03\x04", 12),
        "corrupt"},
       {"short_packed.pcd", head + "WIDTH 1000\nPOINTS 1000\nDATA binary_compressed\n\x04\x00", "truncated"},
-      // PCL reads on past DATA when no point is promised; a FIELDS line there made it read
-      // past its field list (ascii) or crash (binary).
-      {"empty_then_fields.pcd", head + "WIDTH 0\nPOINTS 0\nDATA ascii\nFIELDS0330", "bytes follow the header"},
-      {"empty_then_fields_bin.pcd", head + "WIDTH 0\nPOINTS 0\nDATA binary\nFIELDS x\n", "bytes follow the header"},
+      // PCL's header loop goes on after DATA: a keyword there is read as header. A FIELDS line
+      // made it read past its field list (ascii) or crash (binary); binary data starting
+      // with "COLUMNS" did too; a second DATA line would move the data.
+      {"empty_then_fields.pcd", head + "WIDTH 0\nPOINTS 0\nDATA ascii\n\n\nFIELDS0330", "starts with 'FIELDS'"},
+      {"empty_then_fields_bin.pcd", head + "WIDTH 0\nPOINTS 0\nDATA binary\nFIELDS x\n", "starts with 'FIELDS'"},
+      {"columns_bin.pcd", head + "POINTS 1\nDATA binary\nCOLUMNS\xfe\xff\xff\xf6\x00\x00", "starts with 'COLUMNS'"},
+      {"data_twice.pcd", head + "WIDTH 1\nPOINTS 1\nDATA ascii\n# note\n  DATA binary\n0 0 0\n", "starts with 'DATA'"},
       {"empty.ply", "", "empty"},
       {"text.ply", "plyx\nformat ascii 1.0\n", "not a PLY file"},
       {"noend.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\n", "no end_header"},

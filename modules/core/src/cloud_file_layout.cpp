@@ -215,6 +215,33 @@ PcdLayout readPcdLayout(const std::string& path) {
   }
   if (!have_data) throw bad("no PCD header (no DATA line in its first bytes)");
   L.data_offset = pos;
+  // PCL 1.13's header loop goes on after DATA: it skips empty lines and lines whose first word
+  // starts with '#' or VERSION, reads a line whose first word starts with a keyword as header,
+  // and stops at any other line. A keyword there (a FIELDS line, or binary data that happens
+  // to start like one) replaces what the header said, or moves the data, and PCL then reads
+  // past its arrays or its file (crashes found by fuzzing, session 16).
+  for (std::size_t at = pos;;) {
+    const std::size_t newline = head.bytes.find('\n', at);
+    const std::size_t stop = newline == std::string::npos ? head.bytes.size() : newline;
+    auto space = [](char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; };
+    std::size_t w = at;
+    while (w < stop && space(head.bytes[w])) ++w;
+    std::size_t e = w;
+    while (e < stop && !space(head.bytes[e])) ++e;
+    const std::string word = head.bytes.substr(w, e - w);
+    if (stop > at && word.rfind('#', 0) != 0 && word.rfind("VERSION", 0) != 0) {
+      for (const char* key : {"FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA"})
+        if (word.rfind(key, 0) == 0)
+          throw bad("the data after the DATA line starts with '" + std::string(key) +
+                    "', which PCL would read as a header line (corrupt)");
+      break;  // the first data line: PCL's header loop stops here
+    }
+    if (newline == std::string::npos) {
+      if (head.bytes.size() < L.file_size) throw bad("blank or comment lines after DATA run past the header bytes");
+      break;
+    }
+    at = newline + 1;
+  }
   const std::size_t n = L.fields.size();
   if (n == 0) throw bad("the PCD header has no FIELDS");
   if (n > 4096) throw bad("the PCD header has more than 4096 fields");
@@ -239,11 +266,6 @@ PcdLayout readPcdLayout(const std::string& path) {
               ") is not POINTS (" + std::to_string(L.points) + ")");
   const std::uint64_t left = L.file_size - L.data_offset;
   const std::string claim = "the header promises " + std::to_string(L.points) + " points";
-  // PCL 1.13 reads on past DATA as header when the cloud is empty, and a keyword line there
-  // (e.g. FIELDS) makes it read past its field list (found by the fuzzer, session 16). What
-  // PCL writes for an empty cloud ends at the DATA line.
-  if (L.points == 0 && L.data != PcdLayout::Data::BinaryCompressed && left > 0)
-    throw bad(claim + " but " + std::to_string(left) + " bytes follow the header (corrupt)");
   switch (L.data) {
     case PcdLayout::Data::Binary:
       if (L.points > left / L.point_step)

@@ -18,6 +18,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/positions.h>
+#include <paps/core/spatial_order.h>
 
 namespace paps::compression::detail {
 
@@ -123,9 +124,7 @@ class PointGrid {
 
   /// Order by coordinates (x, then y, then z), copies of a position by index.
   static bool before(const Positions& pts, int a, int b) {
-    for (int k = 0; k < 3; ++k)
-      if (pts[a][k] != pts[b][k]) return pts[a][k] < pts[b][k];
-    return a < b;
+    return pts[a] != pts[b] ? coordinatesBefore(pts[a], pts[b]) : a < b;
   }
 
   float cell() const { return cell_; }

@@ -47,9 +47,7 @@ std::vector<int> spatialOrder(const Positions& points, int bits_per_axis) {
   // depend on the input order; only copies of one position stay in index order.
   std::sort(keyed.begin(), keyed.end(), [&points](const auto& a, const auto& b) {
     if (a.first != b.first) return a.first < b.first;
-    const Eigen::Vector3f &p = points[a.second], &q = points[b.second];
-    for (int k = 0; k < 3; ++k)
-      if (p[k] != q[k]) return p[k] < q[k];
+    if (points[a.second] != points[b.second]) return coordinatesBefore(points[a.second], points[b.second]);
     return a.second < b.second;
   });
   std::vector<int> order(keyed.size());
@@ -67,9 +65,7 @@ std::vector<int> positionSample(const Positions& points, std::size_t samples) {
   // The `samples` smallest (hash, x, y, z, index), kept in a max-heap: one pass, no copy.
   auto before = [&points](const std::pair<std::uint64_t, int>& a, const std::pair<std::uint64_t, int>& b) {
     if (a.first != b.first) return a.first < b.first;
-    const Eigen::Vector3f &p = points[a.second], &q = points[b.second];
-    for (int k = 0; k < 3; ++k)
-      if (p[k] != q[k]) return p[k] < q[k];
+    if (points[a.second] != points[b.second]) return coordinatesBefore(points[a.second], points[b.second]);
     return a.second < b.second;
   };
   std::vector<std::pair<std::uint64_t, int>> heap;

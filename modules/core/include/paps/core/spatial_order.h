@@ -14,6 +14,14 @@ namespace paps {
 /// The order depends on the points only, never on the thread count.
 std::vector<int> spatialOrder(const Positions& points, int bits_per_axis = 21);
 
+/// Lexicographic order of positions (x, then y, then z): the tie-break of the orders and
+/// samples here, which must not depend on the input order.
+inline bool coordinatesBefore(const Eigen::Vector3f& a, const Eigen::Vector3f& b) {
+  for (int k = 0; k < 3; ++k)
+    if (a[k] != b[k]) return a[k] < b[k];
+  return false;
+}
+
 /// A hash of a position's coordinate bits: copies of a point share it, whatever their index.
 std::uint64_t positionHash(const Eigen::Vector3f& p);
 

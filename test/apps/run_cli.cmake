@@ -305,6 +305,22 @@ elseif(CASE STREQUAL "unknown_command")
   if(left)
     message(FATAL_ERROR "an unknown command left files behind: ${left}")
   endif()
+elseif(CASE STREQUAL "unwritable_output")
+  # A folder where no file can be made, even by root (sysfs): PCL's writer fails and says so on
+  # stderr itself; the user sees our one line, and no temporary file is left.
+  write_input(900)
+  if(IS_DIRECTORY /sys/kernel)
+    foreach(target /sys/kernel/paps_test_out.pcd /sys/kernel/paps_test_out.ply)
+      run_paps(denoise ${input} ${target} --quiet)
+      expect_one_error_line("cannot write '${target}'")
+      file(GLOB left /sys/kernel/.paps_test_out*)
+      if(left OR EXISTS ${target})
+        message(FATAL_ERROR "files left behind: ${left}")
+      endif()
+    endforeach()
+  else()
+    message(STATUS "no /sys/kernel here: nothing to check")
+  endif()
 elseif(CASE STREQUAL "order_independent")
   # The same points in another order give the same output points (every field, byte for
   # byte): the stages run in spatial order, and so do curvature and enhance's orientation

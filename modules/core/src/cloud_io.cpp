@@ -120,16 +120,26 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) 
   int rc = -1;
   const Eigen::Vector4f origin = Eigen::Vector4f::Zero();
   const Eigen::Quaternionf orient = Eigen::Quaternionf::Identity();
-  if (ext == ".pcd") {
-    pcl::PCDWriter w;
-    rc = w.writeBinary(tmp, cloud, origin, orient);
-  } else {
-    pcl::PLYWriter w;
-    rc = w.writeBinary(tmp, cloud, origin, orient, false);
+  std::string thrown;  // PCL's writers may throw as well as return -1
+  // PCL's writers print their own complaint to stderr; our exception is the one clear line.
+  const auto level = pcl::console::getVerbosityLevel();
+  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
+  try {
+    if (ext == ".pcd") {
+      pcl::PCDWriter w;
+      rc = w.writeBinary(tmp, cloud, origin, orient);
+    } else {
+      pcl::PLYWriter w;
+      rc = w.writeBinary(tmp, cloud, origin, orient, false);
+    }
+  } catch (const std::exception& e) {
+    thrown = e.what();
+    rc = -1;
   }
+  pcl::console::setVerbosityLevel(level);
   if (rc < 0) {
     std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write '" + path + "': the writer failed");
+    throw IoError("cannot write '" + path + "': the writer failed" + (thrown.empty() ? "" : " (" + thrown + ")"));
   }
   std::filesystem::rename(tmp, target, ec);
   if (ec) {

@@ -20,6 +20,7 @@
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/core/random.h>
+#include <paps/core/xyz_file_reader.h>
 
 namespace {
 
@@ -273,7 +274,7 @@ TEST(CloudIo, AppendFieldsKeepsTheOrganisationAndReplacesNamesakes) {
 TEST(CloudFileLayout, FuzzCorpusReplays) {
   const fs::path dir = PAPS_CLOUD_IO_CORPUS_DIR;
   ASSERT_TRUE(fs::is_directory(dir)) << dir;
-  int seeds = 0;
+  int seeds = 0, direct_seeds = 0;
   for (const auto& entry : fs::directory_iterator(dir)) {
     const std::string name = entry.path().filename().string();
     SCOPED_TRACE(name);
@@ -283,6 +284,15 @@ TEST(CloudFileLayout, FuzzCorpusReplays) {
     ASSERT_FALSE(bytes.empty());
     const fs::path file = scratch(std::string("corpus") + ((bytes[0] & 1) ? ".ply" : ".pcd"));
     writeBytes(file, bytes.substr(1));
+    // The direct x y z readers (the lean codec binary's) on the same bytes.
+    paps::Positions xyz;
+    bool direct = false;
+    std::string direct_error;
+    try {
+      direct = paps::readPcdXyz(file.string(), xyz) || paps::readPlyXyz(file.string(), xyz);
+    } catch (const paps::Error& e) {
+      direct_error = e.what();
+    }
     if (!seed) {
       loadError(file);  // either outcome; a crash fails the run
       continue;
@@ -293,8 +303,12 @@ TEST(CloudFileLayout, FuzzCorpusReplays) {
     EXPECT_EQ(p[0], Eigen::Vector3f(0, 0, 0));
     EXPECT_EQ(p[3], Eigen::Vector3f(1, 1, 0.5f));
     EXPECT_EQ(p[4], Eigen::Vector3f(0.5f, 0.5f, 0.25f));
+    EXPECT_TRUE(direct_error.empty()) << direct_error;
+    if (direct) EXPECT_EQ(xyz, p);  // binary PCD and PLY seeds; ascii PCD is left to PCL
+    direct_seeds += direct;
   }
   EXPECT_EQ(seeds, 5);
+  EXPECT_EQ(direct_seeds, 4);  // all but the ascii PCD
 }
 
 }  // namespace

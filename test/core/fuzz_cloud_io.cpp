@@ -1,5 +1,6 @@
-// libFuzzer target: paps::loadCloud (our header checks, then PCL's PCD and PLY readers) must
-// load any input or reject it with paps::Error: never crash, hang or allocate without bound.
+// libFuzzer target: paps::loadCloud (our header checks, then PCL's PCD and PLY readers) and
+// our own x y z readers (paps::readPcdXyz, readPlyXyz: the lean codec binary's) must load any
+// input or reject it with paps::Error: never crash, hang or allocate without bound.
 // The first byte chooses the format (even: .pcd, odd: .ply); the rest is the file.
 // Built and run by `scripts/fuzz.sh cloud_io`; crash inputs land in test/core/cloud_io_corpus,
 // which test_core_cloud_file_layout replays in CI.
@@ -12,6 +13,7 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/xyz_file_reader.h>
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 1) return 0;
@@ -24,6 +26,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::fclose(f);
   try {
     paps::loadCloud(path);
+  } catch (const paps::Error&) {
+  }
+  try {
+    paps::Positions xyz;
+    if (!paps::readPcdXyz(path, xyz)) paps::readPlyXyz(path, xyz);
   } catch (const paps::Error&) {
   }
   std::remove(path.c_str());

@@ -543,7 +543,7 @@ float chooseRadius(const Positions& pts, std::size_t finite, float diag, int tar
   occupied.reset(std::min<std::size_t>(finite / stride, 1u << 16));
   {
     const float inv = 1.f / c0;
-    const std::uint64_t below = stride == 1 ? ~std::uint64_t(0) : ~std::uint64_t(0) / stride;
+    const std::uint64_t below = ~std::uint64_t(0) / stride;
     for (std::size_t i = 0; i < pts.size(); ++i)
       if (isFinite(pts[i]) && positionHash(pts[i]) <= below)
         occupied.insert(detail::packCell(std::int64_t(std::floor(pts[i].x() * inv)),

@@ -52,6 +52,26 @@ XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
 
 }  // namespace
 
+namespace {
+// Runs one of PCL's readers or writers (a call returning PCL's int status) with its console
+// silenced (it prints its own complaint; our exception is the one clear line), and turns an
+// exception from it into status -1 with its message in `thrown`.
+template <typename F>
+int quietPclIo(F&& io, std::string& thrown) {
+  const auto level = pcl::console::getVerbosityLevel();
+  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
+  int rc = -1;
+  try {
+    rc = io();
+  } catch (const std::exception& e) {
+    thrown = e.what();
+    rc = -1;
+  }
+  pcl::console::setVerbosityLevel(level);
+  return rc;
+}
+}  // namespace
+
 pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) {
   if (origin) origin->setZero();
   const std::string ext = extensionOf(path);
@@ -62,39 +82,24 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   else {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
-  }
-  pcl::PCLPointCloud2 cloud;
-  int rc = -1;
-  // PCL's readers print their own complaint to stderr; our exception is the one clear line.
-  const auto level = pcl::console::getVerbosityLevel();
-  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
-  if (ext != ".pcd" && ext != ".ply") {
-    pcl::console::setVerbosityLevel(level);
     throw IoError("cannot read '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
   }
   // PCL's readers also throw, e.g. std::out_of_range on an ASCII row with too few values:
   // that is a damaged file too, and reaches the caller as IoError like every other.
+  pcl::PCLPointCloud2 cloud;
   std::string thrown;
-  try {
-    if (ext == ".pcd") {
-      pcl::PCDReader reader;
-      Eigen::Vector4f o = Eigen::Vector4f::Zero();
-      Eigen::Quaternionf q;
-      int version = 0;
-      rc = reader.read(path, cloud, o, q, version);
-      if (origin && rc >= 0) *origin = o.head<3>();
-    } else {
-      pcl::PLYReader reader;
-      rc = reader.read(path, cloud);
-    }
-  } catch (const std::exception& e) {
-    thrown = e.what();
-    rc = -1;
-  }
-  pcl::console::setVerbosityLevel(level);
-  if (!thrown.empty())
-    throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file (" + thrown + ")");
-  if (rc < 0) throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file");
+  const int rc = quietPclIo([&] {
+    if (ext == ".ply") return pcl::PLYReader().read(path, cloud);
+    Eigen::Vector4f o = Eigen::Vector4f::Zero();
+    Eigen::Quaternionf q;
+    int version = 0;
+    const int status = pcl::PCDReader().read(path, cloud, o, q, version);
+    if (origin && status >= 0) *origin = o.head<3>();
+    return status;
+  }, thrown);
+  if (rc < 0)
+    throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file" +
+                  (thrown.empty() ? "" : " (" + thrown + ")"));
   if (cloud.data.size() < static_cast<std::size_t>(cloud.row_step) * cloud.height)
     throw IoError("cannot read '" + path + "': truncated data");
   try {
@@ -117,26 +122,13 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) 
   const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" +
                                   std::to_string(::getpid()) + ext)).string();
   const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C (installInterruptCleanup)
-  int rc = -1;
   const Eigen::Vector4f origin = Eigen::Vector4f::Zero();
   const Eigen::Quaternionf orient = Eigen::Quaternionf::Identity();
-  std::string thrown;  // PCL's writers may throw as well as return -1
-  // PCL's writers print their own complaint to stderr; our exception is the one clear line.
-  const auto level = pcl::console::getVerbosityLevel();
-  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
-  try {
-    if (ext == ".pcd") {
-      pcl::PCDWriter w;
-      rc = w.writeBinary(tmp, cloud, origin, orient);
-    } else {
-      pcl::PLYWriter w;
-      rc = w.writeBinary(tmp, cloud, origin, orient, false);
-    }
-  } catch (const std::exception& e) {
-    thrown = e.what();
-    rc = -1;
-  }
-  pcl::console::setVerbosityLevel(level);
+  std::string thrown;
+  const int rc = quietPclIo([&] {
+    return ext == ".pcd" ? pcl::PCDWriter().writeBinary(tmp, cloud, origin, orient)
+                         : pcl::PLYWriter().writeBinary(tmp, cloud, origin, orient, false);
+  }, thrown);
   if (rc < 0) {
     std::filesystem::remove(tmp, ec);
     throw IoError("cannot write '" + path + "': the writer failed" + (thrown.empty() ? "" : " (" + thrown + ")"));

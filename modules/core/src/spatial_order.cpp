@@ -20,6 +20,17 @@ std::uint64_t spreadBits(std::uint64_t v) {
   v = (v | v << 2) & 0x1249249249249249ULL;
   return v;
 }
+
+/// Order of (key, index) pairs by key, then by the indexed point's coordinates, then (copies
+/// of one position) by index: nothing in it depends on the input order but the last step.
+struct KeyThenPosition {
+  const Positions& points;
+  bool operator()(const std::pair<std::uint64_t, int>& a, const std::pair<std::uint64_t, int>& b) const {
+    if (a.first != b.first) return a.first < b.first;
+    if (points[a.second] != points[b.second]) return coordinatesBefore(points[a.second], points[b.second]);
+    return a.second < b.second;
+  }
+};
 }  // namespace
 
 std::vector<int> spatialOrder(const Positions& points, int bits_per_axis) {
@@ -45,11 +56,7 @@ std::vector<int> spatialOrder(const Positions& points, int bits_per_axis) {
   }
   // Points of one cell by their coordinates (x, then y, then z), so that the order does not
   // depend on the input order; only copies of one position stay in index order.
-  std::sort(keyed.begin(), keyed.end(), [&points](const auto& a, const auto& b) {
-    if (a.first != b.first) return a.first < b.first;
-    if (points[a.second] != points[b.second]) return coordinatesBefore(points[a.second], points[b.second]);
-    return a.second < b.second;
-  });
+  std::sort(keyed.begin(), keyed.end(), KeyThenPosition{points});
   std::vector<int> order(keyed.size());
   for (std::size_t k = 0; k < keyed.size(); ++k) order[k] = keyed[k].second;
   return order;
@@ -63,14 +70,10 @@ std::uint64_t positionHash(const Eigen::Vector3f& p) {
 
 std::vector<int> positionSample(const Positions& points, std::size_t samples) {
   // The `samples` smallest (hash, x, y, z, index), kept in a max-heap: one pass, no copy.
-  auto before = [&points](const std::pair<std::uint64_t, int>& a, const std::pair<std::uint64_t, int>& b) {
-    if (a.first != b.first) return a.first < b.first;
-    if (points[a.second] != points[b.second]) return coordinatesBefore(points[a.second], points[b.second]);
-    return a.second < b.second;
-  };
+  if (samples == 0) return {};
+  const KeyThenPosition before{points};
   std::vector<std::pair<std::uint64_t, int>> heap;
   heap.reserve(samples);
-  if (samples == 0) return {};
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) continue;
     const std::pair<std::uint64_t, int> e(positionHash(points[i]), static_cast<int>(i));

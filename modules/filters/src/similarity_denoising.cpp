@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstring>
 #include <limits>
 
 #include <Eigen/Cholesky>
@@ -16,7 +15,6 @@
 #include <paps/core/neighbourhood.h>
 #include <paps/core/noise_estimation.h>
 #include <paps/core/plane_height_patch.h>
-#include <paps/core/random.h>
 #include <paps/core/spatial_order.h>
 
 namespace paps {

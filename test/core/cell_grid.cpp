@@ -236,6 +236,35 @@ TEST(CellGrid, GraphMatchesBruteForceAndKdTree) {
   }
 }
 
+TEST(CellGrid, CappedListsAreTheNearestWhereverTheDensityJumps) {
+  // The capped search first looks at a reach guessed from the previous query; where the
+  // density drops (a dense square beside a sparse one, copies mixed in) the guess falls short
+  // and the full ball is searched. Either way each list is the cap's nearest of the ball.
+  paps::Random rng(11);
+  Positions p;
+  for (int i = 0; i < 3000; ++i) {
+    const bool dense = i % 3 != 0;
+    const float x = static_cast<float>(rng.uniform(0, 1)), y = static_cast<float>(rng.uniform(0, 1));
+    p.emplace_back(dense ? 0.25f * x : 0.25f + x, dense ? 0.25f * y : y, 0.001f * static_cast<float>(rng.uniform(0, 1)));
+    if (i % 29 == 3) p.push_back(p.back());
+  }
+  const float r = 0.08f;  // sparse balls hold about 20 points, dense ones about 640
+  const int cap = 25;
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  const NeighbourGraph g = grid.radiusGraph(p.size(), r, false, {}, cap);
+  int full = 0, short_balls = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    std::vector<int> want = bruteBall(p, p[i], r);
+    std::rotate(want.begin(), std::find(want.begin(), want.end(), int(i)), std::find(want.begin(), want.end(), int(i)) + 1);
+    (want.size() > static_cast<std::size_t>(cap) ? full : short_balls)++;
+    want.resize(std::min<std::size_t>(want.size(), cap));
+    ASSERT_EQ(std::vector<int>(g.begin(i), g.end(i)), want) << "point " << i;
+  }
+  EXPECT_GT(full, 1000);       // crowded balls, capped
+  EXPECT_GT(short_balls, 50);  // sparse balls, under the cap
+}
+
 TEST(CellGrid, OpenBallExcludesTheBoundary) {
   // Points exactly at distance 1 on a lattice: the closed ball has them, the open one not.
   Positions p;

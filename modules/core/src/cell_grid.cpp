@@ -154,22 +154,39 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
   std::vector<std::vector<int>> found(static_cast<std::size_t>(chunks));
   std::vector<int> cnt(total, 0);
   ProgressReporter report(progress, "neighbours", total);
+  // A capped ball keeps its max_count nearest. When the ball at a smaller reach already holds
+  // max_count points, those are the max_count nearest of the whole ball (every point left out
+  // is farther than all of them), so a crowded ball is first searched at a reach guessed from
+  // the previous query's (its max_count-th distance, with a margin): fewer cells scanned and
+  // fewer points to select from. A guess too short costs a second, full search; the lists are
+  // exactly those of the full search either way.
+  const bool guess_reach = max_count > 0 && !overflow;
+  constexpr float kReachMargin = 1.15f;
 #pragma omp parallel
   {
     Cursor cursor;
     std::vector<std::uint64_t> buf;
     std::vector<int> list;
+    float guess = radius;  // per thread: the next query's reach
 #pragma omp for schedule(dynamic, 1)
     for (std::int64_t c = 0; c < chunks; ++c) {
       if (report.cancelled()) continue;
       const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
       for (std::int64_t t = c * chunk; t < end; ++t) {
-        buf.clear();
-        forEachWithin(sorted_[t], radius, max_d2, cursor, [&](int s, float d2) {
-          // Self first, even among exact duplicates.
-          buf.push_back(s == t ? static_cast<std::uint32_t>(original_[s])
-                               : distanceIndexKey(d2, original_[s]) + (std::uint64_t(1) << 32));
-        });
+        auto collect = [&](float reach, float reach_d2) {
+          buf.clear();
+          forEachWithin(sorted_[t], reach, reach_d2, cursor, [&](int s, float d2) {
+            // Self first, even among exact duplicates.
+            buf.push_back(s == t ? static_cast<std::uint32_t>(original_[s])
+                                 : distanceIndexKey(d2, original_[s]) + (std::uint64_t(1) << 32));
+          });
+        };
+        if (guess_reach && guess < radius) {
+          collect(guess, std::min(max_d2, guess * guess));
+          if (buf.size() < static_cast<std::size_t>(max_count)) collect(radius, max_d2);
+        } else {
+          collect(radius, max_d2);
+        }
         if (max_count > 0 && buf.size() > static_cast<std::size_t>(max_count)) {
           if (overflow) {
             list.clear();
@@ -185,6 +202,17 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
           buf.resize(static_cast<std::size_t>(max_count));
         }
         std::sort(buf.begin(), buf.end());
+        if (guess_reach) {
+          // The max_count-th distance (the key's high word is its bits + 1; self is at 0).
+          float kth = radius;
+          if (buf.size() == static_cast<std::size_t>(max_count) && (buf.back() >> 32) > 0) {
+            const std::uint32_t bits = static_cast<std::uint32_t>((buf.back() >> 32) - 1);
+            float d2;
+            std::memcpy(&d2, &bits, sizeof d2);
+            kth = std::sqrt(d2);
+          }
+          guess = std::min(radius, kReachMargin * kth);
+        }
         cnt[original_[t]] = static_cast<int>(buf.size());
         for (const std::uint64_t e : buf) found[c].push_back(static_cast<int>(e & 0xFFFFFFFFu));
       }

@@ -215,9 +215,12 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   const NeighbourGraph& graph = nb.graph;
 
   // 2. Normals of S, oriented, then S = S_smooth + V.
+  ProgressReporter normals_rep(progress, "normals", 1);
   Normals normals = estimateNormals(points, graph);
   if (params.use_viewpoint) orientNormalsTowards(points, normals, params.viewpoint);
   else orientNormalsByPropagation(points, normals, graph);
+  normals_rep.finish();
+  normals_rep.throwIfCancelled();
   std::vector<std::uint8_t> usable(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
     usable[i] = isFinite(points[i]) && graph.count(i) >= kMinNeighbours && isFinite(normals[i]);
@@ -254,6 +257,7 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   // has lost (on S_smooth they would be noise); the normal and the height plane are S_smooth's.
   LocalFrames frames;
   {
+    ProgressReporter frames_rep(progress, "frames", 1);
     Normals guide_normals = estimateNormals(guide, graph);
     for (std::size_t i = 0; i < n; ++i)
       if (isFinite(guide_normals[i]) && isFinite(normals[i]) && guide_normals[i].dot(normals[i]) < 0)
@@ -271,6 +275,8 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
       f.t1 = t1.normalized();
       f.t2 = f.n.cross(f.t1);
     }
+    frames_rep.finish();
+    frames_rep.throwIfCancelled();
   }
   const PlaneHeightPatch patch(SamplingPattern::grid(params.grid_size), nb.radius);
   const std::size_t dims = patch.size();
@@ -458,9 +464,11 @@ SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingPa
 namespace {
 // noiseResolvedParameters, handing over the kd-tree it built (null when it built none).
 SimilarityDenoisingParameters resolveNoise(const Positions& points, const SimilarityDenoisingParameters& params,
-                                           SimilarityDenoisingReport* report, std::unique_ptr<SpatialIndex>* index_out) {
+                                           SimilarityDenoisingReport* report, std::unique_ptr<SpatialIndex>* index_out,
+                                           const ProgressCallback& progress = {}) {
   params.validate();
   if (params.radius > 0 || !params.adapt_to_noise || countFinite(points) < 10) return params;
+  ProgressReporter rep(progress, "noise", 1);
   auto index = std::make_unique<SpatialIndex>(points);
   const float r0 = radiusForNeighbourCount(points, *index, params.target_neighbours);
   float noise = params.noise_sigma;
@@ -481,6 +489,8 @@ SimilarityDenoisingParameters resolveNoise(const Positions& points, const Simila
     report->radius_scale = run.radius / r0;
   }
   if (index_out) *index_out = std::move(index);
+  rep.finish();
+  rep.throwIfCancelled();
   return run;
 }
 }  // namespace
@@ -507,7 +517,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisi
                                 const ProgressCallback& progress) {
   SimilarityDenoisingReport choice;
   std::unique_ptr<SpatialIndex> index;  // built on `points` by the noise measurement, reused by pass 1
-  const SimilarityDenoisingParameters run = resolveNoise(points, params, &choice, &index);
+  const SimilarityDenoisingParameters run = resolveNoise(points, params, &choice, &index, progress);
   Positions cur = points;
   const std::vector<std::uint8_t> side = halvesOf(points);
   SimilarityDenoisingReport report;

@@ -1,6 +1,7 @@
 // Tests of the range coder, the container and the seed coder: exact round trips, and every
 // truncation or bit flip rejected with CorruptStream.
 #include <algorithm>
+#include <cmath>
 
 #include <gtest/gtest.h>
 
@@ -24,8 +25,10 @@ TEST(RangeCoder, RoundTripsSkewedAndFlatSymbols) {
   AdaptiveModel ma(256), mb(3);
   for (int i = 0; i < 50000; ++i) { enc.encode(ma, a[i]); enc.encode(mb, b[i]); enc.encodeBits(bits[i] & 0x7FFFF, 19); }
   const auto bytes = enc.finish();
-  // Skewed symbols cost far less than 8 bits.
-  EXPECT_LT(bytes.size(), 50000u * (8 + 2 + 19) / 8);
+  // Adaptive models learn the skew: measured 136,885 bytes. The symbols' own entropy (0.9 x
+  // 0 plus 0.1 x 256 values: 1.27 bits, log2(3), 19 raw bits) is about 136,600 bytes; flat models
+  // (8 + log2 3 + 19 bits) would need 178,662.
+  EXPECT_LT(bytes.size(), 140000u);
   RangeDecoder dec(bytes.data(), bytes.size());
   AdaptiveModel da(256), db(3);
   for (int i = 0; i < 50000; ++i) {
@@ -60,10 +63,15 @@ TEST(SymbolStreams, AllBackEndsRoundTrip) {
   EntropyMethod chosen;
   std::size_t sizes[3];
   const auto bytes = w.finish(&chosen, sizes);
-  EXPECT_GT(sizes[0], 0u);
-  EXPECT_GT(sizes[1], 0u);
-  EXPECT_GT(sizes[2], 0u);
   EXPECT_EQ(bytes.size() - 1, std::min({sizes[0], sizes[1], sizes[2]}));
+  // The best back end is within 2% of the symbols' empirical (order-0) entropy: measured
+  // 9,030 bytes against 8,980.
+  std::vector<int> count(40, 0);
+  for (int v : s) ++count[v];
+  double entropy_bits = 0;
+  for (int c : count)
+    if (c > 0) entropy_bits -= c * std::log2(double(c) / s.size());
+  EXPECT_LT(double(bytes.size() - 1), 1.02 * entropy_bits / 8);
   SymbolReader r(bytes, s.size(), "test");
   AdaptiveModel rm(40);
   for (int v : s) ASSERT_EQ(r.get(rm), v);
@@ -111,8 +119,10 @@ TEST(SeedCoder, RoundTripsDistinctVoxels) {
   auto sorted = back;
   std::sort(sorted.begin(), sorted.end());
   EXPECT_EQ(sorted, v);
-  // Fewer bits than raw 48 per point.
-  EXPECT_LT(bytes.size() * 8.0 / v.size(), 40.0);
+  // Close to the entropy of the set: choosing n voxels among 2^41 costs about
+  // 41 - log2(n) + log2(e) bits a voxel (30.2 here); measured 32.8.
+  const double set_bits = 41 - std::log2(double(v.size())) + std::log2(std::exp(1.0));
+  EXPECT_LT(bytes.size() * 8.0 / v.size(), set_bits + 3.0);
   // Truncated: an error, not a crash.
   std::vector<std::uint8_t> cut(bytes.begin(), bytes.begin() + bytes.size() / 2);
   EXPECT_THROW(decodeVoxels(cut, v.size(), 16), CorruptStream);

@@ -90,7 +90,9 @@ TEST(SelfSimilarityCodec, NoisyInputIsDenoisedNotAmplified) {
   const double in_err = pointToMeshError(noisy, truth).rmse, out_err = pointToMeshError(out, truth).rmse;
   std::printf("noisy: input %.3g, decoded %.3g to the true surface, %.3f bpp\n", in_err, out_err,
               bytes.size() * 8.0 / noisy.size());
-  EXPECT_LT(out_err, in_err);
+  // The decoded surface is closer to the truth than the input was: measured 6.5e-4 against
+  // 1.42e-3 (a clean input decodes to 5.1e-4).
+  EXPECT_LT(out_err, 0.6 * in_err);
 }
 
 TEST(SelfSimilarityCodec, EveryTruncationAndManyBitFlipsAreRejected) {

@@ -107,14 +107,23 @@ TEST(QuadricHeightPatch, GeodesicBinsAndHeights) {
   std::vector<float> h(patch.size());
   std::vector<std::uint8_t> v(patch.size());
   EXPECT_EQ(patch.describe(f, p, nb.data(), static_cast<int>(nb.size()), h.data(), v.data()), 25);
-  double rms = 0;
-  for (float x : h) rms += x * x;
-  EXPECT_LT(std::sqrt(rms / 25), 0.003);  // the large-scale curvature (up to 0.01 m) is gone
-  // Bins along t1 are geodesically equidistant on the curve.
+  // Rows run along t2 (y), the bump's direction. The large-scale curvature (up to 0.01 m) is
+  // gone: a row is flat along x (its ends equal), and the rows follow the bump, whose
+  // 0.002 cos(60 y) differs by 3.9 mm between the centre row (y = 0) and the first (y = -2
+  // bins = -5.7 cm), less the kernel's smoothing (measured 3.0 mm).
+  EXPECT_NEAR(h[10], h[14], 2e-4f);
+  EXPECT_NEAR(h[12] - h[2], 0.0030f, 5e-4f);
+  EXPECT_NEAR(h[12] - h[22], 0.0030f, 5e-4f);
+  // Bins along t1 are geodesically equidistant on the curve z = k1 x^2 / 2: the arc length
+  // between neighbours (closed form) is the bin spacing. Bins evenly spaced in x instead would
+  // be 1.3% off.
   std::vector<Eigen::Vector3f> c(patch.size());
   patch.binCentres(f, c.data());
-  const float d01 = (c[1] - c[0]).norm(), d34 = (c[3] - c[2]).norm();
-  EXPECT_NEAR(d01, d34, 0.02f * patch.binSpacing());
+  const double a = 0.5 * f.k1;
+  ASSERT_GT(a, 1.5);
+  auto arc = [a](double x) { return 0.5 * x * std::sqrt(1 + 4 * a * a * x * x) + std::asinh(2 * a * x) / (4 * a); };
+  for (int k = 0; k + 1 < 5; ++k)
+    EXPECT_NEAR(arc(c[k + 1].x()) - arc(c[k].x()), patch.binSpacing(), 1e-3 * patch.binSpacing()) << k;
 }
 
 // The conditioning of the regression tells a ball that covers the disc from one whose points lie

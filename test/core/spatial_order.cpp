@@ -108,9 +108,23 @@ TEST(PositionSample, DependsOnThePositionsOnly) {
   // More samples than finite points: every finite point, once.
   EXPECT_EQ(paps::positionSample(p, 100000).size(), p.size() - 1);
   EXPECT_TRUE(paps::positionSample(p, 0).empty());
-  // Copies of a position share its hash.
-  EXPECT_EQ(paps::positionHash(p[3]), paps::positionHash(Eigen::Vector3f(p[3])));
+  // Copies of a position share its hash, whatever their index: a copy of every tenth point
+  // appended, the sample of the larger cloud holds a copy exactly when it holds its original
+  // (but at the sample's last hash, where the cut may fall between the two).
   EXPECT_NE(paps::positionHash(p[3]), paps::positionHash(p[4]));
+  Positions with_copies = p;
+  for (std::size_t i = 0; i < p.size(); i += 10) with_copies.push_back(p[i]);
+  const std::vector<int> c = paps::positionSample(with_copies, 300);
+  std::vector<std::uint8_t> in_sample(with_copies.size(), 0);
+  for (const int i : c) in_sample[i] = 1;
+  std::size_t copies_in = 0;
+  const std::uint64_t last = paps::positionHash(with_copies[c.back()]);
+  for (std::size_t i = 0, k = p.size(); i < p.size(); i += 10, ++k) {
+    if (!paps::isFinite(p[i]) || paps::positionHash(p[i]) == last) continue;
+    EXPECT_EQ(in_sample[k], in_sample[i]) << i;
+    copies_in += in_sample[k];
+  }
+  EXPECT_GT(copies_in, 5u);
 }
 
 TEST(SpatialOrder, EdgeCases) {

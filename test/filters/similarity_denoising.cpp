@@ -75,7 +75,7 @@ TEST(SimilarityDenoising, ReducesErrorOnEngravedPlane) {
   std::printf("similarity denoising, engraved plane 40K, noise 0.25%%: RMSE %.3g -> %.3g (factor %.2f), "
               "radius %.4g, sigma %.3g\n", before, after.rmse, factor, f.getReport().radius,
               f.getReport().sigma);
-  EXPECT_GT(factor, 1.8) << "RMSE before " << before << ", after " << after.rmse;  // measured 2.25
+  EXPECT_GT(factor, 2.8) << "RMSE before " << before << ", after " << after.rmse;  // measured 3.18
   // Random sampling leaves the odd corner point with fewer than 4 neighbours.
   EXPECT_EQ(f.getReport().moved + f.getReport().isolated, s.noisy.size());
   EXPECT_LT(f.getReport().isolated, s.noisy.size() / 1000);
@@ -84,7 +84,7 @@ TEST(SimilarityDenoising, ReducesErrorOnEngravedPlane) {
   // The baseline we must beat: the point bilateral filter at its defaults.
   const double bilateral = paps::pointToMeshError(paps::bilateralFilterPositions(s.noisy, {}), truth).rmse;
   std::printf("bilateral baseline on the same cloud: RMSE %.3g\n", bilateral);
-  EXPECT_LT(after.rmse, 0.95 * bilateral);  // measured 0.82
+  EXPECT_LT(after.rmse, 0.7 * bilateral);  // measured 0.58
 }
 
 TEST(SimilarityDenoising, NoiseFreeSurfacesStayPut) {
@@ -104,14 +104,14 @@ TEST(SimilarityDenoising, NoiseFreeSurfacesStayPut) {
   EXPECT_LT(worst_slide, 1e-4);
 
   // The engraved plane without noise keeps its detail: S_smooth alone (10 curvature-motion
-  // iterations) flattens the engraving to RMSE 0.0048; averaging V puts it back to under half
-  // the 0.0035 noise the filter removes above (measured 0.00146 with 64 descriptor checks per
-  // query, 0.00150 with the default 48, 0.00159 with 32).
+  // iterations) flattens the engraving to RMSE 0.0048; averaging V puts it back to about a
+  // quarter of the 0.0035 noise the filter removes above (measured 0.00091; the first
+  // versions of the filter reached 0.0015).
   const NoisyShape s = engravedPlane(20000, 0.f);
   const paps::PointToMeshDistance truth(s.mesh);
   const double after = paps::pointToMeshError(paps::denoiseBySimilarity(s.clean, {}), truth).rmse;
   std::printf("similarity denoising of the noise-free engraved plane: RMSE %.3g\n", after);
-  EXPECT_LT(after, 0.00175);
+  EXPECT_LT(after, 0.0011);
 }
 
 TEST(SimilarityDenoising, OnePatchIsTheIdentity) {
@@ -334,15 +334,20 @@ TEST(SimilarityDenoising, DuplicatePointsGiveFiniteOutput) {
   ASSERT_EQ(out.size(), p.size());
   for (std::size_t i = 0; i < out.size(); ++i) ASSERT_TRUE(paps::isFinite(out[i].getVector3fMap())) << i;
   EXPECT_TRUE(out.is_dense);
-  // Copies of one point fall in different halves of the split-half guide, so their outputs
-  // may differ, but by less than the noise they remove: the filter does not pull them apart.
-  // The noise is 0.25% of the diagonal (about 1.4 m here).
+  // Copies of one point fall in the same half of the split-half guide (the halves come from
+  // the coordinates), so they get the same descriptor and the same output up to the order of
+  // float sums: the filter does not pull them apart (measured: mean 5.5e-7, at most 2.6e-4,
+  // where the noise is 0.25% of the diagonal, 3.6e-3).
   const float noise = 0.0025f * paps::boundingBoxDiagonal(p);
-  double spread = 0;
-  for (std::size_t i = 0; i < out.size(); i += 3)
-    spread += (out[i].getVector3fMap() - out[i + 1].getVector3fMap()).norm();
+  double spread = 0, worst = 0;
+  for (std::size_t i = 0; i < out.size(); i += 3) {
+    const double d = (out[i].getVector3fMap() - out[i + 1].getVector3fMap()).norm();
+    spread += d;
+    worst = std::max(worst, d);
+  }
   spread /= static_cast<double>(out.size() / 3);
-  EXPECT_LT(spread, 0.5 * noise);
+  EXPECT_LT(spread, 0.01 * noise);
+  EXPECT_LT(worst, 0.2 * noise);
 }
 
 TEST(SimilarityDenoising, DuplicatedScanKeepsItsSimilarityScale) {

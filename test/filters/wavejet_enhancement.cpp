@@ -53,8 +53,10 @@ TEST(WavejetEnhancement, PositionGainScalesDetail) {
   params.alpha0 = 0;
   const double a0 = interiorAmplitude(paps::enhancePositions(p, params));
   EXPECT_NEAR(a1, a, 0.01 * a);  // projection on an exact surface barely moves it
-  EXPECT_GT(a2, 1.2 * a);
-  EXPECT_LT(a0, 0.8 * a);
+  // The detail's amplitude scales with the gain (equation 2.21): measured 2.07x at alpha0 = 2,
+  // 0.07x at alpha0 = 0 (the Wavejet's own smooth part is what is left).
+  EXPECT_NEAR(a2 / a, 2.0, 0.15);
+  EXPECT_LT(a0 / a, 0.15);
   EXPECT_EQ(r.changed, p.size());
   EXPECT_EQ(r.clamped, 0u);
 }

@@ -76,7 +76,15 @@ TEST(MlsUpsampling, RimlsLandsNearSphere) {
   p.output_count = 7777;
   const Positions out = upsampleMls(in, MlsSurface::Rimls, p);
   EXPECT_EQ(out.size(), 7777u);
-  EXPECT_LT(maxRadiusError(out, 1.f), 1e-2);
+  // RIMLS, an implicit MLS of the points' tangent planes, puts a convex surface slightly
+  // outside it (the weighted mean of n_i . (x - p_i) vanishes where |x| = 1 / <cos theta>):
+  // measured mean radius 1.0030, at most 6.2e-3 off. The seeds left unprojected on their
+  // tangent discs would average 1.0005.
+  double mean = 0;
+  for (const auto& q : out) mean += q.norm();
+  mean /= static_cast<double>(out.size());
+  EXPECT_NEAR(mean, 1.0030, 5e-4);
+  EXPECT_LT(maxRadiusError(out, 1.f), 8e-3);
 }
 
 TEST(MlsUpsampling, PclStageAndBadInput) {
@@ -125,8 +133,8 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
 TEST(MlsUpsampling, WideDiscsStillLandOnSphere) {
   // Seeds spread over discs as wide as QSR's (disc_scale sqrt(pi)) are projected about as
   // well as with the default discs: on the unit sphere APSS stays under 1e-3 RMS (seeds left
-  // on such discs: about 2.5e-3); RIMLS keeps its own bias (it shrinks the sphere by about
-  // 4.6e-3 at this kernel size, whatever the discs) within 20%.
+  // on such discs: about 2.5e-3); RIMLS keeps its own bias (it puts the sphere about 4.6e-3
+  // outside, measured, at this kernel size, whatever the discs) within 20%.
   auto rms = [](MlsSurface s, float disc_scale) {
     MlsUpsamplingParameters p;
     p.factor = 3;

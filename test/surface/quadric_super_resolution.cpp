@@ -92,9 +92,9 @@ TEST(QuadricSuperResolution, NoSimilarPatchStillInterpolates) {
   const Positions out = superResolveQuadric({c.sparse}, p, &r);
   EXPECT_EQ(r.without_similar, r.patches);
   EXPECT_EQ(out.size(), 48000u);
-  // Noise-free input: the interpolation stays within a fraction of the relief amplitude.
-  // The relief (RMS 3 mm) is kept to within a fifth of its amplitude.
-  EXPECT_LT(pointToMeshError(interior(out), truth).rmse, 0.2 * 0.006);
+  // Noise-free input: the plain interpolation follows the relief (RMS 3 mm; the same points
+  // flattened to z = 0 score 2.9e-3): measured 4.5e-4.
+  EXPECT_LT(pointToMeshError(interior(out), truth).rmse, 6e-4);
 }
 
 // Patches with too few valid bins to be compared (sparse parts and rims of a scan) still seed

@@ -1,6 +1,6 @@
 // Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
 // its input (same number of points, same fields in the same order, only x y z moved).
-//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized|rough]
+//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized|rough|lines]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
 //   paps_test_cloud_tool keeps IN.pcd OUT.pcd FIELD... (same width x height, FIELDs present)
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
@@ -33,6 +33,9 @@ int fail(const std::string& what) {
 
 // A gently curved, noisy surface with an intensity per point: enough for the denoiser to
 // find neighbours and move points.
+// The surface `write` samples (heights above it are the noise).
+float surface(float x, float y) { return 0.1f * std::sin(3.f * x) * std::cos(2.f * y); }
+
 int write(const std::string& path, int count, const std::string& format) {
   pcl::PointCloud<pcl::PointXYZI> cloud;
   const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(count))));
@@ -43,11 +46,13 @@ int write(const std::string& path, int count, const std::string& format) {
     state = state * 1664525u + 1013904223u;
     return (static_cast<float>(state >> 8) / 16777216.f - 0.5f) * amplitude;
   };
+  const bool lines = format == "lines";  // scan lines: 2 mm apart along x, 5 cm apart in y
+  const int per_line = lines ? 200 : side;
   for (int k = 0; k < count; ++k) {
     pcl::PointXYZI p;
-    p.x = 0.02f * static_cast<float>(k % side);
-    p.y = 0.02f * static_cast<float>(k / side);
-    p.z = 0.1f * std::sin(3.f * p.x) * std::cos(2.f * p.y) + noise();
+    p.x = (lines ? 0.002f : 0.02f) * static_cast<float>(k % per_line);
+    p.y = (lines ? 0.05f : 0.02f) * static_cast<float>(k / per_line);
+    p.z = surface(p.x, p.y) + noise();
     p.intensity = static_cast<float>(k);
     cloud.push_back(p);
   }
@@ -87,6 +92,7 @@ int check(const std::string& in_path, const std::string& out_path) {
   pcl::fromPCLPointCloud2(in, a);
   pcl::fromPCLPointCloud2(out, b);
   std::size_t moved = 0;
+  double before = 0, after = 0;  // squared heights over the written surface
   for (std::size_t i = 0; i < a.size(); ++i) {
     if (a[i].intensity != b[i].intensity) return fail("intensity of point " + std::to_string(i) + " changed");
     if (!std::isfinite(b[i].x) || !std::isfinite(b[i].y) || !std::isfinite(b[i].z))
@@ -94,9 +100,18 @@ int check(const std::string& in_path, const std::string& out_path) {
     if ((a[i].getVector3fMap() - b[i].getVector3fMap()).norm() > 0.05f)
       return fail("point " + std::to_string(i) + " moved too far");
     moved += a[i].getVector3fMap() != b[i].getVector3fMap();
+    before += std::pow(a[i].z - surface(a[i].x, a[i].y), 2);
+    after += std::pow(b[i].z - surface(b[i].x, b[i].y), 2);
   }
   if (moved < a.size() / 2) return fail("only " + std::to_string(moved) + " points moved");
-  std::printf("%zu points, %zu fields, %zu moved\n", n_out, out.fields.size(), moved);
+  // A denoiser brings the points closer to the surface `write` drew them around (measured on
+  // 900 points: RMS 1.17e-3 before, 3.5e-4 similarity, 5.7e-4 bilateral).
+  const double rms_before = std::sqrt(before / a.size()), rms_after = std::sqrt(after / a.size());
+  if (!(rms_after < 0.6 * rms_before))
+    return fail("not denoised: RMS height over the surface " + std::to_string(rms_after) + ", input " +
+                std::to_string(rms_before));
+  std::printf("%zu points, %zu fields, %zu moved, RMS to the surface %.3g -> %.3g\n", n_out, out.fields.size(), moved,
+              rms_before, rms_after);
   return 0;
 }
 

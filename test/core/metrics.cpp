@@ -362,6 +362,32 @@ TEST(TriangleMesh, LoadsObjWithQuads) {
   EXPECT_NEAR(m.area(), 4 + std::sqrt(2.0), 1e-6);  // the quad and a triangle of base 2, slant sqrt(2)
 }
 
+TEST(TriangleMesh, ObjIndicesAreCheckedAndRelativeOnesFollowTheFormat) {
+  const auto path = std::filesystem::path(::testing::TempDir()) /
+                    ("paps_test_obj_" + std::to_string(::getpid()) + ".obj");
+  auto load = [&](const std::string& text) {
+    std::ofstream(path) << text;
+    return paps::loadTriangleMesh(path.string());
+  };
+  // "f v/vt/vn" keeps v; -1 is the last vertex read; comments and other records are skipped.
+  const TriangleMesh m = load("# a triangle\nv 0 0 0\nvn 0 0 1\nv 2 0 0\nv 0 2 0\ng part\nf 1/1/1 -2//1 -1\n");
+  ASSERT_EQ(m.triangles.size(), 1u);
+  EXPECT_EQ(m.triangles[0], Eigen::Vector3i(0, 1, 2));
+  EXPECT_DOUBLE_EQ(m.area(), 2.0);
+  // A face past the vertices crashed PCL's reader; every damaged line is named.
+  for (const char* bad : {"v 1 2\nf 1 2 9999999\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9999999\n",
+                          "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -4 1 2\n",
+                          "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 x\n", "v 0 0 nan\n", "v 0 0 0\n"}) {
+    try {
+      load(bad);
+      ADD_FAILURE() << "accepted: " << bad;
+    } catch (const paps::IoError& e) {
+      EXPECT_NE(std::string(e.what()).find(path.string()), std::string::npos) << e.what();
+    }
+  }
+  std::filesystem::remove(path);
+}
+
 // The OpenCV surface-matching sample fetched by scripts/fetch_samples.sh into $PAPS_SAMPLES
 // (PAPS_SAMPLE_MESH overrides the path); skipped if absent.
 TEST(TriangleMesh, LoadsRealPlyMesh) {

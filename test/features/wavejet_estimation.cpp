@@ -283,6 +283,18 @@ TEST(WavejetEstimation, BadParametersThrow) {
   wj.setInputCloud(empty);
   wj.setRadiusSearch(0.1);
   EXPECT_THROW(wj.compute(out), paps::InvalidInput);
+  {
+    // A search surface with no finite point: PCL's kd-tree, built on nothing, crashed.
+    paps::WavejetEstimation<pcl::PointXYZ> s;
+    s.setInputCloud(toCloud(heightFieldSamples([](double, double) { return 0.0; }, 100, 1.0, 1)));
+    s.setRadiusSearch(0.1);
+    s.setSearchSurface(empty);
+    EXPECT_THROW(s.compute(out), paps::InvalidInput);
+    auto nan = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+    nan->push_back(pcl::PointXYZ(NAN, 0, 0));
+    s.setSearchSurface(nan);
+    EXPECT_THROW(s.compute(out), paps::InvalidInput);
+  }
   wj.setInputCloud(toCloud(heightFieldSamples([](double, double) { return 0.0; }, 100, 1.0, 1)));
   wj.setRadiusSearch(0);
   EXPECT_THROW(wj.compute(out), paps::InvalidParameter);  // neither radius nor k

@@ -78,6 +78,8 @@ void expectInvalidParameter(Fn fn, const std::string& name) {
 template <template <typename> class Filter, typename PointT>
 void expectEmptyAndAllNaNAreInvalidInput(Filter<PointT>& f) {
   pcl::PointCloud<PointT> out;
+  // No input cloud at all (f is new): an error, where pcl::Filter only prints a message.
+  EXPECT_THROW(f.filter(out), InvalidInput);
   f.setInputCloud(pcl::make_shared<pcl::PointCloud<PointT>>());
   EXPECT_THROW(f.filter(out), InvalidInput);
   f.setInputCloud(toCloud<PointT>(Positions(10, Eigen::Vector3f::Constant(payloadNaN()))));

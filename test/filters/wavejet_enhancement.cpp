@@ -220,6 +220,21 @@ TEST(WavejetEnhancement, PclFilterPositionsAndNormals) {
   g.setNormalGain({2.f, 0.f});
   pcl::PointCloud<pcl::PointXYZ> o;
   EXPECT_THROW(g.filter(o), paps::InvalidParameter);  // no normals to write
+
+  // The normal filter checks its indices too (it wrote through an index past the cloud).
+  for (const int bad_index : {-1, static_cast<int>(cloud->size()), 100000}) {
+    paps::WavejetEnhancement<pcl::PointNormal> h;
+    h.setInputCloud(cloud);
+    h.setNormalGain({2.f, 0.f});
+    h.setIndices(pcl::IndicesPtr(new pcl::Indices{0, 5, bad_index}));
+    pcl::PointCloud<pcl::PointNormal> o2;
+    try {
+      h.filter(o2);
+      ADD_FAILURE() << "index " << bad_index << " accepted";
+    } catch (const paps::InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "indices");
+    }
+  }
 }
 
 TEST(WavejetEnhancement, BadParameters) {

@@ -122,6 +122,9 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
     }
   }
   EXPECT_THROW(upsampleMls({}, MlsSurface::Rimls, {}), InvalidInput);
+  // process() before setInputCloud: PCL's base reads the missing cloud; ours says so.
+  EXPECT_THROW(APSSUpsampling<pcl::PointXYZ>().process(out), InvalidInput);
+  EXPECT_THROW(RIMLSUpsampling<pcl::PointXYZ>().process(out), InvalidInput);
   EXPECT_THROW(upsampleMls(Positions(10, Eigen::Vector3f::Constant(NAN)), MlsSurface::Apss, {}), InvalidInput);
   MlsUpsamplingParameters bad;
   bad.disc_scale = 0.f;

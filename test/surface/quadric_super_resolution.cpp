@@ -162,6 +162,12 @@ TEST(QuadricSuperResolution, MultiScanAndPclStage) {
 }
 
 TEST(QuadricSuperResolution, BadInput) {
+  {
+    // process() before setInputCloud: PCL's base reads the missing cloud; ours says so.
+    QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ> qsr;
+    pcl::PointCloud<pcl::PointXYZ> out;
+    EXPECT_THROW(qsr.process(out), InvalidInput);
+  }
   EXPECT_THROW(superResolveQuadric({}, {}), InvalidInput);
   EXPECT_THROW(superResolveQuadric({Positions{}}, {}), InvalidInput);
   EXPECT_THROW(superResolveQuadric({Positions(100, Eigen::Vector3f::Constant(NAN))}, {}), InvalidInput);

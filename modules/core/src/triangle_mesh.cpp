@@ -4,10 +4,10 @@
 #include <cctype>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include <pcl/PolygonMesh.h>
 #include <pcl/conversions.h>
-#include <pcl/io/obj_io.h>
 #include <pcl/io/ply_io.h>
 #include <pcl/point_types.h>
 
@@ -58,6 +58,56 @@ TriangleMesh toTriangleMesh(const pcl::PolygonMesh& mesh) {
   return out;
 }
 
+namespace {
+
+// OBJ, read here rather than by PCL's reader, which crashes on a face index past the vertices
+// (found by the API audit). Only "v" and "f" lines matter; faces of more than three vertices
+// are fanned like the PLY ones; "f 1/2/3" keeps the vertex index; negative indices count back
+// from the last vertex read, as the format says.
+TriangleMesh readObj(const std::string& path) {
+  std::ifstream in(path);
+  TriangleMesh out;
+  std::vector<int> face;
+  std::string line;
+  std::size_t number = 0;
+  auto bad = [&](const std::string& what) {
+    return IoError("cannot read mesh '" + path + "': line " + std::to_string(number) + ": " + what);
+  };
+  while (std::getline(in, line)) {
+    ++number;
+    std::istringstream words(line);
+    std::string key;
+    if (!(words >> key)) continue;
+    if (key == "v") {
+      Eigen::Vector3f v;
+      if (!(words >> v.x() >> v.y() >> v.z()) || !isFinite(v)) throw bad("a vertex needs three finite coordinates");
+      out.vertices.push_back(v);
+    } else if (key == "f") {
+      face.clear();
+      for (std::string token; words >> token;) {
+        std::size_t used = 0;
+        long index = 0;
+        try {
+          index = std::stol(token, &used);
+        } catch (const std::exception&) {
+          throw bad("face vertex '" + token + "' is not an index");
+        }
+        if (used < token.size() && token[used] != '/') throw bad("face vertex '" + token + "' is not an index");
+        const long count = static_cast<long>(out.vertices.size());
+        const long zero_based = index > 0 ? index - 1 : count + index;
+        if (index == 0 || zero_based < 0 || zero_based >= count)
+          throw bad("face vertex " + token + " refers to no vertex (" + std::to_string(count) + " read so far)");
+        face.push_back(static_cast<int>(zero_based));
+      }
+      for (std::size_t k = 1; k + 1 < face.size(); ++k) out.triangles.emplace_back(face[0], face[k], face[k + 1]);
+    }
+  }
+  if (in.bad()) throw IoError("cannot read mesh '" + path + "': read error");
+  return out;
+}
+
+}  // namespace
+
 TriangleMesh loadTriangleMesh(const std::string& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec))
@@ -71,24 +121,20 @@ TriangleMesh loadTriangleMesh(const std::string& path) {
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
 
   // PCL's own readers, not the VTK ones: fewer dependencies and they keep faces as written.
-  pcl::PolygonMesh mesh;
-  int status = -1;
+  TriangleMesh out;
   if (ext == ".ply") {
     readPlyLayoutForPcl(path);  // a header PCL would crash on or trust into a huge allocation
-    status = pcl::io::loadPLYFile(path, mesh);
-  }
-  else if (ext == ".obj")
-    status = pcl::io::loadOBJFile(path, mesh);
-  else
-    throw IoError("cannot read mesh '" + path + "': unsupported extension '" + ext +
-                  "' (expected .ply or .obj)");
-  if (status < 0) throw IoError("cannot read mesh '" + path + "': the file could not be parsed");
-
-  TriangleMesh out;
-  try {
-    out = toTriangleMesh(mesh);
-  } catch (const InvalidInput& e) {
-    throw IoError("cannot read mesh '" + path + "': " + e.what());
+    pcl::PolygonMesh mesh;
+    if (pcl::io::loadPLYFile(path, mesh) < 0) throw IoError("cannot read mesh '" + path + "': the file could not be parsed");
+    try {
+      out = toTriangleMesh(mesh);
+    } catch (const InvalidInput& e) {
+      throw IoError("cannot read mesh '" + path + "': " + e.what());
+    }
+  } else if (ext == ".obj") {
+    out = readObj(path);
+  } else {
+    throw IoError("cannot read mesh '" + path + "': unsupported extension '" + ext + "' (expected .ply or .obj)");
   }
   if (out.triangles.empty()) throw IoError("cannot read mesh '" + path + "': it has no faces");
   return out;

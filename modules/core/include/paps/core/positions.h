@@ -87,6 +87,14 @@ inline std::size_t checkMovableInput(const Positions& points, const std::vector<
   return finite;
 }
 
+/// Throws InvalidInput when a PCL-style stage runs before setInputCloud: pcl::Filter::filter
+/// only prints a message then (leaving the output as it was), and
+/// pcl::CloudSurfaceProcessing::process reads the missing cloud.
+template <typename CloudConstPtr>
+void requireInputCloud(const CloudConstPtr& input) {
+  if (!input) throw InvalidInput("no input cloud: call setInputCloud first");
+}
+
 /// Throws InvalidParameter unless every index is a point of a cloud of `size` points (PCL's
 /// own classes read past the cloud on a bad index; ours say which one is wrong).
 inline void checkIndices(const pcl::Indices& indices, std::size_t size) {

@@ -53,6 +53,13 @@ class PointBilateralFilter : public pcl::Filter<PointT>, public ThreadCountOptio
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const PointBilateralReport& getReport() const { return report_; }
 
+  /// As pcl::Filter::filter, but without an input cloud it throws InvalidInput (PCL's only
+  /// prints a message and leaves `output` as it was).
+  void filter(PointCloud& output) {
+    requireInputCloud(this->input_);
+    Base::filter(output);
+  }
+
  protected:
   void applyFilter(PointCloud& output) override;
 

@@ -153,6 +153,13 @@ class SimilarityDenoising : public pcl::Filter<PointT>, public ThreadCountOption
   /// What the last run chose (radius, sigma) and how many points it could not move.
   const SimilarityDenoisingReport& getReport() const { return report_; }
 
+  /// As pcl::Filter::filter, but without an input cloud it throws InvalidInput (PCL's only
+  /// prints a message and leaves `output` as it was).
+  void filter(PointCloud& output) {
+    requireInputCloud(this->input_);
+    Base::filter(output);
+  }
+
  protected:
   void applyFilter(PointCloud& output) override;
 

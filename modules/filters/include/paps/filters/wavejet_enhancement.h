@@ -122,6 +122,13 @@ class WavejetEnhancement : public pcl::Filter<PointT>, public ThreadCountOption 
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const WavejetEnhancementReport& getReport() const { return report_; }
 
+  /// As pcl::Filter::filter, but without an input cloud it throws InvalidInput (PCL's only
+  /// prints a message and leaves `output` as it was).
+  void filter(PointCloud& output) {
+    requireInputCloud(this->input_);
+    Base::filter(output);
+  }
+
  protected:
   void applyFilter(PointCloud& output) override;
 

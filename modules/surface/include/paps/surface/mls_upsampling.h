@@ -119,6 +119,13 @@ class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, pub
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const MlsUpsamplingReport& getReport() const { return report_; }
 
+  /// As pcl::CloudSurfaceProcessing::process, but without an input cloud it throws
+  /// InvalidInput (PCL's reads the missing cloud).
+  void process(pcl::PointCloud<PointOut>& output) override {
+    requireInputCloud(this->input_);
+    pcl::CloudSurfaceProcessing<PointIn, PointOut>::process(output);
+  }
+
  protected:
   void performProcessing(pcl::PointCloud<PointOut>& output) override;
 

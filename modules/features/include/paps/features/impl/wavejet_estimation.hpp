@@ -22,12 +22,16 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
     throw InvalidParameter("search", "none", "setRadiusSearch(R_phi > 0) or setKSearch(k > 0)");
   if (this->k_ == 0) requirePositive("radius (R_phi)", this->search_radius_);
   if (this->k_ < 0) throw InvalidParameter("k", detail::toString(this->k_), "k > 0");
-  const std::size_t n = this->surface_ ? this->surface_->size() : this->input_->size();
+  if (this->surface_ && this->surface_ != this->input_) {
+    // PCL's kd-tree would be built on nothing and then queried (a crash, not an error).
+    if (this->surface_->empty()) throw InvalidInput("the search surface is empty");
+    if (countFinite(positionsOf(*this->surface_)) == 0)
+      throw InvalidInput("no finite point in the search surface (all NaN or Inf)");
+  }
   if (initial_normals_ && initial_normals_->size() != this->input_->size())
     throw InvalidParameter("initial_normals", detail::toString(initial_normals_->size()), "one per input point");
   if (orientation_ && orientation_->size() != this->input_->size())
     throw InvalidParameter("orientation_hints", detail::toString(orientation_->size()), "one per input point");
-  (void)n;
   if (!Base::initCompute()) throw InvalidInput("pcl::Feature::initCompute failed (see PCL's message)");
   checkIndices(*this->indices_, this->input_->size());
   return true;

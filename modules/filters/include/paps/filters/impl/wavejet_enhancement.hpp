@@ -38,6 +38,7 @@ void WavejetEnhancement<PointT>::applyFilter(PointCloud& output) {
   if (mode_ == Mode::normals) {
     if (!pcl::traits::has_normal_v<PointT>)
       throw InvalidParameter("alpha1", "normal filter", "a point type with normal_x, normal_y, normal_z");
+    checkIndices(*this->indices_, this->input_->size());
     const Normals n = enhanceNormals(positionsOf(*this->input_), params_, &report_, progress_,
                                      have_hints ? &hints : nullptr);
     output = *this->input_;

@@ -294,6 +294,51 @@ PcdLayout readPcdLayout(const std::string& path) {
   return L;
 }
 
+namespace {
+// Whether a word of ascii data is a number as the readers parse them ("nan" and "inf" too).
+bool isNumber(const std::string& word) {
+  char* end = nullptr;
+  std::strtod(word.c_str(), &end);
+  return !word.empty() && end == word.c_str() + word.size();
+}
+}  // namespace
+
+void checkPcdAsciiRows(const std::string& path, const PcdLayout& L) {
+  if (L.data != PcdLayout::Data::Ascii) return;
+  std::uint64_t values = 0;
+  for (const int c : L.counts) values += std::uint64_t(c);
+  std::ifstream f(path, std::ios::binary);
+  if (!f) throw IoError("cannot read '" + path + "': permission denied or unreadable");
+  f.seekg(std::streamoff(L.data_offset));
+  std::string line;
+  std::uint64_t rows = 0, number = 0;
+  auto separator = [](char c) { return c == ' ' || c == '\t' || c == '\r'; };
+  while (rows < L.points && std::getline(f, line)) {
+    ++number;
+    if (line.empty()) continue;  // PCL skips empty lines (and only those)
+    std::uint64_t count = 0;
+    for (std::size_t i = 0; i < line.size();) {
+      while (i < line.size() && separator(line[i])) ++i;
+      if (i == line.size()) break;
+      std::size_t e = i;
+      while (e < line.size() && !separator(line[e])) ++e;
+      const std::string word = line.substr(i, e - i);
+      if (!isNumber(word))
+        throw IoError("cannot read '" + path + "': data line " + std::to_string(number) + " has '" +
+                      word.substr(0, 40) + "', which is not a number");
+      ++count;
+      i = e;
+    }
+    if (count != values)
+      throw IoError("cannot read '" + path + "': data line " + std::to_string(number) + " has " +
+                    std::to_string(count) + " values, not " + std::to_string(values));
+    ++rows;
+  }
+  if (rows < L.points)
+    throw IoError("cannot read '" + path + "': " + std::to_string(rows) + " data lines where the header promises " +
+                  std::to_string(L.points) + " points");
+}
+
 int PlyLayout::element(const std::string& name) const {
   for (std::size_t i = 0; i < elements.size(); ++i)
     if (elements[i].name == name) return int(i);
@@ -374,6 +419,16 @@ PlyLayout readPlyLayout(const std::string& path) {
 
 PlyLayout readPlyLayoutForPcl(const std::string& path) {
   PlyLayout ply = readPlyLayout(path);
+  if (ply.format == PlyLayout::Format::Ascii) {
+    // PCL's reader turns a word that is not a number into NaN without a word.
+    std::ifstream f(path, std::ios::binary);
+    f.seekg(std::streamoff(ply.data_offset));
+    std::string word;
+    for (std::uint64_t k = 0; f >> word; ++k)
+      if (!isNumber(word))
+        throw IoError("cannot read '" + path + "': value " + std::to_string(k + 1) + " of the data is '" +
+                      word.substr(0, 40) + "', not a number");
+  }
   const int v = ply.element("vertex");
   if (v >= 0)
     for (const auto& p : ply.elements[std::size_t(v)].properties)

@@ -77,7 +77,7 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   const std::string ext = extensionOf(path);
   // PCL's readers trust the header (allocation from its counts, a crash without FIELDS):
   // the header is checked against the file first, and a bad one is one clear error.
-  if (ext == ".pcd") readPcdLayout(path);
+  if (ext == ".pcd") checkPcdAsciiRows(path, readPcdLayout(path));
   else if (ext == ".ply") readPlyLayoutForPcl(path);
   else {
     std::error_code ec;

@@ -37,6 +37,11 @@ struct PcdLayout {
 /// size; ascii: at least two characters per value).
 PcdLayout readPcdLayout(const std::string& path);
 
+/// Checks the rows of an ascii PCD (layout from readPcdLayout): each of the first POINTS
+/// non-empty lines holds exactly one number per value of a point. PCL's reader turns a short
+/// row or a word that is not a number into zeros without a word; this says which line.
+void checkPcdAsciiRows(const std::string& path, const PcdLayout& layout);
+
 /// A PLY header, validated.
 struct PlyLayout {
   enum class Format { Ascii, BinaryLittleEndian, BinaryBigEndian };

@@ -131,6 +131,21 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
   EXPECT_THROW(upsampleMls(spherePoints(100, 1.f, 2), MlsSurface::Apss, bad), InvalidParameter);
   bad.disc_scale = NAN;
   EXPECT_THROW(upsampleMls(spherePoints(100, 1.f, 2), MlsSurface::Apss, bad), InvalidParameter);
+  // An output count past 1000x the input is named, not an allocation failure.
+  MlsUpsamplingParameters huge;
+  for (const std::size_t count : {std::size_t(100001), std::size_t(1e10), SIZE_MAX}) {
+    huge.output_count = count;
+    try {
+      upsampleMls(spherePoints(100, 1.f, 2), MlsSurface::Rimls, huge);
+      ADD_FAILURE() << count << " accepted";
+    } catch (const InvalidParameter& e) {
+      EXPECT_EQ(e.parameter(), "output_count");
+    }
+  }
+  const Positions sp = spherePoints(100, 1.f, 2);
+  EXPECT_THROW(upsamplingSeeds(sp, Normals(sp), SIZE_MAX, 0.1f, 1), InvalidParameter);
+  huge.output_count = 100000;  // 1000x: the bound itself is allowed
+  EXPECT_NO_THROW(checkOutputCount(huge.output_count, 100));
 }
 
 TEST(MlsUpsampling, WideDiscsStillLandOnSphere) {

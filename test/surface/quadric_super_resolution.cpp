@@ -492,6 +492,15 @@ TEST(QuadricSuperResolution, NoiseParametersBadValuesAndTinyClouds) {
   Positions nine(few.begin(), few.begin() + 9);
   nine.emplace_back(NAN, NAN, NAN);
   EXPECT_THROW(superResolveQuadric({nine}, {}), InvalidInput);
+  // An output count past 1000x the scan is named before any work, not an allocation failure.
+  p = {};
+  p.output_count = SIZE_MAX;
+  try {
+    superResolveQuadric({few}, p);
+    ADD_FAILURE() << "accepted";
+  } catch (const InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "output_count");
+  }
 }
 
 namespace {

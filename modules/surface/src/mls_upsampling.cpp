@@ -30,6 +30,13 @@ void MlsUpsamplingParameters::validate() const {
   requireInRange("disc_scale", disc_scale, 0.1f, 15.f);
 }
 
+void checkOutputCount(std::size_t output_count, std::size_t input_points) {
+  // output_count > 1000 x input_points, written so that it cannot overflow.
+  if (output_count / 1000 > input_points || (output_count / 1000 == input_points && output_count % 1000 != 0))
+    throw InvalidParameter("output_count", detail::toString(output_count),
+                           "at most 1000 x the " + detail::toString(input_points) + " input points (or 0: the factor)");
+}
+
 namespace {
 
 // Dart throwing over seed candidates that were generated on the tangent discs (radius `disc`)
@@ -406,6 +413,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale) {
   requirePositive("disc_radius", disc_radius);
+  checkOutputCount(count, points.size());
   if (normals.size() != points.size())
     throw InvalidParameter("normals", std::to_string(normals.size()) + " normals",
                            std::to_string(points.size()) + ", one per point");
@@ -970,6 +978,7 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
                                  MlsUpsamplingReport* report, const ProgressCallback& progress) {
   const std::size_t finite = countFinite(points);
   if (finite < 3) throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
+  checkOutputCount(params.output_count, finite);
   // Kernel support h, then neighbour lists reaching past h by the seed disc radius, so that
   // the lists of an input point hold every point within h of the seeds generated from it.
   float h = params.radius;

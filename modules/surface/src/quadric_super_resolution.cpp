@@ -161,6 +161,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
     throw InvalidInput("the scan to super-resolve needs at least 10 finite points (got " + detail::toString(finite0) + ")");
+  checkOutputCount(params.output_count, finite0);
   QuadricSuperResolutionReport rep;
 
   // 1. Neighbourhoods at the patch radius, chosen on the first scan.

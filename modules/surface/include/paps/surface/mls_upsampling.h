@@ -79,6 +79,11 @@ struct MlsUpsamplingReport {
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                       MlsUpsamplingReport* report = nullptr, const ProgressCallback& progress = {});
 
+/// Throws InvalidParameter("output_count") unless an explicit output count (0: from the
+/// factor) is at most 1000 x the input points, the bound of the factor: a larger one is a
+/// typo, and would end in an allocation failure rather than a clear error.
+void checkOutputCount(std::size_t output_count, std::size_t input_points);
+
 /// Seeds for upsampling: about `count` points spread uniformly over the tangent discs of the
 /// input points (discs of radius `disc_radius`), regularised by Poisson-disk thinning to
 /// exactly `count` points. `normals` must be unit (NaN normals: the point spawns nothing).

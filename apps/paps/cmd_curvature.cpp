@@ -281,6 +281,9 @@ int runCurvature(int argc, char** argv) {
                  r.too_few_neighbours, radius > 0 ? " (--radius: without it, sparse balls are widened)"
                                        : params.widening == WavejetParameters::Widening::never
                                            ? " (--fixed-radius: without it, sparse balls are widened)" : "");
+  if (r.failed_fits)
+    std::fprintf(stderr, "warning: %zu points have enough neighbours but a degenerate fit (neighbours along a line, "
+                 "or a radius far beyond the cloud): NaN outputs\n", r.failed_fits);
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);
   // The input's own fields (intensity, colour...) and its width x height are kept; the
   // Wavejet fields are added (input normals are replaced by the corrected ones).

@@ -304,6 +304,24 @@ TEST(NeighbourGraph, MeanCountIgnoresEmptyLists) {
   EXPECT_EQ(NeighbourGraph().size(), 0u);
 }
 
+TEST(RadiusNeighbourhood, AnExplicitRadiusWiderThanTheCloudIsRefused) {
+  // A ball wider than the cloud's diagonal holds all of it, at quadratic cost: refused with
+  // the extent in the message; up to the diagonal itself it is used as given; NaN points and
+  // a one-position cloud (extent 0) are left to the other checks.
+  Positions p = randomPoints(200, 9, 0);
+  p.emplace_back(kNaN, 0.f, 0.f);
+  const float diagonal = paps::boundingBoxDiagonal(p);
+  try {
+    paps::buildRadiusNeighbourhood(p, 1.01f * diagonal, 30);
+    ADD_FAILURE() << "accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "radius");
+    EXPECT_NE(std::string(e.what()).find("at most the extent of the cloud"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(paps::buildRadiusNeighbourhood(p, diagonal, 30).graph.count(0), 200);
+  EXPECT_NO_THROW(paps::requireRadiusWithinExtent("radius", 5.f, Positions(3, Eigen::Vector3f(1, 2, 3))));
+}
+
 TEST(NeighbourGraph, InvalidRadiusAndCount) {
   const Positions p = randomPoints(50, 8, 0);
   const SpatialIndex index(p);

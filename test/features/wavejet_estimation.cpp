@@ -218,6 +218,23 @@ TEST(Wavejet, TooFewNeighboursGiveNaN) {
   EXPECT_TRUE(std::isnan(r.k1) && std::isnan(r.normal.x()) && std::isnan(r.mean_curvature));
 }
 
+TEST(Wavejet, DegenerateFitsAreNotCountedAsTooFewNeighbours) {
+  // Points along a line: every ball holds plenty of neighbours, yet no surface fits. The
+  // report tells them from the sparse points (it counted both as "too few neighbours").
+  Positions p;
+  for (int i = 0; i < 300; ++i) p.emplace_back(0.01f * i, 0.f, 0.f);
+  p.emplace_back(50.f, 50.f, 50.f);  // isolated: too few
+  paps::WavejetReport r;
+  paps::WavejetParameters params;
+  params.widening = paps::WavejetParameters::Widening::never;
+  const auto res = paps::estimateWavejets(p, 0.2f, params, &r);
+  ASSERT_EQ(res.size(), p.size());
+  for (const auto& x : res) EXPECT_FALSE(x.valid());
+  EXPECT_EQ(r.failed_fits, 300u);
+  EXPECT_EQ(r.too_few_neighbours, 1u);
+  EXPECT_EQ(r.fitted, 0u);
+}
+
 pcl::PointCloud<pcl::PointXYZ>::Ptr toCloud(const Positions& p) {
   pcl::PointCloud<pcl::PointXYZ>::Ptr c(new pcl::PointCloud<pcl::PointXYZ>);
   for (const auto& x : p) c->push_back(pcl::PointXYZ(x.x(), x.y(), x.z()));

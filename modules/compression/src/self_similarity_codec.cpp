@@ -676,6 +676,7 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   const std::vector<int> sample = positionSample(pts, 2000);
   std::unique_ptr<detail::PointGrid> grid;
   float R = prm.patch_radius;
+  requireRadiusWithinExtent("patch_radius", R, pts);
   if (R == 0.f) R = chooseRadius(pts, finite, (hi - lo).norm(), prm.patch_points, sample, grid);
   if (!grid || R > 1.25f * grid->cell() || R < 0.8f * grid->cell()) {
     grid.reset();

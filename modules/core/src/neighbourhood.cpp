@@ -272,6 +272,7 @@ RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radi
                                              std::unique_ptr<SpatialIndex> index) {
   if (radius < 0 || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
+  requireRadiusWithinExtent("radius", radius, points);
   RadiusNeighbourhood nb;
   nb.index = index ? std::move(index) : std::make_unique<SpatialIndex>(points);
   if (nb.index->size() == 0) throw InvalidInput("no finite point in the cloud");

@@ -769,6 +769,7 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (!(radius >= 0) || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   requireInRange("target_neighbours", target_neighbours, 3, 100000);
+  requireRadiusWithinExtent("radius", radius, points);
   if (initial_normals && initial_normals->size() != points.size())
     throw InvalidParameter("initial_normals", detail::toString(initial_normals->size()), "one per point");
   if (orientation && orientation->size() != points.size())
@@ -874,7 +875,10 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
     std::vector<float> widened_radii, narrowed_radii;
     for (std::size_t i = 0; i < points.size(); ++i) {
       if (!isFinite(points[i])) { ++report->non_finite; continue; }
-      if (!out[i].valid()) { ++report->too_few_neighbours; continue; }
+      if (!out[i].valid()) {
+        ++(neighbour_count[i] >= run.beta * wavejetUnknowns(2) ? report->failed_fits : report->too_few_neighbours);
+        continue;
+      }
       ++report->fitted;
       sum += neighbour_count[i];
       report->lowered += out[i].order < params.order;

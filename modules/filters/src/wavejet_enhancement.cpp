@@ -35,7 +35,7 @@ std::vector<WavejetResult> fitAll(const Positions& points, const WavejetEnhancem
     *report = WavejetEnhancementReport();
     report->radius = wr.radius;
     report->mean_neighbours = wr.mean_neighbours;
-    report->unfitted = wr.too_few_neighbours;
+    report->unfitted = wr.too_few_neighbours + wr.failed_fits;
     report->non_finite = wr.non_finite;
     report->lowered = wr.lowered;
     report->duplicates = wr.duplicates;

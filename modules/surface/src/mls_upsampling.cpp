@@ -981,6 +981,7 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   checkOutputCount(params.output_count, finite);
   // Kernel support h, then neighbour lists reaching past h by the seed disc radius, so that
   // the lists of an input point hold every point within h of the seeds generated from it.
+  requireRadiusWithinExtent("radius", params.radius, points);
   float h = params.radius;
   if (h <= 0) {
     const SpatialIndex index(points);

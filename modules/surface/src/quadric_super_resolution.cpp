@@ -162,6 +162,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   if (finite0 < 10)
     throw InvalidInput("the scan to super-resolve needs at least 10 finite points (got " + detail::toString(finite0) + ")");
   checkOutputCount(params.output_count, finite0);
+  requireRadiusWithinExtent("patch_radius", params.patch_radius, scans[0]);
   QuadricSuperResolutionReport rep;
 
   // 1. Neighbourhoods at the patch radius, chosen on the first scan.

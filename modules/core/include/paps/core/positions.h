@@ -47,6 +47,17 @@ inline float boundingBoxDiagonal(const Positions& p) {
   return any ? (hi - lo).norm() : 0.f;
 }
 
+/// Throws InvalidParameter(`name`) when an explicit radius exceeds the extent of the finite
+/// points (their bounding-box diagonal, when not 0): a ball that wide holds the whole cloud,
+/// which no local operator wants, and its cost grows with the square of the cloud.
+inline void requireRadiusWithinExtent(const std::string& name, float radius, const Positions& p) {
+  const float extent = boundingBoxDiagonal(p);
+  if (radius > 0 && extent > 0 && radius > extent)
+    throw InvalidParameter(name, detail::toString(radius),
+                           "at most the extent of the cloud (its bounding-box diagonal, " + detail::toString(extent) +
+                               "); 0 chooses it from the data");
+}
+
 /// Per-axis median of the finite points (0 if none): a centre that a few far points cannot
 /// move, unlike the mean or the bounding box.
 inline Eigen::Vector3d medianPoint(const Positions& p) {

@@ -216,6 +216,9 @@ struct WavejetReport {
   std::size_t fitted = 0;            ///< points with valid outputs
   std::size_t lowered = 0;           ///< fitted at an order below the requested one
   std::size_t too_few_neighbours = 0;///< NaN outputs: not enough neighbours for order 2
+  /// NaN outputs although the ball held enough neighbours for order 2 (beta x 6): the fit
+  /// was degenerate (neighbours along a line, or a radius far beyond the cloud's extent).
+  std::size_t failed_fits = 0;
   std::size_t not_converged = 0;     ///< tilt still above refit_angle after max_refits
   std::size_t tilt_within_noise = 0; ///< tilt above refit_angle but within the noise: no refit
   std::size_t non_finite = 0;        ///< NaN/Inf input points (NaN outputs)

@@ -28,6 +28,9 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
     if (countFinite(positionsOf(*this->surface_)) == 0)
       throw InvalidInput("no finite point in the search surface (all NaN or Inf)");
   }
+  if (this->k_ == 0)
+    requireRadiusWithinExtent("radius (R_phi)", static_cast<float>(this->search_radius_),
+                              positionsOf(this->surface_ ? *this->surface_ : *this->input_));
   if (initial_normals_ && initial_normals_->size() != this->input_->size())
     throw InvalidParameter("initial_normals", detail::toString(initial_normals_->size()), "one per input point");
   if (orientation_ && orientation_->size() != this->input_->size())
@@ -141,7 +144,11 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   for (std::int64_t i = 0; i < count; ++i) {
     toPoint(results[i], output[i]);
     if (!isFinite((*this->input_)[indices[i]].getVector3fMap())) { ++report_.non_finite; dense = false; continue; }
-    if (!results[i].valid()) { ++report_.too_few_neighbours; dense = false; continue; }
+    if (!results[i].valid()) {
+      ++(neighbour_count[i] >= run.beta * wavejetUnknowns(2) ? report_.failed_fits : report_.too_few_neighbours);
+      dense = false;
+      continue;
+    }
     ++report_.fitted;
     sum += neighbour_count[i];
     report_.lowered += results[i].order < run.order;

@@ -167,6 +167,10 @@ TEST(CloudFileLayout, AsciiDataThatIsNotNumbersIsRefused) {
   writeBytes(q, "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                 "end_header\n1 2 3\n4 five 6\n7 8 9\n");
   EXPECT_NE(loadError(q).find("value 5 of the data is 'five'"), std::string::npos) << loadError(q);
+  // A folder is said to be one, with or without an extension-like name.
+  EXPECT_NE(loadError(q.parent_path()).find("it is a folder"), std::string::npos) << loadError(q.parent_path());
+  fs::create_directories(scratch("folder.pcd"));
+  EXPECT_NE(loadError(scratch("folder.pcd")).find("it is a folder"), std::string::npos);
 }
 
 TEST(CloudFileLayout, RefusesEmptyForeignAndInconsistentHeaders) {

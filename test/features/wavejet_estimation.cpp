@@ -332,6 +332,26 @@ TEST(WavejetEstimation, BadParametersThrow) {
   EXPECT_THROW(paps::estimateWavejets(p, NAN, paps::WavejetParameters()), paps::InvalidParameter);
   EXPECT_THROW(paps::estimateWavejets(Positions(3, Eigen::Vector3f::Constant(NAN)), 0.1f, paps::WavejetParameters()),
                paps::InvalidInput);
+  // Copies of one position are one position: said so (it said "fewer than 2 finite points").
+  for (const std::size_t copies : {std::size_t(2), std::size_t(1000)}) {
+    try {
+      paps::estimateWavejets(Positions(copies, Eigen::Vector3f(1, 2, 3)), 0.f, paps::WavejetParameters());
+      ADD_FAILURE() << copies << " copies accepted";
+    } catch (const paps::InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("all " + std::to_string(copies) + " finite points are at one position"),
+                std::string::npos) << e.what();
+    }
+  }
+  // A k beyond any neighbourhood is named as k (it was named after an internal parameter).
+  paps::WavejetEstimation<pcl::PointXYZ> big_k;
+  big_k.setInputCloud(toCloud(heightFieldSamples([](double, double) { return 0.0; }, 100, 1.0, 1)));
+  big_k.setKSearch(1000000);
+  try {
+    big_k.compute(out);
+    ADD_FAILURE() << "k = 1e6 accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "k");
+  }
 }
 
 // Points are fitted in spatial order (a shuffled cloud waited on memory): the output of every

@@ -144,6 +144,15 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
   }
   const Positions sp = spherePoints(100, 1.f, 2);
   EXPECT_THROW(upsamplingSeeds(sp, Normals(sp), SIZE_MAX, 0.1f, 1), InvalidParameter);
+  // A support so small that no point has neighbours for a normal names the radius.
+  MlsUpsamplingParameters tiny;
+  tiny.radius = 1e-30f;
+  try {
+    upsampleMls(sp, MlsSurface::Apss, tiny);
+    ADD_FAILURE() << "accepted";
+  } catch (const InvalidParameter& e) {
+    EXPECT_EQ(e.parameter(), "radius");
+  }
   huge.output_count = 100000;  // 1000x: the bound itself is allowed
   EXPECT_NO_THROW(checkOutputCount(huge.output_count, 100));
 }

@@ -81,6 +81,7 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   else if (ext == ".ply") readPlyLayoutForPcl(path);
   else {
     std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) throw IoError("cannot read '" + path + "': it is a folder");
     if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
     throw IoError("cannot read '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
   }

@@ -796,6 +796,11 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
     }
   for (std::size_t i = 0; i < points.size(); ++i)
     if (rep[i] >= 0) slot[i] = slot[rep[i]];
+  if (distinct.size() < 2) {
+    const std::size_t finite = countFinite(points);
+    throw InvalidInput(finite == 1 ? std::string("only one finite point: no surface to fit")
+                                   : "all " + detail::toString(finite) + " finite points are at one position: no surface to fit");
+  }
   const Positions& fitted = distinct;
   // Order policy (WavejetParameters::order_policy): automatic measures the noise with a
   // pilot of fixed-order fits and chooses (wavejet_noise.h); the index is shared with the run.

@@ -1021,6 +1021,9 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   }
   const NeighbourGraph& lists = only_h ? graph_h : graph_ext;
   Normals normals = estimateNormals(points, graph_h);
+  if (std::none_of(normals.begin(), normals.end(), [](const Eigen::Vector3f& n) { return isFinite(n); }))
+    throw InvalidParameter("radius", detail::toString(h),
+                           "a kernel support holding at least 3 points around some point (none does: no normal)");
   orientNormalsByPropagation(points, normals, graph_h);
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite));

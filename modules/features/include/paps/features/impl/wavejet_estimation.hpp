@@ -21,7 +21,7 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
   if (this->search_radius_ == 0.0 && this->k_ == 0)
     throw InvalidParameter("search", "none", "setRadiusSearch(R_phi > 0) or setKSearch(k > 0)");
   if (this->k_ == 0) requirePositive("radius (R_phi)", this->search_radius_);
-  if (this->k_ < 0) throw InvalidParameter("k", detail::toString(this->k_), "k > 0");
+  if (this->k_ < 0 || this->k_ > 100000) throw InvalidParameter("k", detail::toString(this->k_), "0 < k <= 100000");
   if (this->surface_ && this->surface_ != this->input_) {
     // PCL's kd-tree would be built on nothing and then queried (a crash, not an error).
     if (this->surface_->empty()) throw InvalidInput("the search surface is empty");

@@ -78,7 +78,10 @@ TEST(PointBilateralFilter, ReducesErrorOnNoisySphere) {
                 iterations, before, after, before / after, f.getReport().radius);
     // Measured factors 2.40 (1 pass) and 3.21 (3 passes).
     EXPECT_GT(before / after, iterations == 1 ? 2.0 : 2.7) << iterations << " passes";
-    EXPECT_EQ(f.getReport().moved + f.getReport().isolated, noisy.size());
+    // Every point with neighbours moves, but for an update that rounds to nothing in float
+    // (measured: 1 of 20,000 after 3 passes).
+    EXPECT_LE(f.getReport().moved + f.getReport().isolated, noisy.size());
+    EXPECT_GE(f.getReport().moved + f.getReport().isolated, noisy.size() - noisy.size() / 1000);
   }
 }
 
@@ -255,6 +258,15 @@ TEST(PointBilateralFilter, BadParametersAreNamed) {
   expectInvalidParameter([&] {
     paps::bilateralFilterPositions(smallSphere(100), {}, nullptr, std::vector<std::uint8_t>(5, 1));
   }, "movable");
+  // A kernel so narrow that every weight but the point's own underflows moves nothing, and the
+  // report says so (it counted every point as moved).
+  PointBilateralParameters narrow;
+  narrow.sigma_c_fraction = 1e-30f;
+  narrow.sigma_s = 1e-30f;
+  PointBilateralReport r;
+  const Positions in = smallSphere(500);
+  EXPECT_EQ(paps::bilateralFilterPositions(in, narrow, &r), in);
+  EXPECT_EQ(r.moved, 0u);
 }
 
 // ----------------------------------------------------------------- threads, progress

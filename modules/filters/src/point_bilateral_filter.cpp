@@ -72,7 +72,7 @@ Positions bilateralInSpatialOrder(const Positions& points, const PointBilateralP
         den += w;
       }
       next[i] = den > 0 ? Eigen::Vector3f(p + (num / den) * nrm) : p;
-      ++moved;
+      moved += next[i] != p;  // weights that all underflow (a tiny sigma) leave it in place
     }
     rep.throwIfCancelled();
     std::swap(cur, next);

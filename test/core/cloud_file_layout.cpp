@@ -21,6 +21,7 @@
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/core/random.h>
+#include <paps/core/triangle_mesh.h>
 #include <paps/core/xyz_file_reader.h>
 
 namespace {
@@ -323,7 +324,7 @@ TEST(CloudIo, AppendFieldsKeepsTheOrganisationAndReplacesNamesakes) {
 TEST(CloudFileLayout, FuzzCorpusReplays) {
   const fs::path dir = PAPS_CLOUD_IO_CORPUS_DIR;
   ASSERT_TRUE(fs::is_directory(dir)) << dir;
-  int seeds = 0, direct_seeds = 0;
+  int seeds = 0, direct_seeds = 0, mesh_seeds = 0;
   for (const auto& entry : fs::directory_iterator(dir)) {
     const std::string name = entry.path().filename().string();
     SCOPED_TRACE(name);
@@ -331,7 +332,31 @@ TEST(CloudFileLayout, FuzzCorpusReplays) {
     ASSERT_TRUE(seed || name.rfind("regression-", 0) == 0) << "a corpus file is a seed-* or a regression-*";
     const std::string bytes = readBytes(entry.path());
     ASSERT_FALSE(bytes.empty());
+    // The fuzz target's mesh readers on the same bytes: PLY as a mesh (odd first byte), OBJ
+    // (bit 1). A mesh seed is a 5-vertex OBJ.
+    if (bytes[0] & 2) {
+      const fs::path obj = scratch("corpus.obj");
+      writeBytes(obj, bytes.substr(1));
+      if (name.find(".obj") != std::string::npos) {
+        const paps::TriangleMesh m = paps::loadTriangleMesh(obj.string());
+        EXPECT_EQ(m.vertices.size(), 5u);
+        EXPECT_EQ(m.triangles.size(), 4u);
+        ++mesh_seeds;
+        continue;
+      }
+      try {
+        paps::loadTriangleMesh(obj.string());
+      } catch (const paps::Error&) {
+      }
+    }
     const fs::path file = scratch(std::string("corpus") + ((bytes[0] & 1) ? ".ply" : ".pcd"));
+    if (bytes[0] & 1) {
+      writeBytes(file, bytes.substr(1));
+      try {
+        paps::loadTriangleMesh(file.string());
+      } catch (const paps::Error&) {
+      }
+    }
     writeBytes(file, bytes.substr(1));
     // The direct x y z readers (the lean codec binary's) on the same bytes.
     paps::Positions xyz;
@@ -358,6 +383,7 @@ TEST(CloudFileLayout, FuzzCorpusReplays) {
   }
   EXPECT_EQ(seeds, 5);
   EXPECT_EQ(direct_seeds, 4);  // all but the ascii PCD
+  EXPECT_EQ(mesh_seeds, 1);
 }
 
 }  // namespace

@@ -1,7 +1,9 @@
-// libFuzzer target: paps::loadCloud (our header checks, then PCL's PCD and PLY readers) and
-// our own x y z readers (paps::readPcdXyz, readPlyXyz: the lean codec binary's) must load any
-// input or reject it with paps::Error: never crash, hang or allocate without bound.
-// The first byte chooses the format (even: .pcd, odd: .ply); the rest is the file.
+// libFuzzer target: paps::loadCloud (our header checks, then PCL's PCD and PLY readers), our
+// own x y z readers (paps::readPcdXyz, readPlyXyz: the lean codec binary's) and
+// paps::loadTriangleMesh (PLY through PCL, OBJ our own) must load any input or reject it with
+// paps::Error: never crash, hang or allocate without bound.
+// The first byte chooses the format (even: .pcd, odd: .ply, also read as a mesh; bit 1: the
+// same bytes read as an .obj mesh too); the rest is the file.
 // Built and run by `scripts/fuzz.sh cloud_io`; crash inputs land in test/core/cloud_io_corpus,
 // which test_core_cloud_file_layout replays in CI.
 #include <cstddef>
@@ -13,6 +15,7 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/triangle_mesh.h>
 #include <paps/core/xyz_file_reader.h>
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -33,6 +36,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (!paps::readPcdXyz(path, xyz)) paps::readPlyXyz(path, xyz);
   } catch (const paps::Error&) {
   }
+  if (data[0] & 1) {
+    try {
+      paps::loadTriangleMesh(path);
+    } catch (const paps::Error&) {
+    }
+  }
   std::remove(path.c_str());
+  if (data[0] & 2) {
+    const std::string obj = base + ".obj";
+    if (std::FILE* o = std::fopen(obj.c_str(), "wb")) {
+      std::fwrite(data + 1, 1, size - 1, o);
+      std::fclose(o);
+      try {
+        paps::loadTriangleMesh(obj);
+      } catch (const paps::Error&) {
+      }
+      std::remove(obj.c_str());
+    }
+  }
   return 0;
 }

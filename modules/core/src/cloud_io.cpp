@@ -46,7 +46,13 @@ XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
       throw InvalidInput(std::string("field '") + names[a] + "' is not float32 or float64");
     f.offset[a] = static_cast<int>(it->offset);
     f.datatype[a] = it->datatype;
+    if (std::uint64_t(it->offset) + (it->datatype == pcl::PCLPointField::FLOAT32 ? 4 : 8) > cloud.point_step)
+      throw InvalidInput(std::string("field '") + names[a] + "' lies past the end of a point");
   }
+  const std::uint64_t n = std::uint64_t(cloud.width) * cloud.height;
+  if (n > 0 && cloud.data.size() / n < cloud.point_step)
+    throw InvalidInput("the cloud holds " + std::to_string(cloud.data.size()) + " bytes for " + std::to_string(n) +
+                       " points of " + std::to_string(cloud.point_step) + " bytes");
   return f;
 }
 

@@ -7,11 +7,10 @@
 #include <sstream>
 
 #include <pcl/PolygonMesh.h>
-#include <pcl/conversions.h>
 #include <pcl/io/ply_io.h>
-#include <pcl/point_types.h>
 
 #include <paps/core/cloud_file_layout.h>
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 
 namespace paps {
@@ -36,11 +35,10 @@ void TriangleMesh::append(const TriangleMesh& other) {
 }
 
 TriangleMesh toTriangleMesh(const pcl::PolygonMesh& mesh) {
-  pcl::PointCloud<pcl::PointXYZ> cloud;
-  pcl::fromPCLPointCloud2(mesh.cloud, cloud);
-
+  // Read through the checked converter: PCL's fromPCLPointCloud2 indexed an empty cloud when
+  // the vertices had no x, y, z (a crash found by fuzzing the PLY mesh reader).
   TriangleMesh out;
-  out.vertices = positionsOf(cloud);
+  out.vertices = positionsOf(mesh.cloud);
   const std::size_t n = out.vertices.size();
   out.triangles.reserve(mesh.polygons.size());
   for (std::size_t f = 0; f < mesh.polygons.size(); ++f) {

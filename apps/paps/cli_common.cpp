@@ -6,11 +6,14 @@
 #include <limits>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <chrono>
 #include <memory>
 #include <mutex>
 
 #include <unistd.h>
+
+#include <omp.h>
 
 #include <paps/core/error.h>
 
@@ -118,6 +121,22 @@ ProgressCallback progressBar(bool quiet, bool timings) {
     std::fflush(stderr);
     return true;
   };
+}
+
+void takeThreadsOption(int& argc, char** argv) {
+  for (int i = 1; i < argc; ++i) {
+    if (std::strcmp(argv[i], "--threads") != 0) continue;
+    if (i + 1 >= argc) throw InvalidParameter("threads", "(missing)", "a thread count in [1, 4096]");
+    char* end = nullptr;
+    const long n = std::strtol(argv[i + 1], &end, 10);
+    if (end == argv[i + 1] || *end != '\0' || n < 1 || n > 4096)
+      throw InvalidParameter("threads", argv[i + 1], "a thread count in [1, 4096]");
+    ::setenv("OMP_NUM_THREADS", argv[i + 1], 1);
+    omp_set_num_threads(static_cast<int>(n));
+    for (int j = i; j + 2 <= argc; ++j) argv[j] = argv[j + 2];
+    argc -= 2;
+    --i;
+  }
 }
 
 }  // namespace paps::cli

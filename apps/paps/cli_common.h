@@ -42,4 +42,9 @@ std::string samplesDir();
 /// per finished stage with its wall time instead.
 ProgressCallback progressBar(bool quiet, bool timings = false);
 
+/// `--threads N` anywhere on the line bounds every command (and the bench workers it starts,
+/// through OMP_NUM_THREADS); it is taken out of argv before the command parses its options.
+/// Throws InvalidParameter on a count outside [1, 4096].
+void takeThreadsOption(int& argc, char** argv);
+
 }  // namespace paps::cli

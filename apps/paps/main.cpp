@@ -4,12 +4,11 @@
 #include <cstring>
 #include <exception>
 
-#include <omp.h>
-
 #include <paps/core/error.h>
 #include <paps/core/interrupt_cleanup.h>
 
 #include "bench_worker.h"
+#include "cli_common.h"
 #include "commands.h"
 
 namespace {
@@ -29,30 +28,10 @@ const char* kUsage =
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
 }
 
-namespace {
-// `--threads N` anywhere on the line bounds every command (and the bench workers it starts,
-// through OMP_NUM_THREADS); it is taken out before the command parses its options.
-void takeThreadsOption(int& argc, char** argv) {
-  for (int i = 1; i < argc; ++i) {
-    if (std::strcmp(argv[i], "--threads") != 0) continue;
-    if (i + 1 >= argc) throw paps::InvalidParameter("threads", "(missing)", "a thread count in [1, 4096]");
-    char* end = nullptr;
-    const long n = std::strtol(argv[i + 1], &end, 10);
-    if (end == argv[i + 1] || *end != '\0' || n < 1 || n > 4096)
-      throw paps::InvalidParameter("threads", argv[i + 1], "a thread count in [1, 4096]");
-    ::setenv("OMP_NUM_THREADS", argv[i + 1], 1);
-    omp_set_num_threads(static_cast<int>(n));
-    for (int j = i; j + 2 <= argc; ++j) argv[j] = argv[j + 2];
-    argc -= 2;
-    --i;
-  }
-}
-}  // namespace
-
 int main(int argc, char** argv) {
   paps::installInterruptCleanup();  // an interrupted write leaves no temporary file
   try {
-    takeThreadsOption(argc, argv);
+    paps::cli::takeThreadsOption(argc, argv);
   } catch (const paps::Error& e) {
     std::fprintf(stderr, "paps: error: %s\n", e.what());
     return 1;

@@ -143,6 +143,46 @@ TEST(CloudFileLayout, ReadsThePlyLayoutPclWrites) {
   }
 }
 
+TEST(CloudIo, PlyOutputThatPclWouldWriteWrongIsRefused) {
+  // An integer rgb (PCL's writer puts 4 bytes where its header says 3) and a field of several
+  // values (written as a list property no point-cloud PLY reader takes) are refused, and no
+  // file is left; a float rgb, as PCL's own point types have it, is written and reads back.
+  auto cloudWith = [](const std::string& name, std::uint8_t type, std::uint32_t count) {
+    pcl::PCLPointCloud2 c;
+    pcl::toPCLPointCloud2(smallCloud(50), c);
+    pcl::PCLPointField f;
+    f.name = name;
+    f.offset = c.point_step;
+    f.datatype = type;
+    f.count = count;
+    c.fields.push_back(f);
+    const std::uint32_t extra = 4 * count;
+    std::vector<std::uint8_t> data;
+    for (std::size_t i = 0; i < 50; ++i) {
+      data.insert(data.end(), c.data.begin() + i * c.point_step, c.data.begin() + (i + 1) * c.point_step);
+      data.insert(data.end(), extra, std::uint8_t(0x40));
+    }
+    c.point_step += extra;
+    c.row_step = c.point_step * c.width;
+    c.data = data;
+    return c;
+  };
+  const fs::path out = scratch("out.ply");
+  fs::remove(out);
+  for (const auto& bad : {cloudWith("rgb", pcl::PCLPointField::UINT32, 1), cloudWith("vec", pcl::PCLPointField::FLOAT32, 3)}) {
+    EXPECT_THROW(paps::saveCloudAtomic(out.string(), bad), paps::IoError);
+    EXPECT_FALSE(fs::exists(out));
+  }
+  paps::saveCloudAtomic(out.string(), cloudWith("rgb", pcl::PCLPointField::FLOAT32, 1));
+  const paps::Positions back = paps::loadPositions(out.string());
+  ASSERT_EQ(back.size(), 50u);
+  EXPECT_EQ(back[7], smallCloud(50)[7].getVector3fMap());  // binary PLY: bit for bit
+  // The same clouds go to PCD whole.
+  const fs::path pcd = scratch("out.pcd");
+  paps::saveCloudAtomic(pcd.string(), cloudWith("vec", pcl::PCLPointField::FLOAT32, 3));
+  EXPECT_EQ(paps::loadCloud(pcd.string()).fields.back().count, 3u);
+}
+
 TEST(CloudFileLayout, AsciiDataThatIsNotNumbersIsRefused) {
   // PCL's readers turn a word that is not a number, or a short row, into zeros or NaN without
   // a word: the file is refused and the line named. Empty lines are skipped, as PCL does, and

@@ -2,6 +2,7 @@
 // graphs, the automatic radius, errors and determinism across thread counts.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <string>
 #include <limits>
 #include <set>
@@ -58,6 +59,31 @@ std::vector<std::pair<float, int>> bruteForce(const Positions& p, const Eigen::V
 std::vector<int> listOf(const NeighbourGraph& g, std::size_t i) { return {g.begin(i), g.end(i)}; }
 
 // ----------------------------------------------------------------------- SpatialIndex
+
+TEST(SpatialIndex, CoordinatesBeyondFloatSafetyAreRefused) {
+  // Random float bit patterns (what a misaligned binary file reads as): finite values up to
+  // 3.4e38, where the tree's float arithmetic overflowed and FLANN aborted the process. The
+  // index names the first such point instead; up to kMaxCoordinate it is built.
+  paps::Random rng(21);
+  Positions p;
+  for (int i = 0; i < 400; ++i) {
+    Eigen::Vector3f v;
+    for (int a = 0; a < 3; ++a) {
+      std::uint32_t bits = static_cast<std::uint32_t>(rng.next());
+      std::memcpy(&v[a], &bits, 4);
+    }
+    p.push_back(v);
+  }
+  try {
+    const SpatialIndex index(p);
+    ADD_FAILURE() << "built";
+  } catch (const paps::InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("beyond"), std::string::npos) << e.what();
+  }
+  const Positions edge = {{0, 0, 0}, {paps::kMaxCoordinate, 0, 0}, {0, -paps::kMaxCoordinate, 1}};
+  const SpatialIndex ok(edge);
+  EXPECT_EQ(ok.size(), 3u);
+}
 
 TEST(SpatialIndex, SizeCountsFinitePointsOnly) {
   const Positions p = randomPoints(1000, 1, 7);

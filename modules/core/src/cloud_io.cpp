@@ -122,6 +122,18 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) 
   const std::string ext = extensionOf(path);
   if (ext != ".pcd" && ext != ".ply")
     throw IoError("cannot write '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
+  // PCL's PLY writer turns a field of several values into a list property (which PLY readers
+  // of point clouds, ours and PCL's own, refuse), and writes an integer "rgb" in 4 bytes where
+  // its header declares 3 (every later record misaligned): refused, not written wrong.
+  if (ext == ".ply")
+    for (const auto& f : cloud.fields) {
+      if (f.count > 1)
+        throw IoError("cannot write '" + path + "' as PLY: field '" + f.name + "' holds " + std::to_string(f.count) +
+                      " values a point; write .pcd to keep every field");
+      if ((f.name == "rgb") && f.datatype != pcl::PCLPointField::FLOAT32)
+        throw IoError("cannot write '" + path + "' as PLY: PCL's PLY writer misaligns an integer 'rgb' field; "
+                      "write .pcd to keep every field");
+    }
   const std::filesystem::path target(path);
   const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
   std::error_code ec;

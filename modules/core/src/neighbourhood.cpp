@@ -21,6 +21,10 @@ SpatialIndex::SpatialIndex(const Positions& points) {
   cloud->reserve(points.size());
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) continue;
+    if (points[i].cwiseAbs().maxCoeff() > kMaxCoordinate)
+      throw InvalidInput("a point has a coordinate of magnitude " +
+                         detail::toString(points[i].cwiseAbs().maxCoeff()) + ", beyond " +
+                         detail::toString(kMaxCoordinate) + " (a corrupt file?)");
     finite_.push_back(static_cast<int>(i));
     cloud->push_back(pcl::PointXYZ(points[i].x(), points[i].y(), points[i].z()));
   }

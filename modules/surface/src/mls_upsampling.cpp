@@ -1122,5 +1122,7 @@ template class MlsUpsampling<pcl::PointNormal, pcl::PointNormal, MlsSurface::Aps
 template class MlsUpsampling<pcl::PointNormal, pcl::PointNormal, MlsSurface::Rimls>;
 template class MlsUpsampling<pcl::PointXYZRGB, pcl::PointXYZ, MlsSurface::Apss>;
 template class MlsUpsampling<pcl::PointXYZRGB, pcl::PointXYZ, MlsSurface::Rimls>;
+template class MlsUpsampling<pcl::PointXYZI, pcl::PointXYZ, MlsSurface::Apss>;
+template class MlsUpsampling<pcl::PointXYZI, pcl::PointXYZ, MlsSurface::Rimls>;
 
 }  // namespace paps

@@ -11,8 +11,16 @@
 
 namespace paps {
 
+/// Largest coordinate magnitude the neighbourhood code takes (metres or any unit): far beyond
+/// any scan, far enough below float's 3.4e38 that extents and squared distances stay finite
+/// in the kd-tree.
+constexpr float kMaxCoordinate = 1e30f;
+
 /// Kd-tree over the finite points of a Positions array. Queries are const and thread-safe;
 /// returned indices refer to the original array, sorted by increasing distance.
+/// Throws InvalidInput when a coordinate's magnitude exceeds kMaxCoordinate: the tree's float
+/// arithmetic overflows there and FLANN aborts the process (seen on a PLY whose records were
+/// misaligned, i.e. random floats).
 class SpatialIndex {
  public:
   explicit SpatialIndex(const Positions& points);

@@ -5,6 +5,8 @@
 #         cloud_io     paps::loadCloud: our PCD/PLY header checks, then PCL's readers
 #                      (test/core/fuzz_cloud_io.cpp; PCL itself is not instrumented, so
 #                      coverage guides through our checks and a crash anywhere is caught)
+#         stages       every algorithm on small clouds of awkward geometry (copies, lines,
+#                      planes, tiny and UTM-like scales; test/fuzz_stages.cpp)
 # CHECK=asan (default) builds the libraries with clang and ASan/UBSan; CHECK=malloc builds
 # them with coverage only and runs under glibc's malloc checks (libc_malloc_debug,
 # MALLOC_CHECK_=3), which catch heap writes out of bounds inside PCL, whose code ASan does not
@@ -14,7 +16,7 @@
 # regression-<hash>) so that the target's corpus test replays it in CI. New corpus entries
 # are not copied back (keep the committed corpus tiny).
 set -euo pipefail
-TARGET=${1:?usage: scripts/fuzz.sh compression|cloud_io [SECONDS] [BUILD_DIR]}
+TARGET=${1:?usage: scripts/fuzz.sh compression|cloud_io|stages [SECONDS] [BUILD_DIR]}
 SECONDS_TO_RUN=${2:-120}
 CHECK=${CHECK:-asan}
 case "$CHECK" in
@@ -28,8 +30,12 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 case "$TARGET" in
   compression) BIN=test/compression/fuzz_compression_decoder; CORPUS_SRC="$ROOT/test/compression/corpus"; MAX_LEN=65536 ;;
   cloud_io) BIN=test/core/fuzz_cloud_io; CORPUS_SRC="$ROOT/test/core/cloud_io_corpus"; MAX_LEN=8192 ;;
-  *) echo "unknown fuzz target '$TARGET' (compression or cloud_io)" >&2; exit 2 ;;
+  stages) BIN=test/fuzz_stages; CORPUS_SRC="$ROOT/test/stages_corpus"; MAX_LEN=1202 ;;
+  *) echo "unknown fuzz target '$TARGET' (compression, cloud_io or stages)" >&2; exit 2 ;;
 esac
+# The readers' targets need the core (and the codec) only; the stage target every module.
+MODULES=(-DPAPS_MODULE_FILTERS=OFF -DPAPS_MODULE_SURFACE=OFF -DPAPS_MODULE_FEATURES=OFF)
+[ "$TARGET" = stages ] && MODULES=(-DPAPS_MODULE_FILTERS=ON -DPAPS_MODULE_SURFACE=ON -DPAPS_MODULE_FEATURES=ON)
 CC=${CC:-clang-14}
 CXX=${CXX:-clang++-14}
 JOBS=${JOBS:-2}
@@ -38,8 +44,7 @@ FLAGS="-O1 -g -fsanitize=fuzzer-no-link$SANITIZE"
 cmake -S "$ROOT" -B "$BUILD" -DCMAKE_BUILD_TYPE=RelWithDebInfo \
   -DCMAKE_C_COMPILER="$CC" -DCMAKE_CXX_COMPILER="$CXX" \
   -DCMAKE_C_FLAGS="$FLAGS" -DCMAKE_CXX_FLAGS="$FLAGS" \
-  -DPAPS_BUILD_FUZZERS=ON -DPAPS_FUZZ_SANITIZERS="$LINKED" -DPAPS_BUILD_APPS=OFF -DPAPS_MODULE_FILTERS=OFF \
-  -DPAPS_MODULE_SURFACE=OFF -DPAPS_MODULE_FEATURES=OFF > "$BUILD.cmake.log"
+  -DPAPS_BUILD_FUZZERS=ON -DPAPS_FUZZ_SANITIZERS="$LINKED" -DPAPS_BUILD_APPS=OFF "${MODULES[@]}" > "$BUILD.cmake.log"
 nice cmake --build "$BUILD" --target "$(basename "$BIN")" -j "$JOBS"
 
 WORK=$(mktemp -d)

@@ -1,0 +1,64 @@
+// libFuzzer target: every stage on small clouds of awkward geometry must return an output or
+// throw paps::Error: never crash, hang or allocate without bound (the cloud readers have their
+// own target; this one reaches the algorithms).
+// Input: byte 0 chooses the stage (mod 8), byte 1 the scale (mod 4: 1, 1e-4, 1e4, and a
+// UTM-like offset of 5e5 with 1 m steps); then 3 bytes a point, each (b - 128) / 16 on a grid,
+// so copies, lines and planes come up often. At most 400 points.
+// Built and run by `scripts/fuzz.sh stages`; crash inputs land in test/stages_corpus, which
+// test_stages_corpus_replay replays in CI.
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <paps/compression/self_similarity_codec.h>
+#include <paps/core/error.h>
+#include <paps/features/wavejet.h>
+#include <paps/filters/point_bilateral_filter.h>
+#include <paps/filters/similarity_denoising.h>
+#include <paps/filters/wavejet_enhancement.h>
+#include <paps/surface/mls_upsampling.h>
+#include <paps/surface/quadric_super_resolution.h>
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  if (size < 2) return 0;
+  const int stage = data[0] % 8;
+  const int scale_mode = data[1] % 4;
+  const float scale = scale_mode == 1 ? 1e-4f : scale_mode == 2 ? 1e4f : 1.f;
+  const float offset = scale_mode == 3 ? 5e5f : 0.f;
+  paps::Positions p;
+  for (std::size_t i = 2; i + 3 <= size && p.size() < 400; i += 3)
+    p.emplace_back(offset + scale * (data[i] - 128) / 16.f, offset + scale * (data[i + 1] - 128) / 16.f,
+                   scale * (data[i + 2] - 128) / 16.f);
+  try {
+    switch (stage) {
+      case 0: paps::denoiseBySimilarity(p, {}); break;
+      case 1: paps::bilateralFilterPositions(p, {}); break;
+      case 2: paps::estimateWavejets(p, 0.f, paps::WavejetParameters()); break;
+      case 3: {
+        paps::WavejetEnhancementParameters e;
+        e.alpha0 = 2;
+        paps::enhancePositions(p, e);
+        break;
+      }
+      case 4: {
+        paps::QuadricSuperResolutionParameters q;
+        q.factor = 2;
+        paps::superResolveQuadric({p}, q);
+        break;
+      }
+      case 5:
+      case 6: {
+        paps::MlsUpsamplingParameters m;
+        m.factor = 2;
+        paps::upsampleMls(p, stage == 5 ? paps::MlsSurface::Apss : paps::MlsSurface::Rimls, m);
+        break;
+      }
+      default: {
+        const std::vector<std::uint8_t> bytes = paps::compression::compressPositions(p, {});
+        paps::compression::decompressPositions(bytes.data(), bytes.size());
+      }
+    }
+  } catch (const paps::Error&) {
+  }
+  return 0;
+}

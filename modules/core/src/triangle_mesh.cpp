@@ -118,7 +118,8 @@ TriangleMesh loadTriangleMesh(const std::string& path) {
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
 
-  // PCL's own readers, not the VTK ones: fewer dependencies and they keep faces as written.
+  // PLY through PCL's own reader (not the VTK one: fewer dependencies, faces kept as written),
+  // its header checked first; OBJ through readObj above.
   TriangleMesh out;
   if (ext == ".ply") {
     readPlyLayoutForPcl(path);  // a header PCL would crash on or trust into a huge allocation

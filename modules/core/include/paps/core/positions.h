@@ -51,8 +51,9 @@ inline float boundingBoxDiagonal(const Positions& p) {
 /// points (their bounding-box diagonal, when not 0): a ball that wide holds the whole cloud,
 /// which no local operator wants, and its cost grows with the square of the cloud.
 inline void requireRadiusWithinExtent(const std::string& name, float radius, const Positions& p) {
+  if (!(radius > 0)) return;  // automatic (0), or refused by the caller's own check
   const float extent = boundingBoxDiagonal(p);
-  if (radius > 0 && extent > 0 && radius > extent)
+  if (extent > 0 && radius > extent)
     throw InvalidParameter(name, detail::toString(radius),
                            "at most the extent of the cloud (its bounding-box diagonal, " + detail::toString(extent) +
                                "); 0 chooses it from the data");

@@ -22,15 +22,14 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
     throw InvalidParameter("search", "none", "setRadiusSearch(R_phi > 0) or setKSearch(k > 0)");
   if (this->k_ == 0) requirePositive("radius (R_phi)", this->search_radius_);
   if (this->k_ < 0 || this->k_ > 100000) throw InvalidParameter("k", detail::toString(this->k_), "0 < k <= 100000");
-  if (this->surface_ && this->surface_ != this->input_) {
+  {
+    const Positions surface = positionsOf(this->surface_ ? *this->surface_ : *this->input_);
     // PCL's kd-tree would be built on nothing and then queried (a crash, not an error).
-    if (this->surface_->empty()) throw InvalidInput("the search surface is empty");
-    if (countFinite(positionsOf(*this->surface_)) == 0)
-      throw InvalidInput("no finite point in the search surface (all NaN or Inf)");
+    if (this->surface_ && this->surface_ != this->input_ && countFinite(surface) == 0)
+      throw InvalidInput(this->surface_->empty() ? "the search surface is empty"
+                                                 : "no finite point in the search surface (all NaN or Inf)");
+    if (this->k_ == 0) requireRadiusWithinExtent("radius (R_phi)", static_cast<float>(this->search_radius_), surface);
   }
-  if (this->k_ == 0)
-    requireRadiusWithinExtent("radius (R_phi)", static_cast<float>(this->search_radius_),
-                              positionsOf(this->surface_ ? *this->surface_ : *this->input_));
   if (initial_normals_ && initial_normals_->size() != this->input_->size())
     throw InvalidParameter("initial_normals", detail::toString(initial_normals_->size()), "one per input point");
   if (orientation_ && orientation_->size() != this->input_->size())

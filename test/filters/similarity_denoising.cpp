@@ -419,6 +419,7 @@ TEST(SimilarityDenoising, BadParametersAreNamed) {
   expectInvalidParameter([&] { f.setGridSize(0); }, "grid_size");
   expectInvalidParameter([&] { f.setGridSize(-1); }, "grid_size");
   expectInvalidParameter([&] { f.setSigma(-0.1f); }, "sigma");
+  expectInvalidParameter([&] { f.setSigma(1e30f); }, "sigma");  // its square overflowed to inf
   expectInvalidParameter([&] { f.setSmoothingIterations(0); }, "smoothing_iterations");
   expectInvalidParameter([&] { f.setSimilarPatches(0); }, "similar_patches");
   expectInvalidParameter([&] { f.setSimilarPatches(-3); }, "similar_patches");

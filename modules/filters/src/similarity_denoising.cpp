@@ -25,8 +25,9 @@ void SimilarityDenoisingParameters::validate() const {
   requireInRange("target_neighbours", target_neighbours, 3, 1000);
   requireNonNegative("noise_sigma", noise_sigma, "estimated");
   requireInRange("grid_size", grid_size, 1, 16);
-  if (!(sigma >= 0) || !std::isfinite(sigma))
-    throw InvalidParameter("sigma", detail::toString(sigma), "0 (automatic) or a finite value > 0");
+  // Its square is taken in float: beyond 1e18 it overflows (a weight of 1 for every patch).
+  if (!(sigma >= 0) || !(sigma <= 1e18f))
+    throw InvalidParameter("sigma", detail::toString(sigma), "0 (automatic) or a value in (0, 1e18]");
   requirePositive("sigma_scale", sigma_scale);
   requireInRange("smoothing_iterations", smoothing_iterations, 1, 1000);
   requireInRange("descriptor_smoothing", descriptor_smoothing, 0, 1000);

@@ -139,4 +139,21 @@ void takeThreadsOption(int& argc, char** argv) {
   }
 }
 
+void printRead(const std::string& path, const Positions& points) {
+  const std::size_t finite = countFinite(points);
+  std::printf("read %s: %zu points (%zu finite)\n", path.c_str(), points.size(), finite);
+  float largest = 0.f;
+  for (const auto& p : points)
+    if (isFinite(p)) largest = std::max(largest, p.cwiseAbs().maxCoeff());
+  const float extent = boundingBoxDiagonal(points);
+  if (finite < 2 || !(extent > 0)) return;
+  // A surface's typical spacing, roughly; float's step at the largest coordinate.
+  const double spacing = extent / std::sqrt(double(finite));
+  const double step = double(largest) * std::numeric_limits<float>::epsilon();
+  if (step > 0.1 * spacing)
+    std::fprintf(stderr, "warning: coordinates reach %g, where float steps are %g, a tenth or more of the points' "
+                 "typical spacing (about %g): the positions are quantized; save the cloud with an offset\n",
+                 double(largest), step, spacing);
+}
+
 }  // namespace paps::cli

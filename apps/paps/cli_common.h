@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
 namespace paps::cli {
@@ -41,6 +42,11 @@ std::string samplesDir();
 /// A progress bar on stderr when it is a terminal and not `quiet`; with `timings`, one line
 /// per finished stage with its wall time instead.
 ProgressCallback progressBar(bool quiet, bool timings = false);
+
+/// Prints "read PATH: N points (M finite)" and, on stderr, a warning when the coordinates are
+/// so large that float steps there reach a tenth of the points' typical spacing (UTM-like
+/// coordinates without an offset: the file itself has lost the detail).
+void printRead(const std::string& path, const Positions& points);
 
 /// `--threads N` anywhere on the line bounds every command (and the bench workers it starts,
 /// through OMP_NUM_THREADS); it is taken out of argv before the command parses its options.

@@ -165,7 +165,7 @@ int runCompress(int argc, char** argv) {
     in = loadPositions(a.positional[0]);
 #endif
   }
-  std::printf("read %s: %zu points (%zu finite)\n", a.positional[0].c_str(), in.size(), countFinite(in));
+  printRead(a.positional[0], in);
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   EncodeReport r;
   const auto t0 = std::chrono::steady_clock::now();

@@ -253,7 +253,7 @@ int runCurvature(int argc, char** argv) {
   const int neighbours = a.integer("neighbours", 50);
   const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0]);
   const Positions p = positionsOf(cloud);
-  std::printf("read %s: %zu points (%zu finite)\n", a.positional[0].c_str(), p.size(), countFinite(p));
+  printRead(a.positional[0], p);
   Normals hints;
   const bool have_hints = orientationHints(cloud, p, a.text("orient", "auto"), hints);
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
@@ -328,7 +328,7 @@ int runEnhance(int argc, char** argv) {
   params.validate();
   pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0]);
   const Positions p = positionsOf(cloud);
-  std::printf("read %s: %zu points (%zu finite)\n", a.positional[0].c_str(), p.size(), countFinite(p));
+  printRead(a.positional[0], p);
   Normals hints;
   const bool have_hints = orientationHints(cloud, p, a.text("orient", "auto"), hints);
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));

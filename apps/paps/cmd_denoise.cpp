@@ -66,7 +66,7 @@ int runDenoise(int argc, char** argv) {
   Eigen::Vector3f origin;
   pcl::PCLPointCloud2 cloud = loadCloud(in_path, &origin);
   const Positions in = positionsOf(cloud);
-  std::printf("read %s: %zu points (%zu finite)\n", in_path.c_str(), in.size(), countFinite(in));
+  printRead(in_path, in);
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   Positions out;
   if (method == "similarity") {

@@ -77,8 +77,7 @@ int runSuperres(int argc, char** argv) {
   auto readScans = [&] {
     for (std::size_t i = 0; i + 1 < a.positional.size(); ++i) {
       scans.push_back(loadPositions(a.positional[i]));
-      std::printf("read %s: %zu points (%zu finite)\n", a.positional[i].c_str(), scans.back().size(),
-                  countFinite(scans.back()));
+      printRead(a.positional[i], scans.back());
     }
   };
   const std::size_t count = a.count("count", 0);

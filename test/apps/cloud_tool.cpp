@@ -1,6 +1,6 @@
 // Helper of the CLI tests: writes a small test cloud, and checks a `paps` output against
 // its input (same number of points, same fields in the same order, only x y z moved).
-//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized|rough|lines]
+//   paps_test_cloud_tool write OUT.{pcd,ply} COUNT [binary|compressed|ascii|organized|rough|lines|utm]
 //   paps_test_cloud_tool check IN.pcd OUT.pcd
 //   paps_test_cloud_tool keeps IN.pcd OUT.pcd FIELD... (same width x height, FIELDs present)
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
@@ -53,6 +53,10 @@ int write(const std::string& path, int count, const std::string& format) {
     p.x = (lines ? 0.002f : 0.02f) * static_cast<float>(k % per_line);
     p.y = (lines ? 0.05f : 0.02f) * static_cast<float>(k / per_line);
     p.z = surface(p.x, p.y) + noise();
+    if (format == "utm") {  // UTM-like coordinates saved as float: steps of 0.03-0.5 m there
+      p.x += 500000.f;
+      p.y += 5000000.f;
+    }
     p.intensity = static_cast<float>(k);
     cloud.push_back(p);
   }

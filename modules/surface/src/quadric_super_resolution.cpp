@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <numeric>
 
 #include <pcl/point_types.h>
@@ -89,26 +90,44 @@ struct Scan {
   std::size_t offset;  // global index of its first point
 };
 
-// The `want` nearest distinct positions to q (exact duplicates, by `first`, counted once) in
-// `kept`; returns the distance of the farthest kept (metres), or 0 when the cloud holds fewer.
-float nearestDistinct(const SpatialIndex& index, const std::vector<int>& first,
-                      const Eigen::Vector3f& q, int want, std::vector<int>& idx, std::vector<float>& d2,
-                      std::vector<int>& kept) {
-  for (int k = 2 * want;; k *= 2) {
-    const int found = index.nearestK(q, k, idx, d2);
-    kept.clear();
-    float radius = 0.f;
-    for (int j = 0; j < found && static_cast<int>(kept.size()) < want; ++j) {
-      const int r = first[idx[j]];
-      if (std::find_if(kept.begin(), kept.end(), [&](int o) { return first[o] == r; }) != kept.end()) continue;
-      kept.push_back(idx[j]);
-      radius = std::sqrt(d2[j]);
-    }
-    if (static_cast<int>(kept.size()) == want) return radius * 1.0001f;
-    if (found < k) return 0.f;  // the whole cloud holds fewer distinct positions
-    if (k > 64 * want) return 0.f;  // a pile of copies: give up
+// Nearest distinct positions (exact duplicates counted once). Without duplicates it searches
+// the scan's own index; with them, an index of the distinct positions built once: the search on
+// the full index had to double k through every copy, which on a scan made of a few positions
+// repeated thousands of times (UTM coordinates in float, merged scans) took minutes.
+class DistinctSearch {
+ public:
+  DistinctSearch(const Positions& points, const SpatialIndex& full, const std::vector<int>& first) : full_(full) {
+    for (std::size_t i = 0; i < first.size(); ++i)
+      if (first[i] >= 0 && first[i] != static_cast<int>(i)) { has_copies_ = true; break; }
+    if (!has_copies_) return;
+    for (std::size_t i = 0; i < first.size(); ++i)
+      if (first[i] == static_cast<int>(i)) {
+        distinct_.push_back(points[i]);
+        original_.push_back(static_cast<int>(i));
+      }
+    own_ = std::make_unique<SpatialIndex>(distinct_);
   }
-}
+
+  // The `want` nearest distinct positions to q, as indices into the scan, in `kept`; returns
+  // the distance of the farthest kept (metres), or 0 when the scan holds fewer.
+  float nearest(const Eigen::Vector3f& q, int want, std::vector<int>& idx, std::vector<float>& d2,
+                std::vector<int>& kept) const {
+    kept.clear();
+    // Without copies: the `want` first of 2 x want, as before the distinct index (ties at the
+    // boundary of a lattice then resolve as they always did).
+    const int found = has_copies_ ? own_->nearestK(q, want, idx, d2) : full_.nearestK(q, 2 * want, idx, d2);
+    if (found < want) return 0.f;
+    for (int j = 0; j < want; ++j) kept.push_back(has_copies_ ? original_[idx[j]] : idx[j]);
+    return std::sqrt(d2[want - 1]) * 1.0001f;
+  }
+
+ private:
+  const SpatialIndex& full_;
+  bool has_copies_ = false;
+  Positions distinct_;
+  std::vector<int> original_;
+  std::unique_ptr<SpatialIndex> own_;
+};
 
 // A ball is sparse when it holds fewer distinct positions than the quadric has unknowns: the
 // fit is then ill-posed for want of points, and a wider support is the cure. Elsewhere an
@@ -267,6 +286,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     // Sparse parts: an ill-posed fit on a ball with few distinct positions is refitted on the
     // nearest target_neighbours distinct positions, as wide as they need.
     const std::vector<int> first = params.widen_sparse_fits ? exactDuplicateRepresentatives(P) : std::vector<int>();
+    const DistinctSearch distinct(P, *sc[s].nh.index, params.widen_sparse_fits ? first : std::vector<int>());
     const int widen_to = params.target_neighbours;
 #pragma omp parallel reduction(+ : flat, ill_posed, widened, thin_balls)
     {
@@ -294,7 +314,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
           float wide_radius = 0;
           QuadricFit wide;
           for (int want = widen_to;; want *= 2) {
-            wide_radius = nearestDistinct(*sc[s].nh.index, first, P[i], want, idx, d2, kept);
+            wide_radius = distinct.nearest(P[i], want, idx, d2, kept);
             if (wide_radius == 0) break;
             wide = fitQuadric(P, P[i], kept.data(), static_cast<int>(kept.size()), wide_radius, nh, th);
             if (!thin || sparse || wide.conditioning >= kThinSupport) break;

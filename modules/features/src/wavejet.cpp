@@ -678,6 +678,33 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     idx.resize(narrow_to);
     return std::sqrt(order[narrow_to - 1].first);
   };
+  // A ball far larger than `narrow_to` (a cluster much denser than the rest of the cloud): its
+  // `narrow_to` nearest from the kd-tree, as slots of `grid` in the order narrowAt gives on the
+  // whole ball, whose gathering costs the ball's size (200K points, half of them in a 1 cm
+  // cluster: 46 s, most of it there). Returns their radius, or 0 when the tree's answer cannot
+  // be shown to be the same: the ball holds at most `narrow_to` points, or the boundary is
+  // within rounding of the farthest point the tree returned (ties, or another rounding of the
+  // distances in the tree).
+  constexpr int kTreeExtra = 16;
+  std::vector<int> slot_of;
+  auto narrowByTree = [&](const CellGrid& grid, int i, const Eigen::Vector3f& q, std::vector<int>& idx,
+                          std::vector<int>& knn, std::vector<float>& kd2,
+                          std::vector<std::pair<float, int>>& order) -> float {
+    const int n = index->nearestK(points[i], narrow_to + kTreeExtra, knn, kd2);
+    if (n < narrow_to + kTreeExtra) return 0.f;
+    order.resize(n);
+    for (int j = 0; j < n; ++j) {
+      const int slot = slot_of[knn[j]];
+      order[j] = {(grid.sorted()[slot] - q).squaredNorm(), slot};
+    }
+    std::sort(order.begin(), order.end());
+    const float margin = 1.f - 1e-5f;
+    if (!(order[narrow_to].first <= radius * radius) || !(order[narrow_to].first < margin * order[n - 1].first))
+      return 0.f;
+    idx.resize(narrow_to);
+    for (int j = 0; j < narrow_to; ++j) idx[j] = order[j].second;
+    return std::sqrt(order[narrow_to - 1].first);
+  };
   auto fitPoint = [&](int i, const Positions& pts, const int* nb, int found, const Eigen::Vector3f& q, float r,
                       WavejetWorkspace& ws) {
     neighbour_count[i] = found;
@@ -693,19 +720,35 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     // are stored at their input index.
     const Positions& sorted = grid.sorted();
     const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
+    if (widen) {
+      slot_of.assign(points.size(), -1);
+      for (std::int64_t s = 0; s < finite; ++s) slot_of[grid.original()[s]] = static_cast<int>(s);
+    }
 #pragma omp parallel
     {
       WavejetWorkspacePtr ws = makeWavejetWorkspace();
-      std::vector<int> idx, wide;
-      std::vector<float> d2, none;
+      std::vector<int> idx, wide, knn;
+      std::vector<float> d2, none, kd2;
       std::vector<std::pair<float, int>> order;
       idx.reserve(256);
       CellGrid::Cursor cursor;
+      bool dense = false;  // the last ball of this thread was far over narrow_to
 #pragma omp for schedule(dynamic, 256)
       for (std::int64_t s = 0; s < finite; ++s) {
         if (reporter.cancelled()) continue;
         const int i = grid.original()[s];
+        if (dense) {
+          const float rn = narrowByTree(grid, i, sorted[s], idx, knn, kd2, order);
+          if (rn > 0) {
+            support[i] = kNarrowed;
+            fitPoint(i, sorted, idx.data(), narrow_to, sorted[s], rn, *ws);
+            reporter.advance();
+            continue;
+          }
+        }
         const int found = grid.query(sorted[s], radius, idx, cursor);
+        // Points come in cell order: a ball four times over the cap is followed by others.
+        dense = widen && found > 4 * narrow_to;
         const float r = widen && found < widen_to ? widenAt(i, wide, d2) : 0.f;
         if (r > 0) {
           support[i] = kWidened;

@@ -170,20 +170,29 @@ class SeedThinner {
   // the 27 cells around it), sequentially in index order: the same kept seeds as the lists or
   // the cells of input points, each test costing the seeds within 2 d instead of 2 disc. The
   // crowding measure is over those seeds only (nearest earlier seed within the 27 cells).
-  // Returns false (nothing done) when the cells would not fit in 21 bits per axis.
+  // Returns false (nothing done) when the extent holds more than 2^40 cells along an axis.
   bool runOnSeedGrid(float d, std::size_t end, std::vector<int>& kept) {
     Eigen::Vector3f hi = Eigen::Vector3f::Constant(-INFINITY);
     for (const Eigen::Vector3f& p : opos_) hi = hi.cwiseMax(p);
     const Eigen::Vector3d origin = (lo_.cast<double>().array() - 2.0 * disc_).matrix();
     const double inv = 1.0 / d;
-    if (!(((hi.cast<double>() - origin).array() + 2.0 * disc_).maxCoeff() * inv < double(1 << 20))) return false;
+    if (!(((hi.cast<double>() - origin).array() + 2.0 * disc_).maxCoeff() * inv < std::ldexp(1.0, 40))) return false;
     auto cellOf = [&](const Eigen::Vector3f& p, int a) {
       return static_cast<std::int64_t>(std::floor((static_cast<double>(p[a]) - origin[a]) * inv));
     };
-    auto key = [](std::int64_t x, std::int64_t y, std::int64_t z) {
-      return static_cast<std::uint64_t>(x) | (static_cast<std::uint64_t>(y) << 21) | (static_cast<std::uint64_t>(z) << 42);
+    struct Cell {
+      std::int64_t x, y, z;
+      bool operator==(const Cell& o) const { return x == o.x && y == o.y && z == o.z; }
     };
-    std::unordered_map<std::uint64_t, int> head;  // cell -> last seed filed in it
+    struct CellHash {
+      std::size_t operator()(const Cell& c) const {
+        std::uint64_t h = static_cast<std::uint64_t>(c.x) * 0x9E3779B97F4A7C15ULL;
+        h ^= static_cast<std::uint64_t>(c.y) * 0xC2B2AE3D27D4EB4FULL + (h << 6) + (h >> 2);
+        h ^= static_cast<std::uint64_t>(c.z) * 0x165667B19E3779F9ULL + (h << 6) + (h >> 2);
+        return static_cast<std::size_t>(h ^ (h >> 29));
+      }
+    };
+    std::unordered_map<Cell, int, CellHash> head;  // cell -> last seed filed in it
     std::vector<int> next, seed_c;                // per seed: previous seed of its cell, candidate
     const float d2 = d * d;
     std::fill(count_.begin(), count_.end(), 0);
@@ -198,7 +207,7 @@ class SeedThinner {
       for (std::int64_t z = cz - 1; z <= cz + 1 && free; ++z)
         for (std::int64_t y = cy - 1; y <= cy + 1 && free; ++y)
           for (std::int64_t x = cx - 1; x <= cx + 1 && free; ++x) {
-            const auto it = head.find(key(x, y, z));
+            const auto it = head.find(Cell{x, y, z});
             if (it == head.end()) continue;
             for (int t = it->second; t >= 0; t = next[t]) {
               const float e2 = (cand_[seed_c[t]] - p).squaredNorm();
@@ -207,7 +216,7 @@ class SeedThinner {
             }
           }
       if (!free) continue;
-      auto [it, fresh] = head.try_emplace(key(cx, cy, cz), -1);
+      auto [it, fresh] = head.try_emplace(Cell{cx, cy, cz}, -1);
       next.push_back(it->second);
       it->second = static_cast<int>(seed_c.size());
       seed_c.push_back(static_cast<int>(c));

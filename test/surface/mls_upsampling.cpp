@@ -2,6 +2,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
+#include <set>
 #include <cmath>
 
 #include <omp.h>
@@ -524,6 +526,32 @@ TEST(MlsUpsampling, SeedThinningIsExactDartThrowing) {
   }
   EXPECT_GT(want.size(), 3000u);
   EXPECT_GT(crowded, 500u);  // measured 797 (the clump and the close pairs of the sheet)
+}
+
+// Coordinates too large for float to hold the spacing (a 1 m lattice plane at (5e5, 5e6): float
+// steps of 1/32 m and 0.5 m there) leave fewer distinct candidates than the count: no Poisson
+// radius gives enough, the search stops at the float resolution instead of going down to
+// 1e-29 m (that cost 60 s on 200K points, scripts/scaling_audit.sh), and the first `count`
+// candidates are taken, whatever the thread count.
+TEST(MlsUpsampling, SeedsOnCollapsedFloatCoordinatesStillCount) {
+  Positions pts;
+  for (int y = 0; y < 40; ++y)
+    for (int x = 0; x < 40; ++x) pts.emplace_back(500000.f + x / 39.f, 5000000.f + y / 39.f, 100.f);
+  const Normals normals(pts.size(), Eigen::Vector3f::UnitZ());
+  std::vector<int> o1, o2;
+  const Positions one = seedsWithThreads(1, pts, normals, 3200, 0.05f, 3, o1);
+  const Positions two = seedsWithThreads(2, pts, normals, 3200, 0.05f, 3, o2);
+  ASSERT_EQ(one.size(), 3200u);
+  EXPECT_EQ(std::memcmp(one.data(), two.data(), one.size() * sizeof(one[0])), 0);
+  EXPECT_EQ(o1, o2);
+  std::set<std::array<float, 3>> distinct;
+  for (std::size_t k = 0; k < one.size(); ++k) {
+    distinct.insert({one[k].x(), one[k].y(), one[k].z()});
+    // Within the disc of its input point, up to the float step there.
+    EXPECT_LE((one[k] - pts[o1[k]]).head<2>().norm(), 0.05f + 0.75f) << k;
+    EXPECT_EQ(one[k].z(), 100.f);
+  }
+  EXPECT_LT(distinct.size(), 400u);  // copies: float holds no more positions there
 }
 
 TEST(MlsUpsampling, SeedSurplusDroppedWhereCrowded) {

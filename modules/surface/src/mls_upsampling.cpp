@@ -597,6 +597,14 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   // second full pass costs more than dropping a few percent of crowded seeds. The count falls with d about as a power law whose exponent (-2 for
   // a sparse set, less as the set nears the candidates' own spacing) is measured from the last
   // two passes.
+  // No radius below d_floor is tried: where the candidates are fewer distinct positions than
+  // the count (float coordinates too large for the spacing: a 1 m plane at (5e5, 5e6) has float
+  // steps of 0.5 m there), no radius gives enough, and the search went down to 1e-29 m through
+  // passes that cost the square of the candidates (60 s on 200K points). Below it the first
+  // `count` candidates are taken, as when no radius gives enough.
+  float largest = 0.f;
+  for (const int i : usable_pts) largest = std::max(largest, points[i].cwiseAbs().maxCoeff());
+  const double d_floor = std::max(1e-4 * disc_radius, 2.0 * (std::nextafter(largest, INFINITY) - largest));
   SeedThinner thinner(points, ranked, cand, cand_rank, per_point, disc_radius, graph, graph_radius);
   thinner.setBlocks(block_start, std::move(block_parity), std::move(block_coord), block);
   std::vector<int> best, best_partner;
@@ -613,7 +621,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   if (pilot < cand.size() / 2) {
     const double scale = static_cast<double>(cand.size()) / pilot;
     double& slope = slope_hint;
-    for (int it = 0; it < 2; ++it) {
+    for (int it = 0; it < 2 && d >= d_floor; ++it) {
       const double found = scale * static_cast<double>(thinner.run(static_cast<float>(d), pilot_blocks).size());
       if (!(found > 0)) break;
       if (prev_d > 0 && std::abs(std::log(d / prev_d)) > 1e-6 && prev_n > 0)
@@ -624,7 +632,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
     }
     prev_d = prev_n = 0;
   }
-  for (int it = 0; it < 12; ++it) {
+  for (int it = 0; it < 12 && d >= d_floor; ++it) {
     std::vector<int> s = thinner.run(static_cast<float>(d));
     const double found = static_cast<double>(s.size());
     if (s.size() >= count) {

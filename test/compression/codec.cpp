@@ -133,6 +133,34 @@ TEST(SelfSimilarityCodec, BadInputGivesClearErrors) {
   } catch (const InvalidInput& e) {
     EXPECT_NE(std::string(e.what()).find("lie on a line"), std::string::npos) << e.what();
   }
+  // Far points all around (1% of them 1 km away): not a line, but the seeds would be
+  // quantized 0.45 R apart and 35% of the surface lost; refused, and raising seed_bits codes it.
+  Positions around = engraved().points;
+  Random rng(4);
+  for (std::size_t k = 0; k < around.size(); k += 100) {
+    const Eigen::Vector3f v(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian()));
+    around[k] = 1000.f * v.normalized();
+  }
+  try {
+    compressPositions(around, p);
+    ADD_FAILURE() << "1% of the points 1 km away were accepted at 16-bit seeds";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("a quarter of the patch radius"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("remove far points"), std::string::npos) << e.what();
+  }
+  CompressionParameters fine;
+  fine.seed_bits = 21;
+  EXPECT_GT(compressPositions(around, fine).size(), 1000u);
+  // Piles of copies: 20 positions, each 1,000 times. The radius chosen on copies is tiny
+  // (1.5e-6 m): the seeds, quantized 10 R apart, missed every point and the stream decoded
+  // to 0 points; refused, at any seed_bits.
+  Positions piles;
+  for (int k = 0; k < 20; ++k) {
+    const Eigen::Vector3f q(float(rng.uniform()), float(rng.uniform()), float(rng.uniform()));
+    for (int c = 0; c < 1000; ++c) piles.push_back(q);
+  }
+  EXPECT_THROW(compressPositions(piles, p), InvalidInput);
+  EXPECT_THROW(compressPositions(piles, fine), InvalidInput);
   Positions nan(1000, Eigen::Vector3f(NAN, NAN, NAN));
   EXPECT_THROW(compressPositions(nan, p), InvalidInput);
   auto expectParam = [&](CompressionParameters q, const std::string& name) {

@@ -470,20 +470,24 @@ TEST(MlsUpsampling, SeedThinningIsExactDartThrowing) {
       cand.push_back(pts[i] + disc * static_cast<float>(rng.uniform()) * v.normalized());
       cand_point.push_back(static_cast<int>(i));
     }
-  for (const float d : {0.05f, 0.12f, 0.4f}) {
-    const float reach1_sq = (d + disc) * (d + disc) * 1.0001f;
-    std::vector<int> want;
-    std::vector<float> want_m2;
+  // Brute force: the kept candidates, and for each the squared distance to the nearest
+  // earlier kept one whose input point lies within sqrt(reach_sq) of it.
+  auto dartThrowing = [&](float d, float reach_sq, std::vector<int>& want, std::vector<float>& want_m2) {
     for (std::size_t c = 0; c < cand.size(); ++c) {
       bool ok = true;
       float m2 = INFINITY;
       for (const int k : want) {
         const float e2 = (cand[k] - cand[c]).squaredNorm();
         if (e2 < d * d) { ok = false; break; }
-        if ((pts[cand_point[k]] - cand[c]).squaredNorm() < reach1_sq) m2 = std::min(m2, e2);
+        if ((pts[cand_point[k]] - cand[c]).squaredNorm() < reach_sq) m2 = std::min(m2, e2);
       }
       if (ok) want.push_back(static_cast<int>(c)), want_m2.push_back(m2);
     }
+  };
+  for (const float d : {0.05f, 0.12f, 0.4f}) {
+    std::vector<int> want;
+    std::vector<float> want_m2;
+    dartThrowing(d, (d + disc) * (d + disc) * 1.0001f, want, want_m2);
     std::vector<float> m2_grid, m2_lists;
     EXPECT_EQ(detail::thinSeedCandidates(pts, cand, cand_point, slots, disc, d, nullptr, 0.f, &m2_grid), want) << d;
     EXPECT_EQ(m2_grid, want_m2) << d;
@@ -502,16 +506,7 @@ TEST(MlsUpsampling, SeedThinningIsExactDartThrowing) {
   const float d = 0.015f;
   std::vector<int> want;
   std::vector<float> nearest;  // squared distance to the nearest earlier kept seed
-  for (std::size_t c = 0; c < cand.size(); ++c) {
-    bool ok = true;
-    float m2 = INFINITY;
-    for (const int k : want) {
-      const float e2 = (cand[k] - cand[c]).squaredNorm();
-      if (e2 < d * d) { ok = false; break; }
-      m2 = std::min(m2, e2);
-    }
-    if (ok) want.push_back(static_cast<int>(c)), nearest.push_back(m2);
-  }
+  dartThrowing(d, INFINITY, want, nearest);
   std::vector<float> m2_seeds;
   ASSERT_EQ(detail::thinSeedCandidates(pts, cand, cand_point, slots, disc, d, nullptr, 0.f, &m2_seeds), want);
   ASSERT_EQ(m2_seeds.size(), want.size());

@@ -605,6 +605,18 @@ TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
   EXPECT_NO_THROW(bad.validate());
 }
 
+namespace {
+// A uniform point of the unit sphere's upper (z > 0) or lower half.
+Eigen::Vector3f onUnitHemisphere(Random& rng, bool upper) {
+  for (;;) {
+    Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    v.normalize();
+    if ((v.z() > 0) == upper) return v;
+  }
+}
+
+}  // namespace
+
 // A sphere whose lower half is sampled 10x more sparsely than its upper half, every point stored
 // twice: at the radius chosen on the dense half, the sparse half's balls hold too few distinct
 // positions for a quadric. Widened fits (the default) put its output on the sphere; without
@@ -612,13 +624,7 @@ TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
 TEST(QuadricSuperResolution, SparsePartsAreFittedOnAWiderSupport) {
   Random rng(11);
   Positions pts;
-  auto onSphere = [&](bool upper) {
-    for (;;) {
-      Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
-      v.normalize();
-      if ((v.z() > 0) == upper) return v;
-    }
-  };
+  auto onSphere = [&](bool upper) { return onUnitHemisphere(rng, upper); };
   for (int i = 0; i < 3000; ++i) { const Eigen::Vector3f v = onSphere(true); pts.push_back(v); pts.push_back(v); }
   for (int i = 0; i < 300; ++i) { const Eigen::Vector3f v = onSphere(false); pts.push_back(v); pts.push_back(v); }
   auto lowerRms = [](const Positions& out) {
@@ -667,13 +673,7 @@ TEST(QuadricSuperResolution, SparsePartsAreFittedOnAWiderSupport) {
 TEST(QuadricSuperResolution, PilesOfCopiesAreWidenedToo) {
   Random rng(11);
   Positions pts;
-  auto onSphere = [&](bool upper) {
-    for (;;) {
-      Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
-      v.normalize();
-      if ((v.z() > 0) == upper) return v;
-    }
-  };
+  auto onSphere = [&](bool upper) { return onUnitHemisphere(rng, upper); };
   for (int i = 0; i < 3000; ++i) pts.push_back(onSphere(true));
   for (int i = 0; i < 150; ++i) {
     const Eigen::Vector3f v = onSphere(false);

@@ -161,6 +161,17 @@ TEST(SelfSimilarityCodec, BadInputGivesClearErrors) {
   }
   EXPECT_THROW(compressPositions(piles, p), InvalidInput);
   EXPECT_THROW(compressPositions(piles, fine), InvalidInput);
+  // With 10,000 copies no automatic radius fits the grid at all: the input is named, not the
+  // patch_radius the caller left automatic.
+  Positions deep;
+  for (std::size_t k = 0; k < piles.size(); k += 1000)
+    for (int c = 0; c < 10000; ++c) deep.push_back(piles[k]);
+  try {
+    compressPositions(deep, p);
+    ADD_FAILURE() << "piles of 10,000 copies were coded";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("no automatic patch radius fits"), std::string::npos) << e.what();
+  }
   Positions nan(1000, Eigen::Vector3f(NAN, NAN, NAN));
   EXPECT_THROW(compressPositions(nan, p), InvalidInput);
   auto expectParam = [&](CompressionParameters q, const std::string& name) {

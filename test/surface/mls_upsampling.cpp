@@ -155,6 +155,19 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
   } catch (const InvalidParameter& e) {
     EXPECT_EQ(e.parameter(), "radius");
   }
+  // Piles of copies at the automatic support (20 positions, 200 copies each): every ball is
+  // one position, so no normal anywhere; no radius was given, so the input is named.
+  Positions piles;
+  for (int k = 0; k < 20; ++k)
+    for (int c = 0; c < 200; ++c) piles.push_back(sp[k]);
+  for (const MlsSurface surface : {MlsSurface::Apss, MlsSurface::Rimls}) {
+    try {
+      upsampleMls(piles, surface, {});
+      ADD_FAILURE() << "piles accepted";
+    } catch (const InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("piles of copies"), std::string::npos) << e.what();
+    }
+  }
   huge.output_count = 100000;  // 1000x: the bound itself is allowed
   EXPECT_NO_THROW(checkOutputCount(huge.output_count, 100));
 }

@@ -677,7 +677,27 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   std::unique_ptr<detail::PointGrid> grid;
   float R = prm.patch_radius;
   requireRadiusWithinExtent("patch_radius", R, pts);
-  if (R == 0.f) R = chooseRadius(pts, finite, (hi - lo).norm(), prm.patch_points, sample, grid);
+  if (R == 0.f) {
+    try {
+      R = chooseRadius(pts, finite, (hi - lo).norm(), prm.patch_points, sample, grid);
+    } catch (const InvalidParameter&) {  // the grid of a candidate radius: not the caller's parameter
+      throw InvalidInput("no automatic patch radius fits: " + std::to_string(prm.patch_points) +
+                         " points a patch need a radius below extent / 2^20 of the points (piles of copies, or a few "
+                         "dense spots in a wide extent); remove the copies or the far points first, or give a radius");
+    }
+  }
+  const float seed_step = extent / float((1u << prm.seed_bits) - 1u);
+  // Seeds are the patch centres: quantized farther than a quarter of the patch radius they
+  // leave their points (1% of a 1 m plane's points moved 1 km away: step 0.45 R, 35% fewer
+  // points decoded than without them; 10 km: 3.5 R, 65 of 6,600; 20 positions stored 1,000
+  // times each, whose radius is chosen on copies: 10 R, 0 points decoded). Refused.
+  if (seed_step > 0.25f * R)
+    throw InvalidInput("the cloud spans " + paps::detail::toString(extent) + " m: seeds quantized on " +
+                       std::to_string(prm.seed_bits) + " bits are " + paps::detail::toString(seed_step) +
+                       " m apart, more than a quarter of the patch radius " + paps::detail::toString(R) +
+                       " m, and the patches would miss their points (the extent is too large for the radius: far points, "
+                       "or a radius made tiny by piles of copies); remove far points first (e.g. "
+                       "pcl::StatisticalOutlierRemoval or pcl::CropBox) or raise seed_bits (at most 21)");
   if (!grid || R > 1.25f * grid->cell() || R < 0.8f * grid->cell()) {
     grid.reset();
     grid = std::make_unique<detail::PointGrid>(pts, R);
@@ -712,18 +732,7 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   h.radius = R; h.spacing = spacing;
   for (int a = 0; a < 3; ++a) h.lo[a] = lo[a];
   const std::uint32_t qmax = (1u << prm.seed_bits) - 1u;
-  h.seed_step = extent / float(qmax);
-  // Seeds are the patch centres: quantized farther than a quarter of the patch radius they
-  // leave their points (1% of a 1 m plane's points moved 1 km away: step 0.45 R, 35% fewer
-  // points decoded than without them; 10 km: 3.5 R, 65 of 6,600; 20 positions stored 1,000
-  // times each, whose radius is chosen on copies: 10 R, 0 points decoded). Refused.
-  if (h.seed_step > 0.25f * R)
-    throw InvalidInput("the cloud spans " + paps::detail::toString(extent) + " m: seeds quantized on " +
-                       std::to_string(prm.seed_bits) + " bits are " + paps::detail::toString(h.seed_step) +
-                       " m apart, more than a quarter of the patch radius " + paps::detail::toString(R) +
-                       " m, and the patches would miss their points (the extent is too large for the radius: far points, "
-                       "or a radius made tiny by piles of copies); remove far points first (e.g. "
-                       "pcl::StatisticalOutlierRemoval or pcl::CropBox) or raise seed_bits (at most 21)");
+  h.seed_step = seed_step;
   std::vector<VoxelCoordinate> vox;
   vox.reserve(seed_idx.size());
   for (const int i : seed_idx) {

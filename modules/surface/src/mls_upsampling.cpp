@@ -1104,9 +1104,15 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   }
   const NeighbourGraph& lists = only_h ? graph_h : graph_ext;
   Normals normals = estimateNormals(points, graph_h);
-  if (std::none_of(normals.begin(), normals.end(), [](const Eigen::Vector3f& n) { return isFinite(n); }))
-    throw InvalidParameter("radius", detail::toString(h),
-                           "a kernel support holding at least 3 points around some point (none does: no normal)");
+  if (std::none_of(normals.begin(), normals.end(), [](const Eigen::Vector3f& n) { return isFinite(n); })) {
+    if (params.radius > 0)
+      throw InvalidParameter("radius", detail::toString(h),
+                             "a kernel support holding at least 3 points around some point (none does: no normal)");
+    // The automatic support holds the target count, so its balls are all copies or lines.
+    throw InvalidInput("no ball of the automatic kernel support " + detail::toString(h) +
+                       " m holds 3 distinct points off a line (no normal anywhere): the cloud is piles of copies "
+                       "or lines; give a radius wide enough to reach other positions");
+  }
   orientNormalsByPropagation(points, normals, graph_h);
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite));

@@ -265,6 +265,39 @@ TEST(CellGrid, CappedListsAreTheNearestWhereverTheDensityJumps) {
   EXPECT_GT(short_balls, 50);  // sparse balls, under the cap
 }
 
+TEST(CellGrid, CappedListsInACrowdedCellComeFromTheTreeUnchanged) {
+  // A 1 mm cluster of 20,000 points (some stored 40 times) inside one cell of side 0.1 beside
+  // a sparse square: far more than 64 x the cap in one cell, so the capped lists there come
+  // from a kd-tree, checked against the scan's order; they must be the brute-force lists,
+  // copies (ties at distance 0) included.
+  paps::Random rng(12);
+  Positions p;
+  for (int i = 0; i < 20000; ++i) {
+    p.emplace_back(0.001f * static_cast<float>(rng.uniform(0, 1)), 0.001f * static_cast<float>(rng.uniform(0, 1)),
+                   0.001f * static_cast<float>(rng.uniform(0, 1)));
+    if (i % 997 == 5)
+      for (int c = 0; c < 39; ++c) p.push_back(p.back());
+  }
+  for (int i = 0; i < 2000; ++i)
+    p.emplace_back(0.2f + static_cast<float>(rng.uniform(0, 1)), static_cast<float>(rng.uniform(0, 1)), 0.f);
+  const float r = 0.1f;
+  const int cap = 25;
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  const NeighbourGraph g = grid.radiusGraph(p.size(), r, false, {}, cap);
+  int checked = 0, copies_checked = 0;
+  for (std::size_t i = 0; i < p.size(); i += (i < 20800 ? 13 : 1)) {
+    std::vector<int> want = bruteBall(p, p[i], r);
+    std::rotate(want.begin(), std::find(want.begin(), want.end(), int(i)), std::find(want.begin(), want.end(), int(i)) + 1);
+    want.resize(std::min<std::size_t>(want.size(), cap));
+    ASSERT_EQ(std::vector<int>(g.begin(i), g.end(i)), want) << "point " << i;
+    ++checked;
+    copies_checked += i > 0 && p[i] == p[i - 1];
+  }
+  EXPECT_GT(checked, 3000);
+  EXPECT_GT(copies_checked, 5);
+}
+
 TEST(CellGrid, OpenBallExcludesTheBoundary) {
   // Points exactly at distance 1 on a lattice: the closed ball has them, the open one not.
   Positions p;

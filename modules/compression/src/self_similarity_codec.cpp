@@ -686,7 +686,8 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
                          "dense spots in a wide extent); remove the copies or the far points first, or give a radius");
     }
   }
-  const float seed_step = extent / float((1u << prm.seed_bits) - 1u);
+  const std::uint32_t qmax = (1u << prm.seed_bits) - 1u;
+  const float seed_step = extent / float(qmax);
   // Seeds are the patch centres: quantized farther than a quarter of the patch radius they
   // leave their points (1% of a 1 m plane's points moved 1 km away: step 0.45 R, 35% fewer
   // points decoded than without them; 10 km: 3.5 R, 65 of 6,600; 20 positions stored 1,000
@@ -731,7 +732,6 @@ std::vector<std::uint8_t> compressPositions(const Positions& input, const Compre
   h.dictionary_bits = prm.dictionary_bits;
   h.radius = R; h.spacing = spacing;
   for (int a = 0; a < 3; ++a) h.lo[a] = lo[a];
-  const std::uint32_t qmax = (1u << prm.seed_bits) - 1u;
   h.seed_step = seed_step;
   std::vector<VoxelCoordinate> vox;
   vox.reserve(seed_idx.size());

@@ -259,11 +259,10 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
         } else if (guess_reach && guess < radius) {
           collect(guess, std::min(max_d2, guess * guess));
           if (buf.size() < static_cast<std::size_t>(max_count)) collect(radius, max_d2);
-          if (tree) noteCrowding();
         } else {
           collect(radius, max_d2);
-          if (tree) noteCrowding();
         }
+        if (tree && !from_tree) noteCrowding();
         if (max_count > 0 && buf.size() > static_cast<std::size_t>(max_count)) {
           if (overflow) {
             list.clear();

@@ -195,8 +195,7 @@ class SeedThinner {
     std::unordered_map<Cell, int, CellHash> head;  // cell -> last seed filed in it
     std::vector<int> next, seed_c;                // per seed: previous seed of its cell, candidate
     const float d2 = d * d;
-    std::fill(count_.begin(), count_.end(), 0);
-    std::fill(act_count_.begin(), act_count_.end(), 0);
+    std::fill(count_.begin(), count_.end(), 0);  // keep() files the seeds per input point
     kept.clear();
     for (std::size_t c = 0; c < end; ++c) {
       const Eigen::Vector3f& p = cand_[c];
@@ -216,7 +215,7 @@ class SeedThinner {
             }
           }
       if (!free) continue;
-      auto [it, fresh] = head.try_emplace(Cell{cx, cy, cz}, -1);
+      const auto it = head.try_emplace(Cell{cx, cy, cz}, -1).first;
       next.push_back(it->second);
       it->second = static_cast<int>(seed_c.size());
       seed_c.push_back(static_cast<int>(c));

@@ -9,7 +9,9 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -34,6 +36,7 @@
 #include <paps/features/wavejet.h>
 #include <paps/filters/wavejet_enhancement.h>
 
+#include "bench_worker.h"
 #include "cli_common.h"
 #include "render.h"
 #include "commands.h"
@@ -1111,6 +1114,63 @@ int runBenchCurvature(int argc, char** argv) {
                 "principal curvatures %.2f s\n", ps.size(), neighbours, t1, order, tc, tp);
   }
   return 0;
+}
+
+// Hidden `paps bench-worker-curv METHOD IN OUT LOG key=value...`, the child of `paps bench
+// files`: ours at the defaults of `paps curvature` (automatic R_phi), PCL normals + principal
+// curvatures and CGAL jet fitting on the balls of the radius given (ours' R_phi). Writes the
+// points that got finite curvatures (their positions) and the time of the estimate alone.
+int runCurvatureWorker(int argc, char** argv) {
+  if (argc < 6) return 2;
+  const std::string method = argv[2], in = argv[3], out = argv[4], log = argv[5];
+  std::map<std::string, double> p;
+  for (int i = 6; i < argc; ++i) {
+    const std::string a = argv[i];
+    const auto eq = a.find('=');
+    p[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
+  }
+  auto get = [&](const char* k, double d) { return p.count(k) ? p[k] : d; };
+  std::ofstream lf(log);
+  try {
+    const Positions input = readRaw(in);
+    const int order = static_cast<int>(get("order", 4));
+    const float radius = static_cast<float>(get("radius", 0));
+    std::vector<Estimate> est;
+    double secs = 0;
+    if (method == "wavejets") {
+      WavejetParameters params;
+      params.order = order;
+      WavejetReport rep;
+      const auto t0 = Clock::now();
+      const auto res = estimateWavejets(input, 0.f, params, &rep, nullptr, nullptr, nullptr, {},
+                                        static_cast<int>(get("neighbours", 50)));
+      secs = since(t0);
+      est.resize(res.size());
+      for (std::size_t i = 0; i < res.size(); ++i) est[i] = {res[i].normal, res[i].k1, res[i].k2};
+      lf << "radius " << rep.radius << "\n";
+      lf << "chosen " << defaultChoice(rep) << ", mean " << rep.mean_neighbours << " neighbours, " << rep.narrowed
+         << " narrowed, " << rep.widened << " widened\n";
+    } else if (method == "pcl") {
+      if (!(radius > 0)) throw InvalidParameter("radius", std::to_string(radius), "> 0");
+      est = runPcl(input, radius, secs, true);
+#ifdef PAPS_HAVE_CGAL
+    } else if (method == "cgal") {
+      if (!(radius > 0)) throw InvalidParameter("radius", std::to_string(radius), "> 0");
+      est = runCgal(input, radius, order, secs);
+#endif
+    } else {
+      throw InvalidParameter("method", method, "wavejets, pcl or cgal");
+    }
+    Positions fitted;
+    for (std::size_t i = 0; i < est.size(); ++i)
+      if (std::isfinite(est[i].k1) && std::isfinite(est[i].k2)) fitted.push_back(input[i]);
+    writeRaw(out, fitted);
+    lf << "seconds " << secs << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    lf << "error " << e.what() << "\n";
+    return 1;
+  }
 }
 
 }  // namespace paps::cli

@@ -1,6 +1,7 @@
 #include "bench_worker.h"
 
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -39,6 +40,12 @@ Positions readRaw(const std::string& path) {
   return p;
 }
 
+namespace {
+WorkerLimits g_limits;
+}
+
+void setWorkerLimits(const WorkerLimits& limits) { g_limits = limits; }
+
 WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::string, double>& params,
                          const std::string& out_path, const std::string& log_path) {
   std::remove(out_path.c_str());
@@ -56,6 +63,12 @@ WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::stri
     std::vector<char*> argv;
     for (auto& a : args) argv.push_back(a.data());
     argv.push_back(nullptr);
+    if (g_limits.memory_gb > 0) {
+      const rlim_t bytes = static_cast<rlim_t>(g_limits.memory_gb * 1073741824.0);
+      const rlimit lim{bytes, bytes};
+      setrlimit(RLIMIT_AS, &lim);
+    }
+    if (g_limits.seconds > 0) alarm(static_cast<unsigned>(g_limits.seconds));  // kept across execv
     execv("/proc/self/exe", argv.data());
     _exit(127);
   }
@@ -72,6 +85,8 @@ WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::stri
     else if (line.rfind("chosen ", 0) == 0) r.chosen = line.substr(7);
   }
   r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
+  if (!r.ok && WIFSIGNALED(status) && WTERMSIG(status) == SIGALRM)
+    r.message = "timed out after " + std::to_string(g_limits.seconds) + " s";
   if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
   if (r.ok) r.output = readRaw(out_path);
   return r;

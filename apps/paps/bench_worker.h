@@ -19,6 +19,15 @@ struct WorkerResult {
   Positions output;
 };
 
+/// Bounds on every worker started afterwards (0: none). A worker past `seconds` is killed
+/// (SIGALRM) and reported as timed out; `memory_gb` caps its address space (RLIMIT_AS), so a
+/// method whose memory grows without bound fails with bad_alloc instead of swapping.
+struct WorkerLimits {
+  int seconds = 0;
+  double memory_gb = 0;
+};
+void setWorkerLimits(const WorkerLimits& limits);
+
 /// Runs `/proc/self/exe args...` in a child process and collects what it left: the
 /// "seconds"/"error" lines of `log_path`, the positions in `out_path` (raw dump), and the
 /// child's peak memory. `params` are appended as key=value arguments.

@@ -3,6 +3,8 @@ namespace paps::cli {
 extern const char* kDenoiseUsage;
 int runDenoise(int argc, char** argv);
 int runBench(int argc, char** argv);
+int runBenchFiles(int argc, char** argv);
+int runCurvatureWorker(int argc, char** argv);
 int runCurvature(int argc, char** argv);
 int runEnhance(int argc, char** argv);
 int runBenchCurvature(int argc, char** argv);

@@ -24,6 +24,7 @@ const char* kUsage =
     "  bench curvature [options]     Wavejets vs PCL and CGAL jets on analytic surfaces and a scan\n"
     "  superres IN [IN2..] OUT --factor F   QSR super-resolution (or --method apss|rimls)\n"
     "  bench superres [options]      QSR vs APSS, RIMLS and PCL MLS upsampling (Table 2.2 protocol)\n"
+    "  bench files IN [IN..]         ours vs the peers on your own clouds: time, memory, output\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
 }
@@ -46,6 +47,7 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "curvature")) return paps::cli::runCurvature(argc, argv);
     if (!std::strcmp(argv[1], "enhance")) return paps::cli::runEnhance(argc, argv);
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "curvature")) return paps::cli::runBenchCurvature(argc, argv);
+    if (!std::strcmp(argv[1], "bench-worker-curv")) return paps::cli::runCurvatureWorker(argc, argv);
 #endif
 #ifdef PAPS_HAVE_COMPRESSION
     if (!std::strcmp(argv[1], "compress")) return paps::cli::runCompress(argc, argv);
@@ -57,6 +59,7 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "superres")) return paps::cli::runBenchSuperres(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker-sr")) return paps::cli::runSuperresWorker(argc, argv);
 #endif
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "files")) return paps::cli::runBenchFiles(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);
     std::fprintf(stderr, "paps: unknown command '%s'\n%s", argv[1], kUsage);

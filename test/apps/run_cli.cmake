@@ -521,6 +521,50 @@ elseif(CASE STREQUAL "codec_corrupt_input")
       message(FATAL_ERROR "${f}: expected one clear error, got exit ${rc}: ${err}")
     endif()
   endforeach()
+elseif(CASE STREQUAL "bench_files")
+  # `paps bench files` on a user's clouds: every stage's rows, one per method, with a status,
+  # the output count each method gave, the ratio lines, and the CSV; inputs untouched.
+  write_input(3000)
+  file(SHA256 ${input} before)
+  # 2 positions stored 30 times each: APSS finds no ball with three distinct positions and
+  # refuses; the bench reports that row and goes on.
+  set(piles "# .PCD v0.7\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\nWIDTH 60\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 60\nDATA ascii\n")
+  foreach(k RANGE 1 30)
+    string(APPEND piles "0 0 0\n1 0 0\n")
+  endforeach()
+  file(WRITE ${dir}/piles.pcd "${piles}")
+  set(output ${dir}/bench/files.csv)
+  run_paps(bench files ${input} ${dir}/piles.pcd --out ${dir}/bench --timeout 120)
+  expect_success_saying("wrote .*files.csv")
+  foreach(row "denoise +ours +ok .* 3000 " "denoise +pcl-mls +ok" "denoise +bilateral +ok .* 3000 "
+              "superres +qsr +ok .* 6000 " "superres +apss +ok .* 6000 " "superres +rimls +ok .* 6000 "
+              "superres +pcl-mls-plane +ok" "curvature +wavejets +ok .* 3000 " "curvature +pcl +ok"
+              "denoise, ours / peer time: pcl-mls [0-9.e+-]+ bilateral [0-9.e+-]+"
+              "piles +superres +apss +error .*distinct")
+    if(NOT out MATCHES "${row}")
+      message(FATAL_ERROR "no row matching '${row}': ${out}")
+    endif()
+  endforeach()
+  file(STRINGS ${output} rows)
+  list(LENGTH rows n)
+  if(n LESS 19 OR NOT rows MATCHES "input,input_points,stage,method")
+    message(FATAL_ERROR "files.csv: expected a header and at least 9 rows per input, got ${n} lines")
+  endif()
+  file(SHA256 ${input} after)
+  if(NOT before STREQUAL after)
+    message(FATAL_ERROR "the bench modified its input")
+  endif()
+  # A run past --timeout is stopped and reported; the bench still ends normally.
+  write_input(100000)
+  run_paps(bench files ${input} --stages curvature --out ${dir}/bench --timeout 1)
+  expect_success_saying("timeout .*timed out after 1 s")
+  # Bad options: one clear line, and no output directory made.
+  file(REMOVE_RECURSE ${dir}/bench ${dir}/piles.pcd)
+  run_paps(bench files ${input} --stages smoothing --out ${dir}/bench)
+  set(output ${dir}/none)
+  expect_one_error_line("stages")
+  run_paps(bench files ${dir}/missing.pcd --out ${dir}/bench)
+  expect_one_error_line("missing.pcd")
 else()
   message(FATAL_ERROR "unknown CASE '${CASE}'")
 endif()

@@ -4,6 +4,9 @@
 # output's point count and the first error line.
 #   scripts/scaling_audit.sh [PAPS=build/apps/paps/paps] [WORK=/tmp/paps_scaling] [N=200000]
 # TIMEOUT=S (default 300) bounds each run; ONLY=REGEX keeps the inputs whose names match.
+# PEERS=1 also runs `paps bench files` on the same inputs (ours and the PCL/CGAL peers, each
+# bounded by TIMEOUT; a peer that does not finish is reported, not counted as a failure).
+# SKIP_OURS=1 skips the commands (with PEERS=1: the peers only).
 # The inputs (N points each, float32 binary PCD, seeded):
 #   line      points 1 mm apart on a line (no surface)
 #   piles     20 positions, each stored N / 20 times
@@ -52,9 +55,12 @@ PY
 points() { head -c 400 "$1" 2>/dev/null | tr -d '\0' | awk '/^POINTS/{print $2; exit}'; }
 fails=0
 printf '%-9s %-14s %4s %9s %9s %9s  %s\n' input command exit seconds 'peak MB' points 'first error'
+inputs=()
 for in in "$WORK"/in/*.pcd; do
   name=$(basename "$in" .pcd)
   [[ $name =~ $ONLY ]] || continue
+  inputs+=("$in")
+  [ "${SKIP_OURS:-0}" = 1 ] && continue
   for cmd in denoise bilateral curvature enhance superres apss rimls compress decompress; do
     out="$WORK/out/$name.$cmd.pcd"
     case $cmd in
@@ -81,4 +87,8 @@ for in in "$WORK"/in/*.pcd; do
   done
 done
 echo "timeouts or signals: $fails"
+if [ "${PEERS:-0}" = 1 ]; then
+  echo
+  "$PAPS" bench files "${inputs[@]}" --out "$WORK/peers" --timeout "$TIMEOUT" || fails=$((fails + 1))
+fi
 [ $fails -eq 0 ]

@@ -105,8 +105,12 @@ Positions pclMlsUpsample(const Positions& input, const std::string& mode, double
   const double s0 = radius * std::sqrt(M_PI / std::max(1.0, mean));
   if (mode == "plane") {
     mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::SAMPLE_LOCAL_PLANE);
-    mls.setUpsamplingRadius(0.5 * s0 * 1.2);
-    mls.setUpsamplingStepSize(s0 / std::sqrt(factor) );
+    // Grid of step t on a disc of radius 0.6 s0 around each input point: 5 points at x4, 9 at
+    // x10, but at x2 (t = 0.71 s0) only the centre, i.e. no upsampling; there the disc reaches
+    // the first ring (5 points, then the seeded subset below keeps the count).
+    const double step = s0 / std::sqrt(factor);
+    mls.setUpsamplingRadius(std::max(0.5 * s0 * 1.2, factor > 1 ? 1.001 * step : 0.0));
+    mls.setUpsamplingStepSize(step);
   } else if (mode == "random") {
     mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::RANDOM_UNIFORM_DENSITY);
     mls.setPointDensity(static_cast<int>(std::lround(factor * mean)));

@@ -133,6 +133,38 @@ TEST(EstimateNormals, NaNForTooFewOrCollinearNeighbours) {
   }
 }
 
+TEST(PcaNormal, CollinearAndTinyJudgedRelativeToTheSpread) {
+  std::vector<int> idx(31);
+  std::iota(idx.begin(), idx.end(), 0);
+  // 31 points 1 mm apart on a line 100 m out: the closed-form eigen solver puts the repeated
+  // zero eigenvalue at about +-1e-11 against 2.5e-3 for the largest, which an absolute 1e-12
+  // test took for a surface (and gave an arbitrary normal).
+  Positions line;
+  for (int k = 0; k < 31; ++k) line.emplace_back(100.f + 1e-3f * k, 0.f, 0.f);
+  EXPECT_FALSE(paps::isFinite(paps::pcaNormal(line, idx.data(), 31)));
+  // The same along a diagonal: float rounding alone moves the points off the line.
+  Positions diagonal;
+  for (int k = 0; k < 31; ++k) diagonal.push_back(Eigen::Vector3f(100, 100, 100) + 1e-3f * k * Eigen::Vector3f(1, 1, 1).normalized());
+  EXPECT_FALSE(paps::isFinite(paps::pcaNormal(diagonal, idx.data(), 31)));
+  // A small tilted disc, at 1 and at 2^-40 of its size (a micrometre object in metres is
+  // 2^-20): the same normal, bit for bit, at every power-of-two scale.
+  const Eigen::Vector3f n = Eigen::Vector3f(1, 2, 3).normalized();
+  const Eigen::Vector3f u = n.unitOrthogonal(), v = n.cross(u);
+  paps::Random rng(5);
+  Positions disc;
+  for (int k = 0; k < 31; ++k) disc.push_back(rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v);
+  const Eigen::Vector3f ref = paps::pcaNormal(disc, idx.data(), 31);
+  ASSERT_TRUE(paps::isFinite(ref));
+  EXPECT_LT(lineAngleDeg(ref, n), 1e-3);
+  for (const float scale : {std::ldexp(1.f, -40), std::ldexp(1.f, -20), std::ldexp(1.f, 30)}) {
+    Positions scaled = disc;
+    for (auto& q : scaled) q *= scale;
+    const Eigen::Vector3f m = paps::pcaNormal(scaled, idx.data(), 31);
+    ASSERT_TRUE(paps::isFinite(m)) << scale;
+    EXPECT_EQ(m, ref) << scale;
+  }
+}
+
 // --------------------------------------------------------------------- orientation
 
 TEST(OrientNormalsTowards, AllFaceTheViewpoint) {

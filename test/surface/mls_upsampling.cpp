@@ -313,6 +313,27 @@ TEST(MlsUpsampling, SameOutputWhateverTheThreadCount) {
   EXPECT_EQ(run(MlsSurface::Rimls, true, 1), run(MlsSurface::Rimls, true, 2));
 }
 
+// Units: a sphere of radius 2^-27 (a nanometre-sized object given in metres) gives the unit
+// sphere's output scaled, bit for bit. The PCA normals once called every ball of it
+// "collinear" (an absolute 1e-12 on the covariance) and the automatic radius was refused.
+TEST(MlsUpsampling, OutputScalesWithTheUnits) {
+  const Positions in = spherePoints(2000, 1.f, 4);
+  for (const MlsSurface s : {MlsSurface::Apss, MlsSurface::Rimls}) {
+    MlsUpsamplingParameters p;
+    p.factor = 3;
+    const Positions ref = upsampleMls(in, s, p);
+    ASSERT_EQ(ref.size(), 6000u);
+    for (const int e : {-27, 13}) {
+      const float scale = std::ldexp(1.f, e);
+      Positions scaled = in;
+      for (auto& q : scaled) q *= scale;
+      Positions out = upsampleMls(scaled, s, p);
+      for (auto& q : out) q /= scale;
+      EXPECT_EQ(out, ref) << "2^" << e;
+    }
+  }
+}
+
 // Run in spatial order: the same output whatever the order of the input points.
 TEST(MlsUpsampling, OutputDoesNotDependOnTheInputOrder) {
   const Positions in = spherePoints(2000, 1.f, 4);

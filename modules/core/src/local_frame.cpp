@@ -42,7 +42,12 @@ Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Ei
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
   eig.computeDirect(cov);
   const Eigen::Vector3d ev = eig.eigenvalues();
-  if (!(ev(1) > 1e-12 * std::max(1.0, ev(2)))) return kNaN3;  // collinear or coincident
+  // Collinear or coincident: the middle eigenvalue negligible against the largest. Relative,
+  // so that the test does not depend on the units (an absolute 1e-12 m^2 once made every
+  // ball of a micrometre-sized object "collinear"), and well above the closed-form solver's
+  // error on a repeated zero eigenvalue (about 1e-8 of the largest: an exact line gave
+  // +-1e-11 against 2.5e-3, and an arbitrary normal).
+  if (!(ev(1) > 1e-6 * ev(2))) return kNaN3;
   return eig.eigenvectors().col(0).cast<float>().normalized();
 }
 

@@ -151,7 +151,7 @@ float parabolaAbscissaForArcLength(float a, float s) {
     const double step = g / q;
     x -= step;
     if (x < 0) x = 0;
-    if (std::abs(step) < 1e-9 * (1 + target)) break;
+    if (std::abs(step) <= 1e-9 * target) break;  // relative: the same steps in any unit
   }
   return static_cast<float>(s < 0 ? -x : x);
 }

@@ -24,8 +24,9 @@ struct LocalFrame {
 using LocalFrames = std::vector<LocalFrame>;
 
 /// Unit normal by PCA of points[idx[0]] .. points[idx[count - 1]] (centred, in double); NaN
-/// when count < 3 or the points are collinear or coincident. Sign arbitrary. `centroid`, when
-/// given, receives their mean.
+/// when count < 3 or the points are collinear or coincident (the middle eigenvalue of their
+/// covariance at most 1e-6 of the largest: a test that does not depend on the units). Sign
+/// arbitrary. `centroid`, when given, receives their mean.
 Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid = nullptr);
 
 /// Unit normals by PCA of each neighbour list (pcaNormal); NaN where a point has fewer than 3

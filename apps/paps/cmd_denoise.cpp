@@ -117,7 +117,7 @@ int runDenoise(int argc, char** argv) {
                 r.own_weight);
     std::printf("normals oriented %s; moved %zu points; %zu NaN points passed through\n",
                 p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
-    if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours and were left in place\n", r.isolated);
+    if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
   } else {
     PointBilateralParameters p;
     p.radius = static_cast<float>(a.number("radius", 0));
@@ -127,7 +127,7 @@ int runDenoise(int argc, char** argv) {
     out = bilateralFilterPositions(in, p, &r, {}, progress);
     std::printf("bilateral filter: radius %g m%s, %d passes; moved %zu points\n", r.radius,
                 p.radius > 0 ? "" : " (chosen)", p.iterations, r.moved);
-    if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours and were left in place\n", r.isolated);
+    if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
   }
   writePositions(out, cloud);
   saveCloudAtomic(out_path, cloud);

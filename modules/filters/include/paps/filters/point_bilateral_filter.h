@@ -29,7 +29,8 @@ struct PointBilateralParameters {
 
 struct PointBilateralReport {
   float radius = 0.f;
-  /// Points the last pass moved; points with fewer than 3 neighbours (left in place); NaN/Inf.
+  /// Points the last pass moved; points left in place (fewer than 4 neighbours, or only
+  /// collinear ones: no normal); NaN/Inf.
   std::size_t moved = 0, isolated = 0, non_finite = 0;
 };
 

@@ -91,7 +91,7 @@ struct SimilarityDenoisingReport {
   float sigma = 0.f;               ///< similarity scale used (metres)
   double mean_neighbours = 0.0;    ///< mean neighbour count at that radius
   std::size_t moved = 0;           ///< points denoised
-  std::size_t isolated = 0;        ///< finite points left in place: fewer than 4 neighbours
+  std::size_t isolated = 0;        ///< finite points left in place: fewer than 4 neighbours, or collinear ones (no normal)
   std::size_t non_finite = 0;      ///< NaN/Inf points passed through
 };
 

@@ -1121,28 +1121,18 @@ int runBenchCurvature(int argc, char** argv) {
 // curvatures and CGAL jet fitting on the balls of the radius given (ours' R_phi). Writes the
 // points that got finite curvatures (their positions) and the time of the estimate alone.
 int runCurvatureWorker(int argc, char** argv) {
-  if (argc < 6) return 2;
-  const std::string method = argv[2], in = argv[3], out = argv[4], log = argv[5];
-  std::map<std::string, double> p;
-  for (int i = 6; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto eq = a.find('=');
-    p[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
-  }
-  auto get = [&](const char* k, double d) { return p.count(k) ? p[k] : d; };
-  std::ofstream lf(log);
-  try {
-    const Positions input = readRaw(in);
+  return runWorkerFrame(argc, argv, [](const std::string& method, const Positions& input, const WorkerParameters& params,
+                                       std::ostream& lf, double& secs) {
+    auto get = [&](const char* k, double d) { return params.get(k, d); };
     const int order = static_cast<int>(get("order", 4));
     const float radius = static_cast<float>(get("radius", 0));
     std::vector<Estimate> est;
-    double secs = 0;
     if (method == "wavejets") {
-      WavejetParameters params;
-      params.order = order;
+      WavejetParameters wp;
+      wp.order = order;
       WavejetReport rep;
       const auto t0 = Clock::now();
-      const auto res = estimateWavejets(input, 0.f, params, &rep, nullptr, nullptr, nullptr, {},
+      const auto res = estimateWavejets(input, 0.f, wp, &rep, nullptr, nullptr, nullptr, {},
                                         static_cast<int>(get("neighbours", 50)));
       secs = since(t0);
       est.resize(res.size());
@@ -1164,13 +1154,8 @@ int runCurvatureWorker(int argc, char** argv) {
     Positions fitted;
     for (std::size_t i = 0; i < est.size(); ++i)
       if (std::isfinite(est[i].k1) && std::isfinite(est[i].k2)) fitted.push_back(input[i]);
-    writeRaw(out, fitted);
-    lf << "seconds " << secs << "\n";
-    return 0;
-  } catch (const std::exception& e) {
-    lf << "error " << e.what() << "\n";
-    return 1;
-  }
+    return fitted;
+  });
 }
 
 }  // namespace paps::cli

@@ -224,13 +224,8 @@ int runSuperresWorker(int argc, char** argv) {
   if (argc < 5) return 2;
   const std::string method = argv[2], dir = argv[3];
   const int n_scans = std::atoi(argv[4]);
-  std::map<std::string, double> p;
-  for (int i = 5; i < argc; ++i) {
-    const std::string a = argv[i];
-    const auto eq = a.find('=');
-    p[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
-  }
-  auto get = [&](const char* k, double d) { return p.count(k) ? p[k] : d; };
+  const WorkerParameters params(argc, argv, 5);
+  auto get = [&](const char* k, double d) { return params.get(k, d); };
   std::ofstream lf(dir + "/sr_log.txt");
   try {
     std::vector<Positions> scans;

@@ -100,21 +100,39 @@ WorkerResult runWorker(const std::string& scratch_dir, const std::string& method
   return spawnWorker({"bench-worker", method, in, out, log}, params, out, log);
 }
 
-int runBenchWorker(int argc, char** argv) {
-  if (argc < 6) return 2;
-  const std::string method = argv[2], in = argv[3], out = argv[4], log = argv[5];
-  std::map<std::string, double> p;
-  for (int i = 6; i < argc; ++i) {
+WorkerParameters::WorkerParameters(int argc, char** argv, int first) {
+  for (int i = first; i < argc; ++i) {
     const std::string a = argv[i];
     const auto eq = a.find('=');
-    p[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
+    values[a.substr(0, eq)] = std::atof(a.c_str() + eq + 1);
   }
-  auto get = [&](const char* k, double d) { return p.count(k) ? p[k] : d; };
+}
+
+int runWorkerFrame(int argc, char** argv, const WorkerBody& body) {
+  if (argc < 6) return 2;
+  const std::string method = argv[2], in = argv[3], out = argv[4], log = argv[5];
+  const WorkerParameters params(argc, argv, 6);
   std::ofstream lf(log);
   try {
     const Positions input = readRaw(in);
-    Positions output;
+    double seconds = -1;
     const auto t0 = std::chrono::steady_clock::now();
+    const Positions output = body(method, input, params, lf, seconds);
+    if (seconds < 0) seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    writeRaw(out, output);
+    lf << "seconds " << seconds << "\n";
+    return 0;
+  } catch (const std::exception& e) {
+    lf << "error " << e.what() << "\n";
+    return 1;
+  }
+}
+
+int runBenchWorker(int argc, char** argv) {
+  return runWorkerFrame(argc, argv, [](const std::string& method, const Positions& input, const WorkerParameters& params,
+                                       std::ostream& lf, double&) {
+    auto get = [&](const char* k, double d) { return params.get(k, d); };
+    Positions output;
     if (method == "ours") {
       SimilarityDenoisingParameters q;
       q.radius = static_cast<float>(get("radius", 0));
@@ -160,14 +178,8 @@ int runBenchWorker(int argc, char** argv) {
     } else {
       throw InvalidParameter("method", method, "ours, bilateral or mls");
     }
-    const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    writeRaw(out, output);
-    lf << "seconds " << s << "\n";
-    return 0;
-  } catch (const std::exception& e) {
-    lf << "error " << e.what() << "\n";
-    return 1;
-  }
+    return output;
+  });
 }
 
 }  // namespace paps::cli

@@ -1,7 +1,9 @@
 #pragma once
 // Runs one method on one input in a child process, so that each row of a bench table gets
 // its own peak memory (wait4's ru_maxrss) and a crash in one method cannot take the bench down.
+#include <functional>
 #include <map>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -37,6 +39,25 @@ WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::stri
 /// Saves `input` to a scratch file and runs `paps bench-worker METHOD ...` on it.
 WorkerResult runWorker(const std::string& scratch_dir, const std::string& method,
                        const Positions& input, const std::map<std::string, double>& params);
+
+/// The key=value arguments of a worker command line, argv[first] onwards (spawnWorker's
+/// `params`).
+struct WorkerParameters {
+  std::map<std::string, double> values;
+  WorkerParameters(int argc, char** argv, int first);
+  double get(const char* key, double fallback) const {
+    const auto it = values.find(key);
+    return it == values.end() ? fallback : it->second;
+  }
+};
+
+/// The frame of a worker command `paps CMD METHOD IN OUT LOG key=value...`: reads IN, runs
+/// `body`, writes the positions it returns to OUT, and to LOG what `body` wrote there, then
+/// "seconds S" (the wall time of `body`, or the time it set in `seconds` when >= 0) or
+/// "error MESSAGE". Returns the process exit code.
+using WorkerBody = std::function<Positions(const std::string& method, const Positions& input,
+                                           const WorkerParameters& params, std::ostream& log, double& seconds)>;
+int runWorkerFrame(int argc, char** argv, const WorkerBody& body);
 
 /// Entry of the hidden `paps bench-worker` command.
 int runBenchWorker(int argc, char** argv);

@@ -193,17 +193,35 @@ TEST(QuadricSuperResolution, BadInput) {
   p = {};
   p.similarity_radius = INFINITY;
   EXPECT_THROW(p.validate(), InvalidParameter);
-  // Collinear points: every fit is ill-posed and counted as such, and the run still answers.
+  // Only collinear points: no surface anywhere, a clear error (a plane through a line has no
+  // orientation; the run used to write a ribbon of arbitrary orientation).
   Positions line;
   for (int i = 0; i < 200; ++i) line.emplace_back(0.01f * i, 0.f, 0.f);
-  QuadricSuperResolutionReport r;
   QuadricSuperResolutionParameters q;
   q.patch_radius = 0.05f;
-  const Positions out = superResolveQuadric({line}, q, &r);
-  std::printf("line: %zu output, %zu flat, %zu ill-posed, %zu patches\n", out.size(), r.flat_fits, r.ill_posed_fits, r.patches);
+  q.widen_sparse_fits = false;
+  try {
+    superResolveQuadric({line}, q);
+    ADD_FAILURE() << "points on a line were super-resolved";
+  } catch (const InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("lines"), std::string::npos) << e.what();
+  }
+  q.widen_sparse_fits = true;  // widening finds no surface either
+  EXPECT_THROW(superResolveQuadric({line}, q), InvalidInput);
+  // A wire beside a surface: its fits are ill-posed and counted, and the run answers.
+  Positions wired = line;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) wired.emplace_back(0.01f * i, 0.5f + 0.01f * j, 0.f);
+  QuadricSuperResolutionReport r;
+  q.widen_sparse_fits = false;
+  q.factor = 2;
+  const Positions out = superResolveQuadric({wired}, q, &r);
+  std::printf("wire beside a plane: %zu output, %zu flat, %zu ill-posed, %zu patches\n", out.size(), r.flat_fits,
+              r.ill_posed_fits, r.patches);
+  EXPECT_EQ(out.size(), 2 * wired.size());
   EXPECT_EQ(r.ill_posed_fits, line.size());
-  EXPECT_EQ(r.flat_fits, 0u);
-  EXPECT_EQ(r.plane_fallbacks, line.size());
+  EXPECT_EQ(r.flat_fits, 1600u);
+  EXPECT_EQ(r.plane_fallbacks, wired.size());
 }
 
 // Flat parts are told apart from ill-posed fits: a plane gives flat fits only, a sphere none.

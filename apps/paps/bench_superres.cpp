@@ -213,6 +213,10 @@ void runScanLines(const std::string& out_dir, const std::vector<std::string>& me
   double best = INFINITY;
   std::string best_name;
   for (const auto& [k, v] : peer) if (v < best) { best = v; best_name = k; }
+  if (peer.empty()) {
+    std::printf("  -> no ratio: no peer in --methods\n");
+    return;
+  }
   std::printf("  -> to the ground, QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f; qsr-narrow / best = %.3f; "
               "input / best = %.3f\n",
               best_name.c_str(), g_qsr / best, g_narrow / best, g_in / best);
@@ -397,7 +401,10 @@ int runBenchSuperres(int argc, char** argv) {
       double best = INFINITY;
       std::string best_name;
       for (const auto& [k, v] : best_peer) if (v < best) { best = v; best_name = k; }
-      std::printf("  -> QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f\n", best_name.c_str(), e_qsr / best);
+      if (best_peer.empty() || !(e_qsr > 0))
+        std::printf("  -> no ratio: QSR and a peer were not both in --methods\n");
+      else
+        std::printf("  -> QSR / best of APSS, RIMLS, PCL MLS (%s) = %.3f\n", best_name.c_str(), e_qsr / best);
       if (!std::isnan(e_adapt)) std::printf("  -> QSR-adapt (noise-adaptive kernel) / best = %.3f\n", e_adapt / best);
       if (!std::isnan(e_seeds))
         std::printf("  -> seeds-only (control: no surface, no denoising) / best = %.3f\n", e_seeds / best);

@@ -53,7 +53,7 @@ std::string fmt(const char* f, double v) {
 
 std::string status(const WorkerResult& w) {
   if (w.ok) return "ok";
-  return w.message.rfind("timed out", 0) == 0 ? "timeout" : "error";
+  return w.timed_out ? "timeout" : "error";
 }
 
 void printRun(const Run& r) {
@@ -142,36 +142,40 @@ int runBenchFiles(int argc, char** argv) {
       runs.back().w.output.shrink_to_fit();
       return runs.back().w;
     };
+    // One raw copy of the input for every worker: the superres worker reads it by its name
+    // (sr_in0.bin of the scratch directory), the others take it as IN.
+    const std::string in = out_dir + "/sr_in0.bin", out = out_dir + "/worker_out.bin", log = out_dir + "/worker_log.txt";
+    writeRaw(in, pts);
+    auto run = [&](const char* command, const std::string& method, const std::map<std::string, double>& p) {
+      if (std::string(command) == "bench-worker-sr")
+        return spawnWorker({command, method, out_dir, "1"}, p, out_dir + "/sr_out.bin", out_dir + "/sr_log.txt");
+      return spawnWorker({command, method, in, out, log}, p, out, log);
+    };
     for (const auto& stage : stages) {
       const std::size_t first = runs.size();
       if (stage == "denoise") {
-        const WorkerResult ours = add(stage, "ours", "default", runWorker(out_dir, "ours", pts, {}));
+        const WorkerResult ours = add(stage, "ours", "default", run("bench-worker", "ours", {}));
         const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
         const std::string at = (ours.ok ? "radius of ours " : "30-neighbour radius ") + fmt("%.4g", r);
-        add(stage, "pcl-mls", at, runWorker(out_dir, "mls", pts, {{"radius", r}, {"order", 2}, {"threads", 2}}));
-        add(stage, "bilateral", at, runWorker(out_dir, "bilateral", pts, {{"radius", r}}));
+        add(stage, "pcl-mls", at, run("bench-worker", "mls", {{"radius", r}, {"order", 2}, {"threads", 2}}));
+        add(stage, "bilateral", at, run("bench-worker", "bilateral", {{"radius", r}}));
       } else if (stage == "superres") {
-        writeRaw(out_dir + "/sr_in0.bin", pts);
         const std::map<std::string, double> p{{"count", factor * static_cast<double>(finite)}, {"radius", r30}};
         for (const std::string m : {"qsr", "apss", "rimls", "pcl-mls-plane"})
-          add(stage, m, m == "pcl-mls-plane" ? "radius " + fmt("%.4g", r30) : "default",
-              spawnWorker({"bench-worker-sr", m, out_dir, "1"}, p, out_dir + "/sr_out.bin", out_dir + "/sr_log.txt"));
+          add(stage, m, m == "pcl-mls-plane" ? "radius " + fmt("%.4g", r30) : "default", run("bench-worker-sr", m, p));
       } else {
-        const std::string in = out_dir + "/curv_in.bin", out = out_dir + "/curv_out.bin", log = out_dir + "/curv_log.txt";
-        writeRaw(in, pts);
-        const WorkerResult ours = add(stage, "wavejets", "default", spawnWorker({"bench-worker-curv", "wavejets", in, out, log}, {}, out, log));
+        const WorkerResult ours = add(stage, "wavejets", "default", run("bench-worker-curv", "wavejets", {}));
         const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
         const std::string at = (ours.ok ? "R_phi of ours " : "30-neighbour radius ") + fmt("%.4g", r);
-        add(stage, "pcl", at, spawnWorker({"bench-worker-curv", "pcl", in, out, log}, {{"radius", r}}, out, log));
+        add(stage, "pcl", at, run("bench-worker-curv", "pcl", {{"radius", r}}));
 #ifdef PAPS_HAVE_CGAL
-        add(stage, "cgal", at + ", order 4", spawnWorker({"bench-worker-curv", "cgal", in, out, log}, {{"radius", r}}, out, log));
+        add(stage, "cgal", at + ", order 4", run("bench-worker-curv", "cgal", {{"radius", r}}));
 #endif
       }
       printRatios(runs, first);
     }
   }
-  for (const char* scratch : {"worker_in.bin", "worker_out.bin", "worker_log.txt", "sr_in0.bin", "sr_out.bin",
-                              "sr_log.txt", "curv_in.bin", "curv_out.bin", "curv_log.txt"})
+  for (const char* scratch : {"worker_out.bin", "worker_log.txt", "sr_in0.bin", "sr_out.bin", "sr_log.txt"})
     std::remove((out_dir + "/" + scratch).c_str());
   const std::string csv_path = out_dir + "/files.csv";
   {

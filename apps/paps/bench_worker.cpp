@@ -85,8 +85,8 @@ WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::stri
     else if (line.rfind("chosen ", 0) == 0) r.chosen = line.substr(7);
   }
   r.ok = WIFEXITED(status) && WEXITSTATUS(status) == 0;
-  if (!r.ok && WIFSIGNALED(status) && WTERMSIG(status) == SIGALRM)
-    r.message = "timed out after " + std::to_string(g_limits.seconds) + " s";
+  r.timed_out = !r.ok && WIFSIGNALED(status) && WTERMSIG(status) == SIGALRM;
+  if (r.timed_out) r.message = "timed out after " + std::to_string(g_limits.seconds) + " s";
   if (!r.ok && r.message.empty()) r.message = "worker died (status " + std::to_string(status) + ")";
   if (r.ok) r.output = readRaw(out_path);
   return r;

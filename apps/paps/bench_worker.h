@@ -13,6 +13,7 @@ namespace paps::cli {
 
 struct WorkerResult {
   bool ok = false;
+  bool timed_out = false;  // stopped by WorkerLimits::seconds
   double seconds = 0;      // algorithm wall time, measured in the child around the call only
   double peak_mb = 0;      // peak resident memory of the child
   std::string message;     // child's error line when !ok

@@ -272,7 +272,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   std::vector<std::uint8_t> valid(total * B, 0), usable(total, 0);
   std::vector<int> scan_of(total);
   std::vector<std::uint8_t> thin_ball(total, 0);
-  std::size_t flat = 0, ill_posed = 0, widened = 0, thin_balls = 0, collinear = 0, finite = 0;
+  std::size_t flat = 0, ill_posed = 0, widened = 0, thin_balls = 0, collinear = 0, fitted = 0;
   for (std::size_t s = 0; s < sc.size(); ++s) {
     const Positions& P = *sc[s].points;
     for (std::size_t i = 0; i < P.size(); ++i) scan_of[sc[s].offset + i] = static_cast<int>(s);
@@ -288,7 +288,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     const std::vector<int> first = params.widen_sparse_fits ? exactDuplicateRepresentatives(P) : std::vector<int>();
     const DistinctSearch distinct(P, *sc[s].nh.index, params.widen_sparse_fits ? first : std::vector<int>());
     const int widen_to = params.target_neighbours;
-#pragma omp parallel reduction(+ : flat, ill_posed, widened, thin_balls, collinear, finite)
+#pragma omp parallel reduction(+ : flat, ill_posed, widened, thin_balls, collinear, fitted)
     {
       std::vector<int> idx, kept;
       std::vector<float> d2;
@@ -359,7 +359,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
           ++flat;
         else if (fits[gi].isPlaneFallback())
           ++ill_posed;
-        ++finite;
+        ++fitted;
         collinear += fits[gi].status == QuadricFit::Status::Degenerate;
         if (!fits[gi].frame.valid()) continue;
         const int nv = lr.describe(fits[gi], P, g.begin(i), g.count(i), &desc[gi * B], &valid[gi * B]);
@@ -373,7 +373,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   // No surface anywhere: every ball, widened as far as it goes, is collinear or one position
   // (points on lines, piles of copies). A plane through a line has no orientation; APSS and
   // RIMLS refuse such clouds too.
-  if (finite > 0 && collinear == finite)
+  if (fitted > 0 && collinear == fitted)
     throw InvalidInput("every ball of the patch radius " + detail::toString(R) +
                        " m holds only collinear or coincident points (no surface anywhere): the cloud is points on "
                        "lines or piles of copies; give a larger patch radius (--radius) if it is a surface sampled in lines");

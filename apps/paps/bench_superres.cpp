@@ -54,6 +54,9 @@ const char* kUsage =
     "                   median of its ratio to pcl-mls-plane in the same round, and CPU times\n"
     "  --speed-only     skip the error table (only the speed test)\n"
     "  --quick          100000 dense points, speed test on 30000 (a smoke run)\n"
+    "  --normals        instead of the tables below: the output normals of qsr, apss, rimls and\n"
+    "                   pcl-mls-plane (setComputeNormals; those of them in --methods) against the true\n"
+    "                   surface's, per shape and noise (writes superres_normals.csv)\n"
     "  --shapes LIST    comma-separated subset of engraved-plane,rs1,scan-lines (default all three;\n"
     "                   scan-lines: a simulated LiDAR pass over a wavy ground, every return stored\n"
     "                   twice, 5 mm range noise, upsampled x4; errors to the analytic ground)\n"
@@ -79,15 +82,20 @@ SrResult runChild(const std::string& dir, const std::string& method, const std::
                      dir + "/sr_out.bin", dir + "/sr_log.txt");
 }
 
-Positions pclMlsUpsample(const Positions& input, const std::string& mode, double radius, std::size_t target) {
+// PCL's MovingLeastSquares upsampling (order 2, 2 threads) to `target` points; with `normals`,
+// setComputeNormals and the normals of the kept points.
+template <typename PointOut>
+Positions pclMlsUpsampleAs(const Positions& input, const std::string& mode, double radius, std::size_t target,
+                           Normals* normals) {
+  using Mls = pcl::MovingLeastSquares<pcl::PointXYZ, PointOut>;
   auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   writePositions(input, *cloud);
-  pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ> mls;
+  Mls mls;
   mls.setInputCloud(cloud);
   mls.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
   mls.setPolynomialOrder(2);
   mls.setSearchRadius(radius);
-  mls.setComputeNormals(false);
+  mls.setComputeNormals(normals != nullptr);
   mls.setNumberOfThreads(2);
   const double factor = static_cast<double>(target) / std::max<std::size_t>(1, countFinite(input));
   const SpatialIndex index(input);
@@ -104,7 +112,7 @@ Positions pclMlsUpsample(const Positions& input, const std::string& mode, double
   mean /= std::max(1, samples);
   const double s0 = radius * std::sqrt(M_PI / std::max(1.0, mean));
   if (mode == "plane") {
-    mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::SAMPLE_LOCAL_PLANE);
+    mls.setUpsamplingMethod(Mls::SAMPLE_LOCAL_PLANE);
     // Grid of step t on a disc of radius 0.6 s0 around each input point: 5 points at x4, 9 at
     // x10, but at x2 (t = 0.71 s0) only the centre, i.e. no upsampling; there the disc reaches
     // the first ring (5 points, then the seeded subset below keeps the count).
@@ -112,23 +120,50 @@ Positions pclMlsUpsample(const Positions& input, const std::string& mode, double
     mls.setUpsamplingRadius(std::max(0.5 * s0 * 1.2, factor > 1 ? 1.001 * step : 0.0));
     mls.setUpsamplingStepSize(step);
   } else if (mode == "random") {
-    mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::RANDOM_UNIFORM_DENSITY);
+    mls.setUpsamplingMethod(Mls::RANDOM_UNIFORM_DENSITY);
     mls.setPointDensity(static_cast<int>(std::lround(factor * mean)));
   } else {
-    mls.setUpsamplingMethod(pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ>::VOXEL_GRID_DILATION);
+    mls.setUpsamplingMethod(Mls::VOXEL_GRID_DILATION);
     mls.setDilationVoxelSize(static_cast<float>(s0 / std::sqrt(factor)));
     mls.setDilationIterations(1);
   }
-  pcl::PointCloud<pcl::PointXYZ> result;
+  pcl::PointCloud<PointOut> result;
   mls.process(result);
-  Positions out = positionsOf(result);
-  out.erase(std::remove_if(out.begin(), out.end(), [](const Eigen::Vector3f& p) { return !isFinite(p); }), out.end());
+  Positions out;
+  if (normals) normals->clear();
+  for (const auto& p : result) {
+    if (!isFinite(p.getVector3fMap())) continue;
+    out.push_back(p.getVector3fMap());
+    if constexpr (detail::HasNormal<PointOut>::value) if (normals) normals->push_back(p.getNormalVector3fMap());
+  }
   if (out.size() > target) {  // the same count as the others: a seeded random subset
     Random rng(3);
-    for (std::size_t i = out.size(); i > 1; --i) std::swap(out[i - 1], out[rng.below(i)]);
+    for (std::size_t i = out.size(); i > 1; --i) {
+      const std::size_t j = rng.below(i);
+      std::swap(out[i - 1], out[j]);
+      if (normals) std::swap((*normals)[i - 1], (*normals)[j]);
+    }
     out.resize(target);
+    if (normals) normals->resize(target);
   }
   return out;
+}
+
+Positions pclMlsUpsample(const Positions& input, const std::string& mode, double radius, std::size_t target,
+                         Normals* normals = nullptr) {
+  return normals ? pclMlsUpsampleAs<pcl::PointNormal>(input, mode, radius, target, normals)
+                 : pclMlsUpsampleAs<pcl::PointXYZ>(input, mode, radius, target, nullptr);
+}
+
+// Scan s of a bench row: 10% of the dense points (s = 0) or of another dense sampling of the
+// mesh (the other scans of qsr-4scans), with Gaussian noise of `noise` x the diagonal.
+Positions benchScan(const TriangleMesh& mesh, const Positions& dense, int s, double noise) {
+  Positions sub;
+  Random rng(100 + s);
+  const Positions& src = s == 0 ? dense : synthetic::sampleMesh(mesh, dense.size(), 50 + s);
+  for (const auto& p : src) if (rng.uniform() < 0.1) sub.push_back(p);
+  synthetic::addGaussianNoise(sub, static_cast<float>(noise), 11 + s);
+  return sub;
 }
 
 // RMSE from the dense points to their nearest output point.
@@ -222,6 +257,86 @@ void runScanLines(const std::string& out_dir, const std::vector<std::string>& me
               best_name.c_str(), g_qsr / best, g_narrow / best, g_in / best);
 }
 
+// The normals each method gives its output points (QSR: the SR surface's; APSS, RIMLS: their
+// fit's gradient; PCL MLS SAMPLE_LOCAL_PLANE with setComputeNormals: its local polynomial's),
+// against the mesh's vertex normals interpolated at the closest point of the mesh. In process (the
+// workers carry positions only), same inputs and output count as the error table.
+void runNormals(const std::string& name, const TriangleMesh& mesh, const std::vector<double>& noises,
+                const std::vector<std::string>& methods, std::size_t n_dense, std::ofstream& csv) {
+  const Positions dense = synthetic::sampleMesh(mesh, n_dense, 7);
+  const PointToMeshDistance truth(mesh);
+  // Vertex normals: the area-weighted mean of the normals of the triangles around each vertex
+  // (a scanned mesh's own triangles are noisy: rs1's differ from them by 9 degrees RMS).
+  Normals vn(mesh.vertices.size(), Eigen::Vector3f::Zero());
+  for (const auto& tri : mesh.triangles) {
+    const Eigen::Vector3f n = (mesh.vertices[tri[1]] - mesh.vertices[tri[0]]).cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
+    for (int k = 0; k < 3; ++k) vn[tri[k]] += n;
+  }
+  for (auto& n : vn) n = n.norm() > 0 ? Eigen::Vector3f(n.normalized()) : n;
+  for (double noise : noises) {
+    const Positions scan = benchScan(mesh, dense, 0, noise);
+    const SpatialIndex index(scan);
+    const float r = radiusForNeighbourCount(scan, index, 30, NeighbourCountStatistic::Median);
+    char noise_s[16];
+    std::snprintf(noise_s, sizeof noise_s, "%.2f%%", noise * 100);
+    for (const std::string m : {"qsr", "apss", "rimls", "pcl-mls-plane"}) {
+      if (std::find(methods.begin(), methods.end(), m) == methods.end()) continue;
+      Normals normals;
+      Positions out;
+      const auto t0 = std::chrono::steady_clock::now();
+      try {
+        if (m == "qsr") {
+          QuadricSuperResolutionParameters q;
+          q.output_count = n_dense;
+          out = superResolveQuadric({scan}, q, nullptr, {}, &normals);
+        } else if (m == "pcl-mls-plane") {
+          out = pclMlsUpsample(scan, "plane", r, n_dense, &normals);
+        } else {
+          MlsUpsamplingParameters q;
+          q.output_count = n_dense;
+          out = upsampleMls(scan, m == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, q, nullptr, {}, &normals);
+        }
+      } catch (const std::exception& e) {
+        std::printf("%-15s %-6s %-15s failed: %s\n", name.c_str(), noise_s, m.c_str(), e.what());
+        continue;
+      }
+      const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      Normals want(out.size(), Eigen::Vector3f::Constant(NAN));
+      Normals got(out.size(), Eigen::Vector3f::Constant(NAN));
+#pragma omp parallel for schedule(static)
+      for (std::int64_t i = 0; i < static_cast<std::int64_t>(out.size()); ++i) {
+        int t = -1;
+        Eigen::Vector3f c;
+        truth.distance(out[i], &c, &t);
+        if (t < 0 || !isFinite(normals[i])) continue;
+        // The vertex normals interpolated at the closest point (barycentric), as a shaded mesh.
+        const auto& tri = mesh.triangles[t];
+        const Eigen::Vector3f a = mesh.vertices[tri[0]], e1 = mesh.vertices[tri[1]] - a, e2 = mesh.vertices[tri[2]] - a;
+        const Eigen::Vector3f n = e1.cross(e2);
+        const float area2 = n.squaredNorm();
+        if (!(area2 > 0)) continue;
+        const float w1 = (c - a).cross(e2).dot(n) / area2, w2 = e1.cross(c - a).dot(n) / area2;
+        const Eigen::Vector3f v = (1 - w1 - w2) * vn[tri[0]] + w1 * vn[tri[1]] + w2 * vn[tri[2]];
+        want[i] = v.norm() > 0 ? Eigen::Vector3f(v.normalized()) : Eigen::Vector3f(n.normalized());
+        got[i] = normals[i];
+      }
+      // Orientation: the share of normals on the side of the truth's, up to one global sign
+      // (a method that orients by propagation may pick either side for the whole cloud).
+      std::size_t agree = 0, counted = 0;
+      for (std::size_t i = 0; i < out.size(); ++i)
+        if (isFinite(got[i]) && isFinite(want[i])) { ++counted; agree += got[i].dot(want[i]) > 0; }
+      const double oriented = counted ? std::max(agree, counted - agree) / double(counted) : NAN;
+      const ErrorStats a = summarize(normalAngleErrors(got, want, true));
+      const std::size_t missing = out.size() - counted;
+      std::printf("%-15s %-6s %-15s %9zu %9.2f %11.3f %11.3f %11.4f %9zu\n", name.c_str(), noise_s, m.c_str(),
+                  out.size(), seconds, a.rmse, a.p95, oriented, missing);
+      std::fflush(stdout);
+      csv << name << "," << noise << "," << m << "," << out.size() << "," << seconds << "," << a.rmse << "," << a.p95
+          << "," << oriented << "," << missing << "\n";
+    }
+  }
+}
+
 }  // namespace
 
 int runSuperresWorker(int argc, char** argv) {
@@ -292,9 +407,10 @@ int runSuperresWorker(int argc, char** argv) {
 }
 
 int runBenchSuperres(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "speed-only"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "speed-only", "normals"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "samples", "points", "speed", "speed-repeat", "speed-only", "quick", "shapes", "noises", "methods"});
+  a.allowOnly({"out", "samples", "points", "speed", "speed-repeat", "speed-only", "quick", "shapes", "noises", "methods",
+               "normals"});
   const bool speed_only = a.has("speed-only");
   const int speed_repeat = a.integer("speed-repeat", 1);
   if (speed_repeat < 1 || speed_repeat > 100)
@@ -340,6 +456,19 @@ int runBenchSuperres(int argc, char** argv) {
   } else if (std::filesystem::exists(rs1)) datasets.push_back({"rs1", loadTriangleMesh(rs1), false});
   else std::fprintf(stderr, "warning: %s missing (scripts/fetch_samples.sh): rs1 rows skipped\n", rs1.c_str());
 
+  if (a.has("normals")) {
+    std::ofstream ncsv(out_dir + "/superres_normals.csv");
+    ncsv << "dataset,noise,method,output,seconds,angle_rmse_deg,angle_p95_deg,oriented,without_normal\n";
+    std::printf("bench superres --normals: dense %zu points per shape, input 10%%, output normals against the mesh's\n"
+                "vertex normals at the closest point (degrees, orientation-blind); oriented = share on one side of\n"
+                "the truth's\n",
+                n_dense);
+    std::printf("%-15s %-6s %-15s %9s %9s %11s %11s %11s %9s\n", "dataset", "noise", "method", "output", "time(s)",
+                "angle RMS", "angle p95", "oriented", "no normal");
+    for (const auto& ds : datasets) runNormals(ds.name, ds.mesh, noises, methods, n_dense, ncsv);
+    std::printf("wrote %s/superres_normals.csv\n", out_dir.c_str());
+    return 0;
+  }
   // apss and rimls fit once per input point (their default); the -refit rows refit at every
   // output point.
   std::ofstream csv(out_dir + "/superres.csv");
@@ -354,14 +483,7 @@ int runBenchSuperres(int argc, char** argv) {
     const float diag = boundingBoxDiagonal(dense);
     for (double noise : noises) {
       std::vector<Positions> scans;
-      for (int s = 0; s < (ds.multi ? 4 : 1); ++s) {
-        Positions sub;
-        Random rng(100 + s);
-        const Positions& src = s == 0 ? dense : synthetic::sampleMesh(ds.mesh, n_dense, 50 + s);
-        for (const auto& p : src) if (rng.uniform() < 0.1) sub.push_back(p);
-        synthetic::addGaussianNoise(sub, static_cast<float>(noise), 11 + s);
-        scans.push_back(std::move(sub));
-      }
+      for (int s = 0; s < (ds.multi ? 4 : 1); ++s) scans.push_back(benchScan(ds.mesh, dense, s, noise));
       const SpatialIndex index(scans[0]);
       const float r = radiusForNeighbourCount(scans[0], index, 30, NeighbourCountStatistic::Median);
       const double e_in = nearestRmse(dense, scans[0]);

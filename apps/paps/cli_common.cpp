@@ -15,6 +15,10 @@
 
 #include <omp.h>
 
+#include <pcl/conversions.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 
 namespace paps::cli {
@@ -154,6 +158,44 @@ void printRead(const std::string& path, const Positions& points) {
     std::fprintf(stderr, "warning: coordinates reach %g, where float steps are %g, a tenth or more of the points' "
                  "typical spacing (about %g): the positions are quantized; save the cloud with an offset\n",
                  double(largest), step, spacing);
+}
+
+bool hasField(const pcl::PCLPointCloud2& c, const char* name) {
+  for (const auto& f : c.fields)
+    if (f.name == name) return true;
+  return false;
+}
+
+void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
+  pcl::PointCloud<pcl::Normal> nc;
+  nc.resize(n.size());
+  for (std::size_t i = 0; i < n.size(); ++i) {
+    nc[i].getNormalVector3fMap() = n[i];
+    nc[i].curvature = 0.f;
+  }
+  if (!hasField(cloud, "normal_x")) {
+    pcl::PCLPointCloud2 nb;
+    pcl::toPCLPointCloud2(nc, nb);
+    nb.fields.erase(std::remove_if(nb.fields.begin(), nb.fields.end(),
+                                   [](const pcl::PCLPointField& f) { return f.name == "curvature"; }),
+                    nb.fields.end());
+    cloud = appendFields(cloud, nb);  // in the input's width x height
+    return;
+  }
+  std::size_t off[3] = {0, 0, 0};
+  for (const auto& f : cloud.fields) {
+    if (f.datatype != pcl::PCLPointField::FLOAT32 &&
+        (f.name == "normal_x" || f.name == "normal_y" || f.name == "normal_z"))
+      throw InvalidInput("normal fields of the input are not float32");
+    if (f.name == "normal_x") off[0] = f.offset;
+    if (f.name == "normal_y") off[1] = f.offset;
+    if (f.name == "normal_z") off[2] = f.offset;
+  }
+  for (std::size_t i = 0; i < n.size(); ++i)
+    for (int k = 0; k < 3; ++k) {
+      const float v = n[i][k];
+      std::memcpy(&cloud.data[i * cloud.point_step + off[k]], &v, sizeof(float));
+    }
 }
 
 }  // namespace paps::cli

@@ -5,6 +5,8 @@
 #include <string>
 #include <vector>
 
+#include <pcl/PCLPointCloud2.h>
+
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -52,5 +54,12 @@ void printRead(const std::string& path, const Positions& points);
 /// through OMP_NUM_THREADS); it is taken out of argv before the command parses its options.
 /// Throws InvalidParameter on a count outside [1, 4096].
 void takeThreadsOption(int& argc, char** argv);
+
+/// Whether the cloud has a field of that name.
+bool hasField(const pcl::PCLPointCloud2& c, const char* name);
+
+/// Writes one normal per point into float32 normal_x/y/z, appending the three fields (no
+/// curvature) when the cloud has none. Throws InvalidInput when its normal fields are not float32.
+void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n);
 
 }  // namespace paps::cli

@@ -19,7 +19,11 @@ const char* kSuperresUsage =
     "usage: paps superres IN [IN2 ...] OUT --factor F [options]\n"
     "  IN                     the scan to super-resolve (.pcd or .ply)\n"
     "  IN2 ...                other scans of the same object, registered (sources of similar patches)\n"
-    "  OUT                    .pcd or .ply, x y z only, factor x the finite points of IN\n"
+    "  OUT                    .pcd or .ply, x y z (and normal_x/y/z with --normals), factor x the\n"
+    "                         finite points of IN\n"
+    "  --normals              also write the normal of the fitted surface at each output point\n"
+    "                         (QSR: the SR surface's; APSS/RIMLS: the gradient of their fit),\n"
+    "                         oriented as the input's normals propagated over the scan\n"
     "  --factor F             output count / input count (default 4, 1 to 1000)\n"
     "  --count N              exact output count (overrides --factor)\n"
     "  --method M             qsr (default), apss or rimls\n"
@@ -58,11 +62,11 @@ const char* kSuperresUsage =
 }  // namespace
 
 int runSuperres(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt", "normals"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit", "max-neighbours", "seed-disc", "thin-disc"});
+               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   a.requireOutputApart();
@@ -84,6 +88,8 @@ int runSuperres(int argc, char** argv) {
   if (count > 4000000000u) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   Positions out;
+  Normals normals;
+  Normals* const normals_out = a.has("normals") ? &normals : nullptr;
   if (method == "qsr") {
     QuadricSuperResolutionParameters p;
     p.factor = static_cast<float>(a.number("factor", p.factor));
@@ -109,7 +115,7 @@ int runSuperres(int argc, char** argv) {
     p.validate();
     readScans();
     QuadricSuperResolutionReport r;
-    out = superResolveQuadric(scans, p, &r, progress);
+    out = superResolveQuadric(scans, p, &r, progress, normals_out);
     std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
                 p.patch_radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.similarity_radius,
                 p.similarity_radius > 0 ? "" : " (chosen)");
@@ -169,7 +175,7 @@ int runSuperres(int argc, char** argv) {
     readScans();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     MlsUpsamplingReport r;
-    out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress);
+    out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress, normals_out);
     std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,
                 p.radius > 0 ? "" : " (chosen)", r.disc_radius);
     if (r.capped)
@@ -184,6 +190,7 @@ int runSuperres(int argc, char** argv) {
     writePositions(out, xyz);
     pcl::toPCLPointCloud2(xyz, cloud);
   }
+  if (normals_out) setNormals(cloud, normals);
   saveCloudAtomic(out_path, cloud);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());
   return 0;

@@ -6,6 +6,8 @@
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
 //   paps_test_cloud_tool permute IN.pcd OUT.pcd (the same points in a seeded shuffled order)
 //   paps_test_cloud_tool same-points A.pcd B.pcd (the same points, byte for byte, in any order)
+//   paps_test_cloud_tool normals OUT.pcd MAX_DEGREES (unit normals in normal_x/y/z, all on one
+//     side of the written surface's and within MAX_DEGREES of it at every point)
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
 #include <cmath>
 #include <cstdint>
@@ -205,6 +207,36 @@ int samePoints(const std::string& a_path, const std::string& b_path) {
   return 0;
 }
 
+// OUT (an upsampled `write` surface) has a unit normal per point, within max_degrees of the
+// surface's own normal (orientation-blind), and all of them on one side of it.
+int normals(const std::string& path, double max_degrees) {
+  pcl::PointCloud<pcl::PointNormal> cloud;
+  pcl::PCLPointCloud2 blob;
+  if (pcl::io::loadPCDFile(path, blob) != 0) return fail("cannot read " + path);
+  for (const char* f : {"normal_x", "normal_y", "normal_z"})
+    if (std::none_of(blob.fields.begin(), blob.fields.end(), [f](const pcl::PCLPointField& x) { return x.name == f; }))
+      return fail(path + " has no field " + f);
+  pcl::fromPCLPointCloud2(blob, cloud);
+  if (cloud.empty()) return fail(path + " is empty");
+  std::size_t up = 0;
+  double worst = 0;
+  for (const auto& p : cloud) {
+    const Eigen::Vector3f n = p.getNormalVector3fMap();
+    if (!std::isfinite(n.norm()) || std::abs(n.norm() - 1.f) > 1e-3f) return fail("a normal is not a unit vector");
+    const float h = 1e-3f;  // the surface's normal by central differences
+    const Eigen::Vector3f t((surface(p.x + h, p.y) - surface(p.x - h, p.y)) / (2 * h),
+                            (surface(p.x, p.y + h) - surface(p.x, p.y - h)) / (2 * h), 1.f);
+    const float c = n.dot(Eigen::Vector3f(-t.x(), -t.y(), 1.f).normalized());
+    up += c > 0;
+    worst = std::max(worst, std::acos(std::min(1.f, std::abs(c))) * 180.0 / M_PI);
+  }
+  if (up != 0 && up != cloud.size())
+    return fail(std::to_string(up) + " of " + std::to_string(cloud.size()) + " normals point up: not one orientation");
+  if (worst > max_degrees) return fail("a normal is " + std::to_string(worst) + " degrees off the surface's");
+  std::printf("%zu unit normals, one orientation, at most %.2f degrees off the surface's\n", cloud.size(), worst);
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -214,6 +246,7 @@ int main(int argc, char** argv) {
   if (mode == "unhex" && argc == 4) return unhex(argv[2], argv[3]);
   if (mode == "permute" && argc == 4) return permute(argv[2], argv[3]);
   if (mode == "same-points" && argc == 4) return samePoints(argv[2], argv[3]);
+  if (mode == "normals" && argc == 4) return normals(argv[2], std::atof(argv[3]));
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

@@ -268,6 +268,27 @@ elseif(CASE STREQUAL "superres_denoise_choice")
   expect_one_error_line("denoise")
   run_paps(superres ${input} ${output} --denoise on --factor 2 --quiet)
   expect_success_saying("denoised first")
+elseif(CASE STREQUAL "superres_normals")
+  # --normals: every method writes a unit normal per output point, close to the surface's
+  # and with one orientation (checked by the cloud tool against the written surface).
+  write_input(900)
+  foreach(method qsr apss rimls)
+    file(REMOVE ${output})
+    run_paps(superres ${input} ${output} --method ${method} --factor 2 --normals --quiet)
+    expect_success_saying("wrote")
+    execute_process(COMMAND ${TOOL} normals ${output} 15 RESULT_VARIABLE crc OUTPUT_VARIABLE cout ERROR_VARIABLE cerr)
+    message(STATUS "${method}: ${cout}${cerr}")
+    if(NOT crc STREQUAL "0")
+      message(FATAL_ERROR "${method} --normals: ${cerr}")
+    endif()
+  endforeach()
+  # Without --normals the output stays x y z.
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --factor 2 --quiet)
+  execute_process(COMMAND ${TOOL} normals ${output} 15 RESULT_VARIABLE crc ERROR_VARIABLE cerr)
+  if(crc STREQUAL "0" OR NOT cerr MATCHES "no field normal_x")
+    message(FATAL_ERROR "an output without --normals has normals: ${cerr}")
+  endif()
 elseif(CASE STREQUAL "superres_seed_disc")
   # The seed disc in mean input spacings: printed by QSR, one error line when out of range,
   # for QSR and for APSS (whose own parameter is a scale of its default disc).

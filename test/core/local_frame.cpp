@@ -342,6 +342,53 @@ TEST(OrientNormalsByPropagation, SeparatedLargeComponentsEachUpwards) {
   EXPECT_EQ(bad, 0u);
 }
 
+// A scan seen from above whose highest points are on a vertical rim: the lower half of a unit
+// sphere (a bowl, open at z = 1... here the equator at z = 0), every normal pointing up into
+// it but for the highest point, whose normal is horizontal with a touch of noise pointing up
+// and out. Seeding at that point alone (its normal up) turned the whole bowl down; the bowl's
+// normals point up on the whole, and it is turned up. `copies` bowls side by side, each its own component.
+Shape rimmedBowls(int count, int copies) {
+  Positions p;
+  for (int b = 0; b < copies; ++b) {
+    const Positions sphere = fibonacciSphere(2 * count, 1.f, Eigen::Vector3f(3.f * b, 0, 0));
+    for (const auto& q : sphere)
+      if (q.z() < 0) p.push_back(q);
+  }
+  Shape s = withRadiusGraph(p, 4.f / std::sqrt(static_cast<float>(count)));  // about 1.6 spacings
+  for (std::size_t i = 0; i < s.points.size(); ++i) {
+    const Eigen::Vector3f c(3.f * std::round(s.points[i].x() / 3.f), 0, 0);
+    s.normals[i] = (c - s.points[i]).normalized();  // into the bowl: up
+  }
+  for (int b = 0; b < copies; ++b) {
+    // The bowl's highest point: its rim normal, horizontal, noise tilting it up and out.
+    std::size_t hi = 0;
+    bool any = false;
+    for (std::size_t i = 0; i < s.points.size(); ++i)
+      if (std::abs(s.points[i].x() - 3.f * b) < 1.5f && (!any || s.points[i].z() > s.points[hi].z())) hi = i, any = true;
+    const Eigen::Vector3f out(s.points[hi].x() - 3.f * b, s.points[hi].y(), 0.f);
+    s.normals[hi] = (out.normalized() + Eigen::Vector3f(0, 0, 0.05f)).normalized();
+  }
+  return s;
+}
+
+TEST(OrientNormalsByPropagation, ScanWithAVerticalRimTurnedUp) {
+  for (const auto& [count, copies] : {std::pair<int, int>{2000, 1}, std::pair<int, int>{12000, 2}}) {
+    Shape s = rimmedBowls(count, copies);
+    const Normals start = s.normals;
+    paps::orientNormalsByPropagation(s.points, s.normals, s.graph);
+    std::size_t up = 0, bad = 0;
+    for (std::size_t i = 0; i < s.points.size(); ++i) {
+      const Eigen::Vector3f c(3.f * std::round(s.points[i].x() / 3.f), 0, 0);
+      up += s.normals[i].z() > 0;
+      bad += s.normals[i].dot(c - s.points[i]) <= 0;
+      EXPECT_TRUE(s.normals[i] == start[i] || s.normals[i] == -start[i]) << "only flips";
+    }
+    // Every normal into its bowl, the noisy rim ones too (they follow their neighbours).
+    EXPECT_EQ(bad, 0u) << count << " points x " << copies;
+    EXPECT_GT(up, s.points.size() * 99 / 100) << count << " points x " << copies;
+  }
+}
+
 // -------------------------------------------------------------------------- frames
 
 TEST(EstimatePrincipalFrames, CylinderT1AroundAxisT2AlongIt) {

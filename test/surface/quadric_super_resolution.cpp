@@ -735,3 +735,58 @@ TEST(QuadricSuperResolution, PilesOfCopiesAreWidenedToo) {
   EXPECT_GT(r_on.widened_fits, r_off.ill_posed_fits / 2);
 }
 
+
+// The output normals are the SR surface's: on the engraved plane they follow the relief (the
+// quadrics' slopes plus those of the SR heights), not just the base plane; one orientation;
+// the positions are those of a run without normals; the PCL stage writes them into
+// PointNormal outputs.
+TEST(QuadricSuperResolution, NormalsFollowTheRelief) {
+  Case c;
+  synthetic::addGaussianNoise(c.sparse, 0.0001f, 9);
+  QuadricSuperResolutionParameters p;
+  p.factor = 3;
+  Normals normals;
+  const Positions out = superResolveQuadric({c.sparse}, p, nullptr, {}, &normals);
+  ASSERT_EQ(normals.size(), out.size());
+  EXPECT_EQ(out, superResolveQuadric({c.sparse}, p));
+  // The relief's normal where each output point lands (nearest triangle of the fine mesh).
+  const PointToMeshDistance truth(c.mesh);
+  Normals got, want;
+  std::size_t up = 0, flat_closer = 0;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    if (std::abs(out[i].x()) > 0.45f || std::abs(out[i].y()) > 0.45f) continue;
+    ASSERT_TRUE(isFinite(normals[i])) << i;
+    int t = -1;
+    truth.distance(out[i], nullptr, &t);
+    ASSERT_GE(t, 0);
+    const auto& tri = c.mesh.triangles[t];
+    want.push_back((c.mesh.vertices[tri[1]] - c.mesh.vertices[tri[0]])
+                       .cross(c.mesh.vertices[tri[2]] - c.mesh.vertices[tri[0]])
+                       .normalized());
+    got.push_back(normals[i]);
+    up += normals[i].z() > 0;
+    // Closer to the base plane's normal than to the relief's: the relief not followed.
+    flat_closer += std::abs(normals[i].z()) > std::abs(normals[i].dot(want.back()));
+  }
+  EXPECT_TRUE(up == 0 || up == got.size()) << up << " of " << got.size() << " point up";
+  const ErrorStats e = summarize(normalAngleErrors(got, want));
+  // The relief tilts the true normals by up to 20 degrees. Measured: 2.84 degrees RMS, 4.90 at
+  // the 95th percentile, 338 of 28,897 normals closer to the plane's normal than to the relief's.
+  std::printf("normal angle RMS %.2f, p95 %.2f degrees; %zu of %zu closer to the plane's normal\n", e.rmse, e.p95,
+              flat_closer, got.size());
+  EXPECT_LT(e.rmse, 3.5);
+  EXPECT_LT(e.p95, 6.5);
+  EXPECT_LT(flat_closer, got.size() / 20);
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  writePositions(c.sparse, *cloud);
+  QuadricSuperResolution<pcl::PointXYZ, pcl::PointNormal> qsr;
+  qsr.setInputCloud(cloud);
+  qsr.setParameters(p);
+  pcl::PointCloud<pcl::PointNormal> cloud_out;
+  qsr.process(cloud_out);
+  ASSERT_EQ(cloud_out.size(), out.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getVector3fMap()), out[i]) << i;
+    ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getNormalVector3fMap()), normals[i]) << i;
+  }
+}

@@ -828,6 +828,11 @@ struct Sphere {
     out = centre + x.cast<float>();
     return out.allFinite();
   }
+  // Gradient of u0 + u.x + u4 |x|^2 at p (block units): the normal there, oriented as the
+  // input normals the fit was constrained by.
+  Eigen::Vector3f gradient(const Eigen::Vector3f& p) const {
+    return (u + 2 * u4 * (p - centre).cast<double>()).cast<float>();
+  }
 };
 
 PAPS_AVX2_CLONE __attribute__((noinline)) Sphere fitSphere(const Block& b, const Eigen::Vector3f& q) {
@@ -946,6 +951,7 @@ struct RimlsQuadratic {
     out = q - fq * gq / g2;
     return out.allFinite();
   }
+  Eigen::Vector3f gradient(const Eigen::Vector3f& q) const { return g + H * q; }
 };
 
 // RIMLS at the block's own input point (the origin), where the Wendland factors and the
@@ -1057,7 +1063,7 @@ PAPS_AVX2_CLONE __attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float 
 
 namespace {
 Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
-                                 MlsUpsamplingReport* report, const ProgressCallback& progress) {
+                                 MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals_out) {
   const std::size_t finite = countFinite(points);
   if (finite < 3) throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
   checkOutputCount(params.output_count, finite);
@@ -1130,6 +1136,7 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
     for (std::size_t s = 0; s < origin.size(); ++s) slist[cur[origin[s]]++] = static_cast<int>(s);
   }
   std::size_t unprojected = 0;
+  if (normals_out) normals_out->assign(out.size(), Eigen::Vector3f::Constant(NAN));
   const float inv_h = 1.f / h;
   // What the projections read, in units of h: the sphere at the input point reads its
   // neighbours within h; a projection at a seed (within disc of its input point) those within
@@ -1155,21 +1162,25 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
       }
       for (std::int64_t k = s0; k < s1; ++k) {
         const int s = slist[k];
-        Eigen::Vector3f q = (out[s] - po) * inv_h, next;
+        Eigen::Vector3f q = (out[s] - po) * inv_h, next, grad = Eigen::Vector3f::Constant(NAN);
         bool ok = origin_ok;
         if (per_point && apss) {
           ok = ok && sphere.project(q, next);
-          if (ok) q = next;
+          if (ok) q = next, grad = sphere.gradient(q);
         } else if (per_point && quad_ok && q.squaredNorm() <= kTaylorReach * kTaylorReach) {
           ok = quad.project(q, next);
-          if (ok) q = next;
+          if (ok) q = next, grad = quad.gradient(q);
         } else {
           for (int it = 0; it < params.iterations && ok; ++it) {
             if (apss) {
               const Sphere sp = fitSphere(b, q);
               ok = sp.ok && sp.project(q, next);
+              if (ok) grad = sp.gradient(next);
             } else {
-              ok = rimlsStep(b, q, params.sigma_r, params.sigma_n, params.inner_iterations, per_point, next);
+              // The gradient at the step's start: one step from near the surface, so within
+              // the step's length of the projected point's.
+              ok = rimlsStep(b, q, params.sigma_r, params.sigma_n, params.inner_iterations, per_point, next, nullptr,
+                             &grad);
             }
             if (!ok) break;
             const float step = (next - q).norm();
@@ -1177,8 +1188,12 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
             if (step < 1e-4f) break;
           }
         }
-        if (ok) out[s] = po + q * h;
-        else ++unprojected;
+        if (ok) {
+          out[s] = po + q * h;
+          if (normals_out) (*normals_out)[s] = grad.norm() > 0 ? Eigen::Vector3f(grad.normalized()) : grad;
+        } else {
+          ++unprojected;
+        }
       }
       rep.advance(static_cast<std::size_t>(s1 - s0));
     }
@@ -1198,10 +1213,10 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
 }  // namespace
 
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
-                      MlsUpsamplingReport* report, const ProgressCallback& progress) {
+                      MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals) {
   params.validate();
   // In Z order, as QSR: neighbourhood loops stay in cache, the output ignores the input order.
-  return upsampleInSpatialOrder(gathered(points, spatialOrderAll(points)), surface, params, report, progress);
+  return upsampleInSpatialOrder(gathered(points, spatialOrderAll(points)), surface, params, report, progress, normals);
 }
 
 template class MlsUpsampling<pcl::PointXYZ, pcl::PointXYZ, MlsSurface::Apss>;
@@ -1212,5 +1227,7 @@ template class MlsUpsampling<pcl::PointXYZRGB, pcl::PointXYZ, MlsSurface::Apss>;
 template class MlsUpsampling<pcl::PointXYZRGB, pcl::PointXYZ, MlsSurface::Rimls>;
 template class MlsUpsampling<pcl::PointXYZI, pcl::PointXYZ, MlsSurface::Apss>;
 template class MlsUpsampling<pcl::PointXYZI, pcl::PointXYZ, MlsSurface::Rimls>;
+template class MlsUpsampling<pcl::PointXYZ, pcl::PointNormal, MlsSurface::Apss>;
+template class MlsUpsampling<pcl::PointXYZ, pcl::PointNormal, MlsSurface::Rimls>;
 
 }  // namespace paps

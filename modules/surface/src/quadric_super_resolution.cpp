@@ -175,7 +175,8 @@ struct Similar {
 
 namespace {
 Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
-                                     QuadricSuperResolutionReport* report, const ProgressCallback& progress) {
+                                     QuadricSuperResolutionReport* report, const ProgressCallback& progress,
+                                     Normals* normals_out) {
   if (scans.empty()) throw InvalidInput("no scan to super-resolve");
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
@@ -673,6 +674,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       rep.narrowed_discs += params.thin_disc < 1.f;
     }
   Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed, nullptr, nullptr, 0.f, &disc_scale);
+  if (normals_out) normals_out->assign(out.size(), Eigen::Vector3f::Constant(NAN));
   {
     const SpatialIndex& index0 = *sc[0].nh.index;
     const float inv_2sig2 = 1.f / (2.f * 0.5f * s0 * 0.5f * s0);
@@ -683,17 +685,18 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     {
       std::vector<int> idx;
       std::vector<float> d2;
-      std::vector<Eigen::Vector3f> proj;
-      std::vector<float> pw;
+      std::vector<Eigen::Vector3f> proj, pn;
+      std::vector<float> pw, fw;
 #pragma omp for schedule(dynamic, 512)
       for (std::int64_t q = 0; q < n; ++q) {
         if (pr.cancelled()) continue;
         Eigen::Vector3f x = out[q];
-        Eigen::Vector3f est = x;
+        Eigen::Vector3f est = x, est_n = Eigen::Vector3f::Constant(NAN);
         bool any = false;
         for (int round = 0; round < 2; ++round) {
         index0.nearestK(x, 8, idx, d2);
         proj.clear();
+        pn.clear();
         pw.clear();
         for (std::size_t k = 0; k < idx.size(); ++k) {
           const int a = idx[k];
@@ -718,12 +721,27 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
           const Eigen::Vector3f pw_ = f.origin + f.frame.toWorld(pl);
           if ((pw_ - x).squaredNorm() > 9.f * s0 * s0) continue;  // a patch that does not reach q
           proj.push_back(pw_);
+          if (normals_out) {
+            // Normal of the SR surface Q + h: the quadric's slopes plus those of the bilinear
+            // SR heights (zero along an axis where the read is clamped to the border bins).
+            const float dhu = u_raw > 0.f && u_raw < m - 1 ? (1 - fv) * (at(v0, u0 + 1) - at(v0, u0)) +
+                                                                  fv * (at(v0 + 1, u0 + 1) - at(v0 + 1, u0))
+                                                            : 0.f;
+            const float dhv = v_raw > 0.f && v_raw < m - 1 ? (1 - fu) * (at(v0 + 1, u0) - at(v0, u0)) +
+                                                                  fu * (at(v0 + 1, u0 + 1) - at(v0, u0 + 1))
+                                                            : 0.f;
+            const float kx = f.k1 * l.x(), ky = f.k2 * l.y();
+            const float hx = dhu * std::sqrt(1.f + kx * kx) / d_sr;
+            const float hy = dhv * std::sqrt(1.f + ky * ky) / d_sr;
+            pn.push_back(f.frame.toWorld(Eigen::Vector3f(-(kx + hx), -(ky + hy), 1.f).normalized()));
+          }
           pw.push_back(std::exp(-d2[k] * inv_2sig2) + 1e-12f);
         }
         if (proj.empty()) {  // no anchor close enough: the tangent plane of the nearest one
           if (round == 0 && !idx.empty() && anchor[idx[0]]) {
             const QuadricFit& f = fits[idx[0]];
             est = x - (x - f.origin).dot(f.frame.n) * f.frame.n;
+            est_n = f.frame.n;
             any = true;
           }
           break;
@@ -733,20 +751,27 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
         float sw = 0;
         for (std::size_t k = 0; k < proj.size(); ++k) { est += pw[k] * proj[k]; sw += pw[k]; }
         est /= sw;
+        fw.assign(pw.begin(), pw.end());
         for (int pass = 0; pass < params.irls_iterations; ++pass) {
           Eigen::Vector3f e = Eigen::Vector3f::Zero();
           float s = 0;
           for (std::size_t k = 0; k < proj.size(); ++k) {
-            const float w = pw[k] * l1Weight((proj[k] - est).norm(), 0.05f * d_sr);
-            e += w * proj[k];
-            s += w;
+            fw[k] = pw[k] * l1Weight((proj[k] - est).norm(), 0.05f * d_sr);
+            e += fw[k] * proj[k];
+            s += fw[k];
           }
           if (s > 0) est = e / s;
+        }
+        if (normals_out) {  // the patches' normals, with the weights of the last position pass
+          Eigen::Vector3f e = Eigen::Vector3f::Zero();
+          for (std::size_t k = 0; k < pn.size(); ++k) e += fw[k] * pn[k];
+          est_n = e.norm() > 0 ? Eigen::Vector3f(e.normalized()) : Eigen::Vector3f(pn[0]);
         }
         x = est;
         }
         if (!any) { ++unprojected; pr.advance(); continue; }
         out[q] = est;
+        if (normals_out) (*normals_out)[q] = est_n;
         pr.advance();
       }
     }
@@ -761,19 +786,21 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
 }  // namespace
 
 Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
-                              QuadricSuperResolutionReport* report, const ProgressCallback& progress) {
+                              QuadricSuperResolutionReport* report, const ProgressCallback& progress,
+                              Normals* normals) {
   params.validate();
   // Every stage loops over neighbourhoods: the scans run in Z order (in input order a shuffled
   // scan waits on memory), which also makes the output independent of the input order.
   std::vector<Positions> sorted;
   sorted.reserve(scans.size());
   for (const Positions& scan : scans) sorted.push_back(gathered(scan, spatialOrderAll(scan)));
-  return superResolveInSpatialOrder(sorted, params, report, progress);
+  return superResolveInSpatialOrder(sorted, params, report, progress, normals);
 }
 
 template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ>;
 template class QuadricSuperResolution<pcl::PointNormal, pcl::PointNormal>;
 template class QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZ>;
 template class QuadricSuperResolution<pcl::PointXYZI, pcl::PointXYZ>;
+template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointNormal>;
 
 }  // namespace paps

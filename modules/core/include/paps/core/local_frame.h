@@ -39,7 +39,10 @@ std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
 
 /// Consistent orientation without a viewpoint: propagation over the neighbour graph along
 /// the most parallel normals first (Hoppe et al. 1992), one component at a time, each seeded
-/// at its highest point with the normal pointing up (+z). Returns flips.
+/// at its highest point; each connected component is then turned up (+z): a component whose
+/// normals point one way on the whole (a scan seen from one side: |sum of z| >= 0.2 sum of
+/// |z|) by their summed z, otherwise (a closed surface) by the normal of its highest point
+/// within 60 degrees of vertical, otherwise by its seed's. Returns flips.
 /// Parallel (OpenMP) and deterministic whatever the thread count: the points are cut into
 /// fixed blocks of space (runs of 4096 points in Morton order); the propagation runs inside
 /// each block on its own, then the pieces are oriented relative to each other by the summed

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <Eigen/Core>
@@ -85,6 +87,28 @@ void writePositions(const Positions& p, pcl::PointCloud<PointT>& cloud) {
   cloud.width = static_cast<std::uint32_t>(p.size());
   cloud.height = 1;
   cloud.is_dense = countFinite(p) == p.size();
+}
+
+/// writePositions, and for a point type with normals the normals too (one per position; a
+/// NaN normal makes the cloud not dense). The curvature field of such types is left at 0.
+namespace detail {
+// Whether PointT has normal_x/y/z (pcl::traits::has_normal_v without including every point type).
+template <typename PointT, typename = void>
+struct HasNormal : std::false_type {};
+template <typename PointT>
+struct HasNormal<PointT, std::void_t<decltype(std::declval<PointT&>().getNormalVector3fMap())>> : std::true_type {};
+}  // namespace detail
+
+template <typename PointT>
+void writePositionsAndNormals(const Positions& p, const Normals& n, pcl::PointCloud<PointT>& cloud) {
+  writePositions(p, cloud);
+  if constexpr (detail::HasNormal<PointT>::value) {
+    if (n.size() != p.size()) throw InvalidParameter("normals", detail::toString(n.size()), "one per position");
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      cloud[i].getNormalVector3fMap() = n[i];
+      cloud.is_dense = cloud.is_dense && isFinite(n[i]);
+    }
+  }
 }
 
 /// The checks every point-moving stage makes on its input: throws InvalidInput when the cloud

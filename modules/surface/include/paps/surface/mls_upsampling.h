@@ -76,8 +76,12 @@ struct MlsUpsamplingReport {
 };
 
 /// Upsamples `points` (NaN entries ignored). Throws InvalidInput for fewer than 3 finite points.
+/// With `normals`, also the unit normal of the fitted surface at each output point (the
+/// gradient of the sphere or of the RIMLS function there; NaN where the point was not
+/// projected), oriented as the input's normals propagated over the cloud.
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
-                      MlsUpsamplingReport* report = nullptr, const ProgressCallback& progress = {});
+                      MlsUpsamplingReport* report = nullptr, const ProgressCallback& progress = {},
+                      Normals* normals = nullptr);
 
 /// Throws InvalidParameter("output_count") unless an explicit output count (0: from the
 /// factor) is at most 1000 x the input points, the bound of the factor: a larger one is a

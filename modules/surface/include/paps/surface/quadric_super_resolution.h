@@ -155,9 +155,12 @@ QuadricSuperResolutionParameters noiseAdaptedParameters(const QuadricSuperResolu
 
 /// Super-resolves scans[0] using all scans (scans[0] included) as the source of similar
 /// patches. NaN points are ignored. Throws InvalidInput when scans is empty or scans[0] has
-/// fewer than 10 finite points, InvalidParameter for bad parameters.
+/// fewer than 10 finite points, InvalidParameter for bad parameters. With `normals`, also the
+/// unit normal of the SR surface at each output point (one per output point, NaN where the
+/// point was not projected), oriented as the input's normals propagated over the scan.
 Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
-                              QuadricSuperResolutionReport* report = nullptr, const ProgressCallback& progress = {});
+                              QuadricSuperResolutionReport* report = nullptr, const ProgressCallback& progress = {},
+                              Normals* normals = nullptr);
 
 /// The pcl::CloudSurfaceProcessing stage: the input cloud (with its indices) is the scan to
 /// super-resolve; addScan() adds other scans of the same object, already registered.

@@ -9,7 +9,11 @@ template <typename PointIn, typename PointOut, MlsSurface S>
 void MlsUpsampling<PointIn, PointOut, S>::performProcessing(pcl::PointCloud<PointOut>& output) {
   const ScopedThreadCount threads(this->threads_);
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
-  writePositions(upsampleMls(positionsAt(*this->input_, *this->indices_), S, params_, &report_, progress_), output);
+  Normals normals;  // the fitted surface's, when the output type has them
+  constexpr bool with_normals = detail::HasNormal<PointOut>::value;
+  const Positions out = upsampleMls(positionsAt(*this->input_, *this->indices_), S, params_, &report_, progress_,
+                                    with_normals ? &normals : nullptr);
+  writePositionsAndNormals(out, normals, output);
 }
 
 }  // namespace paps

@@ -14,7 +14,12 @@ void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointClou
     if (!s) throw InvalidInput("a null scan was added");
     scans.push_back(positionsOf(*s));
   }
-  writePositions(superResolveQuadric(scans, params_, &report_, progress_), output);
+  // Output normals (the SR surface's) when the output type has them, as PCL's MLS with
+  // setComputeNormals.
+  Normals normals;
+  constexpr bool with_normals = detail::HasNormal<PointOut>::value;
+  const Positions out = superResolveQuadric(scans, params_, &report_, progress_, with_normals ? &normals : nullptr);
+  writePositionsAndNormals(out, normals, output);
 }
 
 }  // namespace paps

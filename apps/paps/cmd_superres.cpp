@@ -6,6 +6,7 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
 
@@ -24,6 +25,9 @@ const char* kSuperresUsage =
     "  --normals              also write the normal of the fitted surface at each output point\n"
     "                         (QSR: the SR surface's; APSS/RIMLS: the gradient of their fit),\n"
     "                         oriented as the input's normals propagated over the scan\n"
+    "  --orient M             with --normals: propagate (default) or viewpoint (each normal\n"
+    "                         towards the origin, the sensor of a range scan in its own frame:\n"
+    "                         right where propagation fails, across folds between scan pieces)\n"
     "  --factor F             output count / input count (default 4, 1 to 1000)\n"
     "  --count N              exact output count (overrides --factor)\n"
     "  --method M             qsr (default), apss or rimls\n"
@@ -66,7 +70,7 @@ int runSuperres(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals"});
+               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals", "orient"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   a.requireOutputApart();
@@ -90,6 +94,9 @@ int runSuperres(int argc, char** argv) {
   Positions out;
   Normals normals;
   Normals* const normals_out = a.has("normals") ? &normals : nullptr;
+  const std::string orient = a.text("orient", "propagate");
+  if (orient != "propagate" && orient != "viewpoint") throw InvalidParameter("orient", orient, "propagate or viewpoint");
+  if (a.has("orient") && !normals_out) throw InvalidParameter("orient", orient, "with --normals (it orients them)");
   if (method == "qsr") {
     QuadricSuperResolutionParameters p;
     p.factor = static_cast<float>(a.number("factor", p.factor));
@@ -190,7 +197,10 @@ int runSuperres(int argc, char** argv) {
     writePositions(out, xyz);
     pcl::toPCLPointCloud2(xyz, cloud);
   }
-  if (normals_out) setNormals(cloud, normals);
+  if (normals_out) {
+    if (orient == "viewpoint") orientNormalsTowards(out, normals, Eigen::Vector3f::Zero());
+    setNormals(cloud, normals);
+  }
   saveCloudAtomic(out_path, cloud);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());
   return 0;

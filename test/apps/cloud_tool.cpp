@@ -6,8 +6,9 @@
 //   paps_test_cloud_tool unhex IN.hex OUT (bytes from hexadecimal text, for damaged files)
 //   paps_test_cloud_tool permute IN.pcd OUT.pcd (the same points in a seeded shuffled order)
 //   paps_test_cloud_tool same-points A.pcd B.pcd (the same points, byte for byte, in any order)
-//   paps_test_cloud_tool normals OUT.pcd MAX_DEGREES (unit normals in normal_x/y/z, all on one
-//     side of the written surface's and within MAX_DEGREES of it at every point)
+//   paps_test_cloud_tool normals OUT.pcd MAX_DEGREES [up|down] (unit normals in normal_x/y/z,
+//     all on one side of the written surface's, that side if given, and within MAX_DEGREES of
+//     it at every point)
 // Exit 0 when it went well; otherwise one line on stderr and exit 1.
 #include <cmath>
 #include <cstdint>
@@ -55,6 +56,7 @@ int write(const std::string& path, int count, const std::string& format) {
     p.x = (lines ? 0.002f : 0.02f) * static_cast<float>(k % per_line);
     p.y = (lines ? 0.05f : 0.02f) * static_cast<float>(k / per_line);
     p.z = surface(p.x, p.y) + noise();
+    if (format == "lifted") p.z += 1.f;  // 1 m above the origin, the sensor's place
     if (format == "utm") {  // UTM-like coordinates saved as float: steps of 0.03-0.5 m there
       p.x += 500000.f;
       p.y += 5000000.f;
@@ -209,7 +211,7 @@ int samePoints(const std::string& a_path, const std::string& b_path) {
 
 // OUT (an upsampled `write` surface) has a unit normal per point, within max_degrees of the
 // surface's own normal (orientation-blind), and all of them on one side of it.
-int normals(const std::string& path, double max_degrees) {
+int normals(const std::string& path, double max_degrees, const std::string& side) {
   pcl::PointCloud<pcl::PointNormal> cloud;
   pcl::PCLPointCloud2 blob;
   if (pcl::io::loadPCDFile(path, blob) != 0) return fail("cannot read " + path);
@@ -232,6 +234,7 @@ int normals(const std::string& path, double max_degrees) {
   }
   if (up != 0 && up != cloud.size())
     return fail(std::to_string(up) + " of " + std::to_string(cloud.size()) + " normals point up: not one orientation");
+  if ((side == "up" && up == 0) || (side == "down" && up != 0)) return fail("the normals do not point " + side);
   if (worst > max_degrees) return fail("a normal is " + std::to_string(worst) + " degrees off the surface's");
   std::printf("%zu unit normals, one orientation, at most %.2f degrees off the surface's\n", cloud.size(), worst);
   return 0;
@@ -246,7 +249,7 @@ int main(int argc, char** argv) {
   if (mode == "unhex" && argc == 4) return unhex(argv[2], argv[3]);
   if (mode == "permute" && argc == 4) return permute(argv[2], argv[3]);
   if (mode == "same-points" && argc == 4) return samePoints(argv[2], argv[3]);
-  if (mode == "normals" && argc == 4) return normals(argv[2], std::atof(argv[3]));
+  if (mode == "normals" && (argc == 4 || argc == 5)) return normals(argv[2], std::atof(argv[3]), argc == 5 ? argv[4] : "");
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

@@ -89,8 +89,6 @@ void writePositions(const Positions& p, pcl::PointCloud<PointT>& cloud) {
   cloud.is_dense = countFinite(p) == p.size();
 }
 
-/// writePositions, and for a point type with normals the normals too (one per position; a
-/// NaN normal makes the cloud not dense). The curvature field of such types is left at 0.
 namespace detail {
 // Whether PointT has normal_x/y/z (pcl::traits::has_normal_v without including every point type).
 template <typename PointT, typename = void>
@@ -99,6 +97,8 @@ template <typename PointT>
 struct HasNormal<PointT, std::void_t<decltype(std::declval<PointT&>().getNormalVector3fMap())>> : std::true_type {};
 }  // namespace detail
 
+/// writePositions, and for a point type with normals the normals too (one per position; a
+/// NaN normal makes the cloud not dense). The curvature field of such types is left at 0.
 template <typename PointT>
 void writePositionsAndNormals(const Positions& p, const Normals& n, pcl::PointCloud<PointT>& cloud) {
   writePositions(p, cloud);

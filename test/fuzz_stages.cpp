@@ -1,11 +1,13 @@
 // libFuzzer target: every stage on small clouds of awkward geometry must return an output or
 // throw paps::Error: never crash, hang or allocate without bound (the cloud readers have their
-// own target; this one reaches the algorithms).
+// own target; this one reaches the algorithms). The upsamplers' normals must be one per output
+// point, each a unit vector or NaN.
 // Input: byte 0 chooses the stage (mod 8), byte 1 the scale (mod 4: 1, 1e-4, 1e4, and a
 // UTM-like offset of 5e5 with 1 m steps); then 3 bytes a point, each (b - 128) / 16 on a grid,
 // so copies, lines and planes come up often. At most 400 points.
 // Built and run by `scripts/fuzz.sh stages`; crash inputs land in test/stages_corpus, which
 // test_stages_corpus_replay replays in CI.
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -18,6 +20,15 @@
 #include <paps/filters/wavejet_enhancement.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
+
+namespace {
+// An upsampler's normals: one per output point, each a unit vector or NaN (not projected).
+void checkNormals(const paps::Positions& out, const paps::Normals& n) {
+  if (n.size() != out.size()) __builtin_trap();
+  for (const auto& v : n)
+    if (paps::isFinite(v) && std::abs(v.norm() - 1.f) > 1e-3f) __builtin_trap();
+}
+}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;
@@ -43,14 +54,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 4: {
         paps::QuadricSuperResolutionParameters q;
         q.factor = 2;
-        paps::superResolveQuadric({p}, q);
+        paps::Normals n;
+        checkNormals(paps::superResolveQuadric({p}, q, nullptr, {}, &n), n);
         break;
       }
       case 5:
       case 6: {
         paps::MlsUpsamplingParameters m;
         m.factor = 2;
-        paps::upsampleMls(p, stage == 5 ? paps::MlsSurface::Apss : paps::MlsSurface::Rimls, m);
+        paps::Normals n;
+        checkNormals(paps::upsampleMls(p, stage == 5 ? paps::MlsSurface::Apss : paps::MlsSurface::Rimls, m, nullptr, {}, &n), n);
         break;
       }
       default: {

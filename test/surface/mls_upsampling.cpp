@@ -656,4 +656,15 @@ TEST(MlsUpsampling, NormalsAreTheFittedSurfacesOnASphere) {
   Normals expected;
   upsampleMls(in, MlsSurface::Rimls, p, nullptr, {}, &expected);
   for (std::size_t i = 0; i < out.size(); ++i) ASSERT_EQ(Eigen::Vector3f(out[i].getNormalVector3fMap()), expected[i]) << i;
+  // With a viewpoint (pcl::NormalEstimation::setViewPoint), each normal faces it: from the
+  // centre, every normal points inward; the positions do not move.
+  rimls.setViewPoint(0.f, 0.f, 0.f);
+  pcl::PointCloud<pcl::PointNormal> inward;
+  rimls.process(inward);
+  ASSERT_EQ(inward.size(), out.size());
+  for (std::size_t i = 0; i < inward.size(); ++i) {
+    ASSERT_EQ(Eigen::Vector3f(inward[i].getVector3fMap()), Eigen::Vector3f(out[i].getVector3fMap())) << i;
+    ASSERT_LT(inward[i].getNormalVector3fMap().dot(inward[i].getVector3fMap()), 0.f) << i;
+  }
+  EXPECT_THROW(rimls.setViewPoint(0.f, NAN, 0.f), InvalidParameter);
 }

@@ -789,4 +789,9 @@ TEST(QuadricSuperResolution, NormalsFollowTheRelief) {
     ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getVector3fMap()), out[i]) << i;
     ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getNormalVector3fMap()), normals[i]) << i;
   }
+  // A viewpoint below the plane turns every normal down, whatever the propagation chose.
+  qsr.setViewPoint(0.f, 0.f, -1.f);
+  qsr.process(cloud_out);
+  ASSERT_EQ(cloud_out.size(), out.size());
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_LT(cloud_out[i].normal_z, 0.f) << i;
 }

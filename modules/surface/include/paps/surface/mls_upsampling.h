@@ -10,6 +10,7 @@
 #include <pcl/surface/processing.h>
 
 #include <paps/core/thread_count.h>
+#include <paps/core/view_point_option.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
@@ -119,7 +120,8 @@ std::vector<int> thinSeedCandidates(const Positions& points, const Positions& ca
 
 /// The pcl::CloudSurfaceProcessing stages. Indices are honoured (only those points are used).
 template <typename PointIn, typename PointOut, MlsSurface S>
-class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption {
+class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption,
+                               public ViewPointOption {
  public:
   void setParameters(const MlsUpsamplingParameters& p) { p.validate(); params_ = p; }
   const MlsUpsamplingParameters& getParameters() const { return params_; }

@@ -15,6 +15,7 @@
 #include <pcl/surface/processing.h>
 
 #include <paps/core/thread_count.h>
+#include <paps/core/view_point_option.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -165,7 +166,8 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
 /// The pcl::CloudSurfaceProcessing stage: the input cloud (with its indices) is the scan to
 /// super-resolve; addScan() adds other scans of the same object, already registered.
 template <typename PointIn, typename PointOut = PointIn>
-class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption {
+class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption,
+                               public ViewPointOption {
  public:
   void setParameters(const QuadricSuperResolutionParameters& p) { p.validate(); params_ = p; }
   const QuadricSuperResolutionParameters& getParameters() const { return params_; }

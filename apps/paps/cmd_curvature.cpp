@@ -62,7 +62,8 @@ const char* kCurvatureUsage =
     "  --refits N             plane corrections with refit, at most (default 4)\n"
     "  --refit-angle D        refit while the tilt exceeds D degrees (default 45)\n"
     "  --orient M             normal orientation: input (input normals, default when present),\n"
-    "                         propagate (default otherwise), or viewpoint (towards the origin)\n"
+    "                         propagate (default otherwise), or viewpoint (towards the sensor\n"
+    "                         origin of a .pcd, VIEWPOINT; the origin when it has none)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 
@@ -210,10 +211,10 @@ int runCurvature(int argc, char** argv) {
                "timings", "select-order", "fixed-radius", "max-neighbours", "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireOutputApart();
-  const WavejetParameters params = wavejetParameters(a, "auto");
+  WavejetParameters params = wavejetParameters(a, "auto");
   const float radius = static_cast<float>(a.number("radius", 0));
   const int neighbours = a.integer("neighbours", 50);
-  const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0]);
+  const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0], &params.viewpoint);
   const Positions p = positionsOf(cloud);
   printRead(a.positional[0], p);
   Normals hints;
@@ -256,7 +257,7 @@ int runCurvature(int argc, char** argv) {
   pcl::toPCLPointCloud2(wj, b2);
   pcl::PCLPointCloud2 out = appendFields(cloud, b2);
   out.is_dense = r.fitted == p.size();
-  saveCloudAtomic(a.positional[1], out);
+  saveCloudAtomic(a.positional[1], out, params.viewpoint);
   std::printf("wrote %s\n", a.positional[1].c_str());
   return 0;
 }
@@ -288,7 +289,7 @@ int runEnhance(int argc, char** argv) {
     params.alpha1 = {static_cast<float>(re), static_cast<float>(im)};
   }
   params.validate();
-  pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0]);
+  pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0], &params.wavejet.viewpoint);
   const Positions p = positionsOf(cloud);
   printRead(a.positional[0], p);
   Normals hints;
@@ -323,7 +324,7 @@ int runEnhance(int argc, char** argv) {
                            params.wavejet.widening == WavejetParameters::Widening::never || params.radius > 0);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);
   if (r.unfitted) std::fprintf(stderr, "warning: %zu points have too few neighbours: left in place, normal NaN\n", r.unfitted);
-  saveCloudAtomic(a.positional[1], cloud);
+  saveCloudAtomic(a.positional[1], cloud, params.wavejet.viewpoint);
   std::printf("wrote %s\n", a.positional[1].c_str());
   return 0;
 }

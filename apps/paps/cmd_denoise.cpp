@@ -130,7 +130,7 @@ int runDenoise(int argc, char** argv) {
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
   }
   writePositions(out, cloud);
-  saveCloudAtomic(out_path, cloud);
+  saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s\n", out_path.c_str());
   return 0;
 }

@@ -26,8 +26,9 @@ const char* kSuperresUsage =
     "                         (QSR: the SR surface's; APSS/RIMLS: the gradient of their fit),\n"
     "                         oriented as the input's normals propagated over the scan\n"
     "  --orient M             with --normals: propagate (default) or viewpoint (each normal\n"
-    "                         towards the origin, the sensor of a range scan in its own frame:\n"
-    "                         right where propagation fails, across folds between scan pieces)\n"
+    "                         towards IN's sensor origin, a .pcd's VIEWPOINT, else the origin,\n"
+    "                         where a range scan in its own frame has its sensor: right where\n"
+    "                         propagation fails, across folds between scan pieces)\n"
     "  --factor F             output count / input count (default 4, 1 to 1000)\n"
     "  --count N              exact output count (overrides --factor)\n"
     "  --method M             qsr (default), apss or rimls\n"
@@ -82,9 +83,10 @@ int runSuperres(int argc, char** argv) {
   const std::string out_path = a.positional.back();
   // Parameters are checked before the scans are read, so a bad value fails at once.
   std::vector<Positions> scans;
+  Eigen::Vector3f origin = Eigen::Vector3f::Zero();  // the first scan's sensor origin (.pcd VIEWPOINT)
   auto readScans = [&] {
     for (std::size_t i = 0; i + 1 < a.positional.size(); ++i) {
-      scans.push_back(loadPositions(a.positional[i]));
+      scans.push_back(i == 0 ? positionsOf(loadCloud(a.positional[i], &origin)) : loadPositions(a.positional[i]));
       printRead(a.positional[i], scans.back());
     }
   };
@@ -198,10 +200,10 @@ int runSuperres(int argc, char** argv) {
     pcl::toPCLPointCloud2(xyz, cloud);
   }
   if (normals_out) {
-    if (orient == "viewpoint") orientNormalsTowards(out, normals, Eigen::Vector3f::Zero());
+    if (orient == "viewpoint") orientNormalsTowards(out, normals, origin);
     setNormals(cloud, normals);
   }
-  saveCloudAtomic(out_path, cloud);
+  saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());
   return 0;
 }

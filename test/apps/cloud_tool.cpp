@@ -73,6 +73,8 @@ int write(const std::string& path, int count, const std::string& format) {
     for (std::size_t k = 3; k < cloud.size(); k += 10) cloud[k].x = cloud[k].y = cloud[k].z = NAN;
     cloud.is_dense = false;
   }
+  // "sensor-below": the file says its sensor was 2 m under the surface (PCD VIEWPOINT).
+  if (format == "sensor-below") cloud.sensor_origin_ = Eigen::Vector4f(0.3f, 0.3f, -2.f, 0.f);
   const bool ply = path.size() > 4 && path.compare(path.size() - 4, 4, ".ply") == 0;
   const int rc = ply ? (format == "ascii" ? pcl::io::savePLYFileASCII(path, cloud) : pcl::io::savePLYFileBinary(path, cloud))
                  : format == "compressed" ? pcl::io::savePCDFileBinaryCompressed(path, cloud)
@@ -240,6 +242,16 @@ int normals(const std::string& path, double max_degrees, const std::string& side
   return 0;
 }
 
+// Prints the sensor origin a .pcd stores (VIEWPOINT), "x y z".
+int origin(const std::string& path) {
+  pcl::PCLPointCloud2 blob;
+  Eigen::Vector4f o;
+  Eigen::Quaternionf q;
+  if (pcl::io::loadPCDFile(path, blob, o, q) != 0) return fail("cannot read " + path);
+  std::printf("%g %g %g\n", o.x(), o.y(), o.z());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -249,6 +261,7 @@ int main(int argc, char** argv) {
   if (mode == "unhex" && argc == 4) return unhex(argv[2], argv[3]);
   if (mode == "permute" && argc == 4) return permute(argv[2], argv[3]);
   if (mode == "same-points" && argc == 4) return samePoints(argv[2], argv[3]);
+  if (mode == "origin" && argc == 3) return origin(argv[2]);
   if (mode == "normals" && (argc == 4 || argc == 5)) return normals(argv[2], std::atof(argv[3]), argc == 5 ? argv[4] : "");
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");

@@ -241,6 +241,30 @@ pcl::PointCloud<pcl::PointXYZ>::Ptr toCloud(const Positions& p) {
   return c;
 }
 
+TEST(WavejetEstimation, NormalsFaceTheSensorOriginUnlessAViewPointIsGiven) {
+  // pcl::NormalEstimation's convention: without setViewPoint, the input's sensor_origin_.
+  const Positions p = heightFieldSamples([](double x, double y) { return 0.25 * (x * x + y * y); }, 2000, 1.0, 3);
+  auto cloud = toCloud(p);
+  cloud->sensor_origin_ = Eigen::Vector4f(0.f, 0.f, -10.f, 0.f);
+  paps::WavejetEstimation<pcl::PointXYZ> wj;
+  wj.setInputCloud(cloud);
+  wj.setRadiusSearch(0.15);
+  pcl::PointCloud<paps::PointWavejet> out;
+  wj.compute(out);
+  ASSERT_EQ(out.size(), p.size());
+  std::size_t fitted = 0;
+  for (const auto& q : out)
+    if (std::isfinite(q.normal_z)) {
+      ++fitted;
+      ASSERT_LT(q.normal_z, 0.f);
+    }
+  EXPECT_GT(fitted, p.size() * 9 / 10);
+  wj.setViewPoint(0, 0, 10);  // an explicit viewpoint wins
+  wj.compute(out);
+  for (const auto& q : out)
+    if (std::isfinite(q.normal_z)) ASSERT_GT(q.normal_z, 0.f);
+}
+
 TEST(WavejetEstimation, FeatureOnHeightFieldWithIsolatedAndNaNPoints) {
   Positions p = heightFieldSamples([](double x, double y) { return 0.25 * (x * x + y * y); }, 3000, 1.0, 2);
   p.emplace_back(50.f, 50.f, 50.f);  // isolated: too few neighbours

@@ -615,6 +615,37 @@ TEST(MlsUpsampling, SeedSurplusDroppedWhereCrowded) {
 // The output normals are the fitted surface's: on a sphere, radial to within a degree or two
 // (PCA input normals bias the fits a little), one orientation for the whole output, and the
 // PCL stage with a normal-carrying output type writes them (PCL's MLS with setComputeNormals).
+TEST(MlsUpsampling, SeedsLeftUnprojectedKeepTheirTangentPlanesNormal) {
+  // A plane with a few points floating above it: APSS cannot project some seeds of those
+  // outliers (measured: 5 on the CLI's version of this input). They stay on their input
+  // point's tangent disc, and their normal is that plane's, not NaN: every output normal is a
+  // unit vector and the cloud stays dense.
+  Random rng(5);
+  Positions in;
+  for (int i = 0; i < 3000; ++i)
+    in.emplace_back(rng.uniform(0, 1), rng.uniform(0, 1), 0.002 * rng.gaussian());
+  for (int i = 0; i < 60; ++i) in.emplace_back(rng.uniform(0, 1), rng.uniform(0, 1), rng.uniform(0.05, 0.3));
+  MlsUpsamplingParameters p;
+  p.factor = 4;
+  MlsUpsamplingReport r;
+  Normals normals;
+  const Positions out = upsampleMls(in, MlsSurface::Apss, p, &r, {}, &normals);
+  ASSERT_EQ(normals.size(), out.size());
+  EXPECT_GT(r.unprojected, 0u);
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    ASSERT_TRUE(isFinite(normals[i])) << i;
+    ASSERT_NEAR(normals[i].norm(), 1.f, 1e-5f) << i;
+  }
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  writePositions(in, *cloud);
+  APSSUpsampling<pcl::PointXYZ, pcl::PointNormal> apss;
+  apss.setInputCloud(cloud);
+  apss.setUpsamplingFactor(4);
+  pcl::PointCloud<pcl::PointNormal> cloud_out;
+  apss.process(cloud_out);
+  EXPECT_TRUE(cloud_out.is_dense);
+}
+
 TEST(MlsUpsampling, NormalsAreTheFittedSurfacesOnASphere) {
   const Positions in = spherePoints(3000, 1.f, 5);
   for (const MlsSurface s : {MlsSurface::Apss, MlsSurface::Rimls}) {
@@ -667,4 +698,19 @@ TEST(MlsUpsampling, NormalsAreTheFittedSurfacesOnASphere) {
     ASSERT_LT(inward[i].getNormalVector3fMap().dot(inward[i].getVector3fMap()), 0.f) << i;
   }
   EXPECT_THROW(rimls.setViewPoint(0.f, NAN, 0.f), InvalidParameter);
+  // Without a viewpoint, the cloud's own sensor_origin_ (when set) is where the normals face,
+  // as pcl::NormalEstimation does; an explicit viewpoint wins over it.
+  cloud->sensor_origin_ = Eigen::Vector4f(0.f, 0.f, 5.f, 0.f);
+  APSSUpsampling<pcl::PointXYZ, pcl::PointNormal> apss;
+  apss.setInputCloud(cloud);
+  apss.setUpsamplingFactor(2);
+  pcl::PointCloud<pcl::PointNormal> seen;
+  apss.process(seen);
+  ASSERT_EQ(seen.size(), 6000u);
+  const Eigen::Vector3f sensor(0.f, 0.f, 5.f);
+  for (const auto& q : seen)
+    ASSERT_GT(q.getNormalVector3fMap().dot(sensor - q.getVector3fMap()), 0.f) << q;
+  apss.setViewPoint(0.f, 0.f, 0.f);
+  apss.process(seen);
+  for (const auto& q : seen) ASSERT_LT(q.getNormalVector3fMap().dot(q.getVector3fMap()), 0.f) << q;
 }

@@ -794,4 +794,18 @@ TEST(QuadricSuperResolution, NormalsFollowTheRelief) {
   qsr.process(cloud_out);
   ASSERT_EQ(cloud_out.size(), out.size());
   for (std::size_t i = 0; i < out.size(); ++i) ASSERT_LT(cloud_out[i].normal_z, 0.f) << i;
+  // Without one, a cloud that knows its sensor's position (sensor_origin_) is seen from there,
+  // as pcl::NormalEstimation does: below, then above the plane; positions unchanged.
+  for (const float z : {-1.f, 1.f}) {
+    cloud->sensor_origin_ = Eigen::Vector4f(0.f, 0.f, z, 0.f);
+    QuadricSuperResolution<pcl::PointXYZ, pcl::PointNormal> seen;
+    seen.setInputCloud(cloud);
+    seen.setParameters(p);
+    seen.process(cloud_out);
+    ASSERT_EQ(cloud_out.size(), out.size());
+    for (std::size_t i = 0; i < out.size(); ++i) {
+      ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getVector3fMap()), out[i]) << i;
+      ASSERT_GT(cloud_out[i].normal_z * z, 0.f) << i << " seen from z = " << z;
+    }
+  }
 }

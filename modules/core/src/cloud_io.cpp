@@ -101,7 +101,8 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
     Eigen::Quaternionf q;
     int version = 0;
     const int status = pcl::PCDReader().read(path, cloud, o, q, version);
-    if (origin && status >= 0) *origin = o.head<3>();
+    // A VIEWPOINT that is not finite tells nothing: read as none.
+    if (origin && status >= 0 && o.head<3>().allFinite()) *origin = o.head<3>();
     return status;
   }, thrown);
   if (rc < 0)
@@ -117,7 +118,7 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   return cloud;
 }
 
-void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) {
+void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud, const Eigen::Vector3f& sensor_origin) {
   checkOutputPath(path);
   const std::string ext = extensionOf(path);
   if (ext != ".pcd" && ext != ".ply")
@@ -141,7 +142,8 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud) 
   const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" +
                                   std::to_string(::getpid()) + ext)).string();
   const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C (installInterruptCleanup)
-  const Eigen::Vector4f origin = Eigen::Vector4f::Zero();
+  if (!sensor_origin.allFinite()) throw InvalidParameter("sensor_origin", "non-finite", "finite coordinates");
+  const Eigen::Vector4f origin(sensor_origin.x(), sensor_origin.y(), sensor_origin.z(), 0.f);
   const Eigen::Quaternionf orient = Eigen::Quaternionf::Identity();
   std::string thrown;
   const int rc = quietPclIo([&] {

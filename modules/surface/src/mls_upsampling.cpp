@@ -1191,8 +1191,9 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
         if (ok) {
           out[s] = po + q * h;
           if (normals_out) (*normals_out)[s] = grad.norm() > 0 ? Eigen::Vector3f(grad.normalized()) : grad;
-        } else {
+        } else {  // the seed stays on its input point's tangent disc: that plane's normal
           ++unprojected;
+          if (normals_out) (*normals_out)[s] = normals[o];
         }
       }
       rep.advance(static_cast<std::size_t>(s1 - s0));

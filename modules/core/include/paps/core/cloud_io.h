@@ -12,12 +12,15 @@ namespace paps {
 
 /// Loads a .pcd or .ply file. Throws IoError naming the path when it is missing, unreadable,
 /// of another format, or has no x/y/z fields.
-/// `origin`, when given, receives the sensor origin stored in a .pcd (zero otherwise).
+/// `origin`, when given, receives the sensor origin stored in a .pcd (VIEWPOINT; zero
+/// otherwise, and when it is not finite).
 pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin = nullptr);
 
 /// Writes a .pcd (binary) or .ply (binary) file atomically. Throws IoError on failure; the
-/// target is then untouched and no temporary file is left.
-void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud);
+/// target is then untouched and no temporary file is left. A .pcd's VIEWPOINT gets
+/// `sensor_origin` (a stage that keeps the input's frame passes the input's on).
+void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud,
+                     const Eigen::Vector3f& sensor_origin = Eigen::Vector3f::Zero());
 
 /// x, y, z of every point of a blob (float32 or float64 fields).
 Positions positionsOf(const pcl::PCLPointCloud2& cloud);

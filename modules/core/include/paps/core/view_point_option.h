@@ -3,6 +3,8 @@
 // the setViewPoint() of pcl::NormalEstimation. By default the normals are oriented by
 // propagation over the scan, which can cross a fold between two scan pieces with the wrong
 // sign; a range scan in its sensor's frame is better served by its sensor's position.
+#include <optional>
+
 #include <Eigen/Core>
 
 #include <paps/core/error.h>
@@ -10,6 +12,15 @@
 #include <paps/core/positions.h>
 
 namespace paps {
+
+/// The sensor origin a cloud carries (pcl::PointCloud::sensor_origin_, a PCD's VIEWPOINT),
+/// when it says something: finite and not PCL's default 0 0 0, which a cloud gets whether or
+/// not anyone knows where its sensor was.
+inline std::optional<Eigen::Vector3f> knownSensorOrigin(const Eigen::Vector4f& sensor_origin) {
+  const Eigen::Vector3f o = sensor_origin.head<3>();
+  if (!isFinite(o) || o.squaredNorm() == 0) return std::nullopt;
+  return o;
+}
 
 class ViewPointOption {
  public:
@@ -28,9 +39,12 @@ class ViewPointOption {
   const Eigen::Vector3f& getViewPoint() const { return view_point_; }
 
  protected:
-  /// Orients `normals` (one per point of `points`) towards the viewpoint, when one is set.
-  void orientTowardsViewPoint(const Positions& points, Normals& normals) const {
+  /// Orients `normals` (one per point of `points`) towards the viewpoint when one is set,
+  /// else towards the input's sensor origin when it has one (as pcl::NormalEstimation does);
+  /// otherwise they keep the orientation the stage propagated.
+  void orientTowardsViewPoint(const Positions& points, Normals& normals, const Eigen::Vector4f& sensor_origin) const {
     if (use_view_point_) orientNormalsTowards(points, normals, view_point_);
+    else if (const auto o = knownSensorOrigin(sensor_origin)) orientNormalsTowards(points, normals, *o);
   }
 
  private:

@@ -20,6 +20,7 @@
 #include <pcl/features/feature.h>
 
 #include <paps/core/thread_count.h>
+#include <paps/core/view_point_option.h>
 #include <paps/features/point_types.h>
 #include <paps/features/wavejet.h>
 
@@ -60,8 +61,13 @@ class WavejetEstimation : public pcl::Feature<PointInT, PointOutT>, public Threa
   void setPlaneCorrection(int max_refits, float angle_degrees) {
     auto p = params_; p.max_refits = max_refits; p.refit_angle = angle_degrees; setParameters(p);
   }
-  /// Normals face this point (metres), PCL's convention; default the origin.
-  void setViewPoint(float x, float y, float z) { auto p = params_; p.viewpoint = {x, y, z}; setParameters(p); }
+  /// Normals face this point (metres). Without it, as pcl::NormalEstimation, they face the
+  /// input's sensor_origin_ when it is set (not 0 0 0), else the parameters' viewpoint
+  /// (default the origin).
+  void setViewPoint(float x, float y, float z) {
+    auto p = params_; p.viewpoint = {x, y, z}; setParameters(p);
+    view_point_set_ = true;
+  }
   /// Optional first parameterization normals, one per input point (NaN entries: PCA).
   void setInitialNormals(std::shared_ptr<const Normals> n) { initial_normals_ = std::move(n); }
   /// Optional orientation hints, one per input point: the output normal takes their side.
@@ -86,6 +92,7 @@ class WavejetEstimation : public pcl::Feature<PointInT, PointOutT>, public Threa
   WavejetParameters params_;
   std::shared_ptr<const Normals> initial_normals_, orientation_;
   bool keep_coefficients_ = false;
+  bool view_point_set_ = false;
   std::vector<WavejetCoefficients> coefficients_;
   WavejetReport report_;
   ProgressCallback progress_;

@@ -70,7 +70,9 @@ struct MlsUpsamplingParameters {
 struct MlsUpsamplingReport {
   float radius = 0.f;
   std::size_t output = 0;
-  std::size_t unprojected = 0;  ///< seeds with too few neighbours, left where generated
+  /// Seeds whose fit failed (too few neighbours, a fit that does not reach them), left where
+  /// generated: on their input point's tangent disc, with its normal.
+  std::size_t unprojected = 0;
   std::size_t capped = 0;       ///< input points whose kernel holds max_neighbours (the cap)
   int max_neighbours = 0;       ///< the cap used
   float disc_radius = 0.f;      ///< radius of the tangent discs the seeds were spread over
@@ -78,8 +80,9 @@ struct MlsUpsamplingReport {
 
 /// Upsamples `points` (NaN entries ignored). Throws InvalidInput for fewer than 3 finite points.
 /// With `normals`, also the unit normal of the fitted surface at each output point (the
-/// gradient of the sphere or of the RIMLS function there; NaN where the point was not
-/// projected), oriented as the input's normals propagated over the cloud.
+/// gradient of the sphere or of the RIMLS function there), oriented as the input's normals
+/// propagated over the cloud. A seed that could not be projected stays on its input point's
+/// tangent disc, with that plane's normal.
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                       MlsUpsamplingReport* report = nullptr, const ProgressCallback& progress = {},
                       Normals* normals = nullptr);
@@ -119,6 +122,8 @@ std::vector<int> thinSeedCandidates(const Positions& points, const Positions& ca
 }  // namespace detail
 
 /// The pcl::CloudSurfaceProcessing stages. Indices are honoured (only those points are used).
+/// An output type with normals gets the fit's gradient, turned towards setViewPoint()'s point,
+/// else towards the input's sensor_origin_ when it is set (not 0 0 0), else propagated.
 template <typename PointIn, typename PointOut, MlsSurface S>
 class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption,
                                public ViewPointOption {

@@ -164,7 +164,9 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
                               Normals* normals = nullptr);
 
 /// The pcl::CloudSurfaceProcessing stage: the input cloud (with its indices) is the scan to
-/// super-resolve; addScan() adds other scans of the same object, already registered.
+/// super-resolve; addScan() adds other scans of the same object, already registered. An
+/// output type with normals gets the SR surface's, turned towards setViewPoint()'s point, else
+/// towards the input's sensor_origin_ when it is set (not 0 0 0), else propagated over the scan.
 template <typename PointIn, typename PointOut = PointIn>
 class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption,
                                public ViewPointOption {

@@ -70,6 +70,8 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
       run.order_policy = WavejetParameters::OrderPolicy::fixed;
     }
   }
+  if (!view_point_set_)
+    if (const auto origin = knownSensorOrigin(this->input_->sensor_origin_)) run.viewpoint = *origin;
   // Widening (WavejetParameters::widening): the radius here is always explicit, so only
   // Widening::always widens, to the `widen_to` nearest points of the search surface (exact
   // duplicates are not merged here: they count as neighbours).

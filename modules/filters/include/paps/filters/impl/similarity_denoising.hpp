@@ -1,5 +1,6 @@
 #pragma once
 #include <paps/core/error.h>
+#include <paps/core/view_point_option.h>
 #include <paps/filters/similarity_denoising.h>
 
 namespace paps {
@@ -36,10 +37,10 @@ void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {
   // A cloud that knows where its sensor was gets its normals oriented towards it (2.1.2);
   // otherwise orientation is propagated over the neighbour graph.
   SimilarityDenoisingParameters params = params_;
-  const Eigen::Vector3f origin = this->input_->sensor_origin_.template head<3>();
-  if (!params.use_viewpoint && isFinite(origin) && origin.squaredNorm() > 0) {
+  const auto origin = knownSensorOrigin(this->input_->sensor_origin_);
+  if (!params.use_viewpoint && origin) {
     params.use_viewpoint = true;
-    params.viewpoint = origin;
+    params.viewpoint = *origin;
   }
   applyPositionFilter(*this->input_, *this->indices_, output,
                       [&](const Positions& in, const std::vector<std::uint8_t>& movable) {

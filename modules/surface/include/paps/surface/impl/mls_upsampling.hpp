@@ -13,7 +13,7 @@ void MlsUpsampling<PointIn, PointOut, S>::performProcessing(pcl::PointCloud<Poin
   constexpr bool with_normals = detail::HasNormal<PointOut>::value;
   const Positions out = upsampleMls(positionsAt(*this->input_, *this->indices_), S, params_, &report_, progress_,
                                     with_normals ? &normals : nullptr);
-  if (with_normals) this->orientTowardsViewPoint(out, normals);
+  if (with_normals) this->orientTowardsViewPoint(out, normals, this->input_->sensor_origin_);
   writePositionsAndNormals(out, normals, output);
 }
 

@@ -19,7 +19,7 @@ void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointClou
   Normals normals;
   constexpr bool with_normals = detail::HasNormal<PointOut>::value;
   const Positions out = superResolveQuadric(scans, params_, &report_, progress_, with_normals ? &normals : nullptr);
-  if (with_normals) this->orientTowardsViewPoint(out, normals);
+  if (with_normals) this->orientTowardsViewPoint(out, normals, this->input_->sensor_origin_);
   writePositionsAndNormals(out, normals, output);
 }
 

@@ -1,5 +1,6 @@
 // paps superres IN [IN2 ...] OUT --factor F [options]
 #include <cstdio>
+#include <cstring>
 
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
@@ -24,7 +25,9 @@ const char* kSuperresUsage =
     "                         finite points of IN\n"
     "  --normals              also write the normal of the fitted surface at each output point\n"
     "                         (QSR: the SR surface's; APSS/RIMLS: the gradient of their fit),\n"
-    "                         oriented as the input's normals propagated over the scan\n"
+    "                         oriented as the input's normals propagated over the scan, and\n"
+    "                         PCL's curvature field (the surface variation of the input ball\n"
+    "                         each point was made from, as PCL's MLS)\n"
     "  --orient M             with --normals: propagate (default) or viewpoint (each normal\n"
     "                         towards IN's sensor origin, a .pcd's VIEWPOINT, else the origin,\n"
     "                         where a range scan in its own frame has its sensor: right where\n"
@@ -95,6 +98,7 @@ int runSuperres(int argc, char** argv) {
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   Positions out;
   Normals normals;
+  std::vector<float> curvature;  // PCL's curvature field, with --normals
   Normals* const normals_out = a.has("normals") ? &normals : nullptr;
   const std::string orient = a.text("orient", "propagate");
   if (orient != "propagate" && orient != "viewpoint") throw InvalidParameter("orient", orient, "propagate or viewpoint");
@@ -124,7 +128,7 @@ int runSuperres(int argc, char** argv) {
     p.validate();
     readScans();
     QuadricSuperResolutionReport r;
-    out = superResolveQuadric(scans, p, &r, progress, normals_out);
+    out = superResolveQuadric(scans, p, &r, progress, normals_out, normals_out ? &curvature : nullptr);
     std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
                 p.patch_radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.similarity_radius,
                 p.similarity_radius > 0 ? "" : " (chosen)");
@@ -184,7 +188,8 @@ int runSuperres(int argc, char** argv) {
     readScans();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     MlsUpsamplingReport r;
-    out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress, normals_out);
+    out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress, normals_out,
+                      normals_out ? &curvature : nullptr);
     std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,
                 p.radius > 0 ? "" : " (chosen)", r.disc_radius);
     if (r.capped)
@@ -202,6 +207,21 @@ int runSuperres(int argc, char** argv) {
   if (normals_out) {
     if (orient == "viewpoint") orientNormalsTowards(out, normals, origin);
     setNormals(cloud, normals);
+    // PCL's `curvature` beside the normals, as its MLS writes it: the surface variation of
+    // the input ball each output point was made from.
+    pcl::PCLPointCloud2 c;
+    c.width = static_cast<std::uint32_t>(curvature.size());
+    c.height = 1;
+    c.point_step = sizeof(float);
+    c.row_step = c.point_step * c.width;
+    c.fields.resize(1);
+    c.fields[0].name = "curvature";
+    c.fields[0].offset = 0;
+    c.fields[0].datatype = pcl::PCLPointField::FLOAT32;
+    c.fields[0].count = 1;
+    c.data.resize(curvature.size() * sizeof(float));
+    std::memcpy(c.data.data(), curvature.data(), c.data.size());
+    cloud = appendFields(cloud, c);
   }
   saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());

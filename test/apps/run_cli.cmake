@@ -281,6 +281,11 @@ elseif(CASE STREQUAL "superres_normals")
     if(NOT crc STREQUAL "0")
       message(FATAL_ERROR "${method} --normals: ${cerr}")
     endif()
+    # PCL's curvature field beside the normals, as its MLS writes them.
+    file(STRINGS ${output} header LIMIT_COUNT 4)
+    if(NOT header MATCHES "FIELDS x y z normal_x normal_y normal_z curvature")
+      message(FATAL_ERROR "${method} --normals: no curvature field (${header})")
+    endif()
   endforeach()
   # --orient: a bad value, or without --normals, is one error line; viewpoint turns every
   # normal towards the origin: down, on the surface written 1 m above it.

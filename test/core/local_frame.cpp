@@ -108,6 +108,35 @@ TEST(EstimateNormals, SphereNormalsAreRadial) {
   EXPECT_LT(worst, 1.0) << "largest angle between normal and radius (degrees)";
 }
 
+TEST(EstimateNormals, SurfaceVariationOfSphericalCapsKnownAnswer) {
+  // PCL's curvature field: lambda0 / (lambda0 + lambda1 + lambda2) of a ball. On the unit
+  // sphere a ball of chord radius r is a cap of height c = r^2 / 2 whose area is uniform in
+  // height: lambda0 = c^2 / 12, lambda1 + lambda2 = E[rho^2] = c - c^2 / 3.
+  const float r = 0.077f;
+  const Shape s = withRadiusGraph(fibonacciSphere(20000), r);
+  const double c = 0.5 * r * r, expected = (c * c / 12) / (c * c / 12 + c - c * c / 3);
+  std::vector<float> v;
+  const Normals n = paps::estimateNormals(s.points, s.graph, &v);
+  ASSERT_EQ(v.size(), s.points.size());
+  for (std::size_t i = 0; i < v.size(); ++i) {
+    ASSERT_TRUE(std::isfinite(v[i])) << i;
+    ASSERT_EQ(n[i], s.normals[i]) << i;  // the normals do not change
+  }
+  std::vector<float> sorted = v;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  EXPECT_NEAR(sorted[sorted.size() / 2], expected, 0.1 * expected) << "analytic " << expected;
+  // A plane has none; a list of fewer than 3 points has NaN, as its normal.
+  Positions plane;
+  for (int i = 0; i < 30; ++i)
+    for (int j = 0; j < 30; ++j) plane.emplace_back(0.01f * i, 0.01f * j, 0.f);
+  const Shape flat = withRadiusGraph(plane, 0.05f);
+  paps::estimateNormals(flat.points, flat.graph, &v);
+  for (const float x : v) ASSERT_LT(x, 1e-9f);
+  const Shape alone = withRadiusGraph(plane, 0.005f);
+  paps::estimateNormals(alone.points, alone.graph, &v);
+  for (const float x : v) ASSERT_TRUE(std::isnan(x));
+}
+
 TEST(EstimateNormals, TiltedPlaneFarFromOriginIsExact) {
   // A plane through (1000, -2000, 500): centring in double precision keeps PCA exact.
   const Eigen::Vector3f n = Eigen::Vector3f(1, 2, 3).normalized();

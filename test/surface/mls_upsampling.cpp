@@ -687,6 +687,21 @@ TEST(MlsUpsampling, NormalsAreTheFittedSurfacesOnASphere) {
   Normals expected;
   upsampleMls(in, MlsSurface::Rimls, p, nullptr, {}, &expected);
   for (std::size_t i = 0; i < out.size(); ++i) ASSERT_EQ(Eigen::Vector3f(out[i].getNormalVector3fMap()), expected[i]) << i;
+  // PCL's curvature field (the surface variation of the input ball a point was made from),
+  // known on the unit sphere: caps of chord radius r, c = r^2 / 2, variation (c^2 / 12) /
+  // (c^2 / 12 + c - c^2 / 3). Positions do not change.
+  const float r = rimls.getReport().radius;
+  const double c = 0.5 * r * r, cap = (c * c / 12) / (c * c / 12 + c - c * c / 3);
+  std::vector<float> variation;
+  ASSERT_EQ(upsampleMls(in, MlsSurface::Rimls, p, nullptr, {}, nullptr, &variation), positionsOf(out));
+  std::vector<float> sorted;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    ASSERT_EQ(out[i].curvature, variation[i]) << i;
+    ASSERT_TRUE(std::isfinite(variation[i])) << i;
+    sorted.push_back(variation[i]);
+  }
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  EXPECT_NEAR(sorted[sorted.size() / 2], cap, 0.15 * cap);
   // With a viewpoint (pcl::NormalEstimation::setViewPoint), each normal faces it: from the
   // centre, every normal points inward; the positions do not move.
   rimls.setViewPoint(0.f, 0.f, 0.f);

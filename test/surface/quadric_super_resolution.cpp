@@ -789,6 +789,19 @@ TEST(QuadricSuperResolution, NormalsFollowTheRelief) {
     ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getVector3fMap()), out[i]) << i;
     ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getNormalVector3fMap()), normals[i]) << i;
   }
+  // PCL's curvature field, as its MLS fills it: the surface variation of the input ball each
+  // point was made from. The relief bends the balls a little; positions do not change.
+  std::vector<float> variation;
+  const Positions again = superResolveQuadric({c.sparse}, p, nullptr, {}, nullptr, &variation);
+  ASSERT_EQ(again, out);
+  float most = 0.f;
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    ASSERT_EQ(cloud_out[i].curvature, variation[i]) << i;
+    ASSERT_TRUE(std::isfinite(variation[i])) << i;
+    most = std::max(most, variation[i]);
+  }
+  EXPECT_GT(most, 1e-4f);
+  EXPECT_LT(most, 0.1f);
   // A viewpoint below the plane turns every normal down, whatever the propagation chose.
   qsr.setViewPoint(0.f, 0.f, -1.f);
   qsr.process(cloud_out);

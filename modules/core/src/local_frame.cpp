@@ -23,8 +23,10 @@ Eigen::Vector3f anyTangent(const Eigen::Vector3f& n) {
 }
 }  // namespace
 
-Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid) {
+Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid,
+                          float* variation) {
   if (centroid) *centroid = kNaN3;
+  if (variation) *variation = NAN;
   if (count < 1) return kNaN3;
   // Double precision and centring keep PCA accurate for scans far from the origin.
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
@@ -48,14 +50,17 @@ Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Ei
   // error on a repeated zero eigenvalue (about 1e-8 of the largest: an exact line gave
   // +-1e-11 against 2.5e-3, and an arbitrary normal).
   if (!(ev(1) > 1e-6 * ev(2))) return kNaN3;
+  if (variation) *variation = static_cast<float>(std::max(0.0, ev(0)) / ev.sum());
   return eig.eigenvectors().col(0).cast<float>().normalized();
 }
 
-Normals estimateNormals(const Positions& points, const NeighbourGraph& graph) {
+Normals estimateNormals(const Positions& points, const NeighbourGraph& graph, std::vector<float>* variation) {
   Normals normals(points.size(), kNaN3);
+  if (variation) variation->assign(points.size(), NAN);
   const std::int64_t n = static_cast<std::int64_t>(points.size());
 #pragma omp parallel for schedule(dynamic, 512)
-  for (std::int64_t i = 0; i < n; ++i) normals[i] = pcaNormal(points, graph.begin(i), graph.count(i));
+  for (std::int64_t i = 0; i < n; ++i)
+    normals[i] = pcaNormal(points, graph.begin(i), graph.count(i), nullptr, variation ? &(*variation)[i] : nullptr);
   return normals;
 }
 

@@ -1063,7 +1063,8 @@ PAPS_AVX2_CLONE __attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float 
 
 namespace {
 Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
-                                 MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals_out) {
+                                 MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals_out,
+                                 std::vector<float>* curvature_out) {
   const std::size_t finite = countFinite(points);
   if (finite < 3) throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
   checkOutputCount(params.output_count, finite);
@@ -1108,7 +1109,8 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
     for (std::size_t i = 0; i < g.size(); ++i) capped += g.count(i) >= cap;
   }
   const NeighbourGraph& lists = only_h ? graph_h : graph_ext;
-  Normals normals = estimateNormals(points, graph_h);
+  std::vector<float> variation;
+  Normals normals = estimateNormals(points, graph_h, curvature_out ? &variation : nullptr);
   if (std::none_of(normals.begin(), normals.end(), [](const Eigen::Vector3f& n) { return isFinite(n); })) {
     if (params.radius > 0)
       throw InvalidParameter("radius", detail::toString(h),
@@ -1137,6 +1139,10 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   }
   std::size_t unprojected = 0;
   if (normals_out) normals_out->assign(out.size(), Eigen::Vector3f::Constant(NAN));
+  if (curvature_out) {  // PCL's MLS: the surface variation of the ball a point was made from
+    curvature_out->resize(out.size());
+    for (std::size_t s = 0; s < out.size(); ++s) (*curvature_out)[s] = variation[origin[s]];
+  }
   const float inv_h = 1.f / h;
   // What the projections read, in units of h: the sphere at the input point reads its
   // neighbours within h; a projection at a seed (within disc of its input point) those within
@@ -1214,10 +1220,12 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
 }  // namespace
 
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
-                      MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals) {
+                      MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals,
+                      std::vector<float>* curvature) {
   params.validate();
   // In Z order, as QSR: neighbourhood loops stay in cache, the output ignores the input order.
-  return upsampleInSpatialOrder(gathered(points, spatialOrderAll(points)), surface, params, report, progress, normals);
+  return upsampleInSpatialOrder(gathered(points, spatialOrderAll(points)), surface, params, report, progress, normals,
+                                curvature);
 }
 
 template class MlsUpsampling<pcl::PointXYZ, pcl::PointXYZ, MlsSurface::Apss>;

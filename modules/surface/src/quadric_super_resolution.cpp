@@ -176,7 +176,7 @@ struct Similar {
 namespace {
 Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                                      QuadricSuperResolutionReport* report, const ProgressCallback& progress,
-                                     Normals* normals_out) {
+                                     Normals* normals_out, std::vector<float>* curvature_out) {
   if (scans.empty()) throw InvalidInput("no scan to super-resolve");
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
@@ -274,12 +274,13 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   std::vector<int> scan_of(total);
   std::vector<std::uint8_t> thin_ball(total, 0);
   std::size_t flat = 0, ill_posed = 0, widened = 0, thin_balls = 0, collinear = 0, fitted = 0;
+  std::vector<float> variation0;  // the first scan's balls' surface variation (curvature_out)
   for (std::size_t s = 0; s < sc.size(); ++s) {
     const Positions& P = *sc[s].points;
     for (std::size_t i = 0; i < P.size(); ++i) scan_of[sc[s].offset + i] = static_cast<int>(s);
     if (sc[s].nh.radius <= 0) continue;
     const NeighbourGraph& g = sc[s].nh.graph;
-    Normals normals = estimateNormals(P, g);
+    Normals normals = estimateNormals(P, g, s == 0 && curvature_out ? &variation0 : nullptr);
     orientNormalsByPropagation(P, normals, g);
     const LocalFrames frames = estimatePrincipalFrames(normals, g);
     ProgressReporter pr(progress, "quadric patches", P.size());
@@ -673,8 +674,15 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       disc_scale[i] = params.thin_disc;
       rep.narrowed_discs += params.thin_disc < 1.f;
     }
-  Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed, nullptr, nullptr, 0.f, &disc_scale);
+  std::vector<int> origin;
+  Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed, curvature_out ? &origin : nullptr,
+                                  nullptr, 0.f, &disc_scale);
   if (normals_out) normals_out->assign(out.size(), Eigen::Vector3f::Constant(NAN));
+  if (curvature_out) {  // PCL's MLS: the surface variation of the ball a point was made from
+    curvature_out->assign(out.size(), NAN);
+    if (variation0.size() == n0)
+      for (std::size_t q = 0; q < out.size(); ++q) (*curvature_out)[q] = variation0[origin[q]];
+  }
   {
     const SpatialIndex& index0 = *sc[0].nh.index;
     const float inv_2sig2 = 1.f / (2.f * 0.5f * s0 * 0.5f * s0);
@@ -787,14 +795,14 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
 
 Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                               QuadricSuperResolutionReport* report, const ProgressCallback& progress,
-                              Normals* normals) {
+                              Normals* normals, std::vector<float>* curvature) {
   params.validate();
   // Every stage loops over neighbourhoods: the scans run in Z order (in input order a shuffled
   // scan waits on memory), which also makes the output independent of the input order.
   std::vector<Positions> sorted;
   sorted.reserve(scans.size());
   for (const Positions& scan : scans) sorted.push_back(gathered(scan, spatialOrderAll(scan)));
-  return superResolveInSpatialOrder(sorted, params, report, progress, normals);
+  return superResolveInSpatialOrder(sorted, params, report, progress, normals, curvature);
 }
 
 template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ>;

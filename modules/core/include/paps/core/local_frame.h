@@ -26,12 +26,17 @@ using LocalFrames = std::vector<LocalFrame>;
 /// Unit normal by PCA of points[idx[0]] .. points[idx[count - 1]] (centred, in double); NaN
 /// when count < 3 or the points are collinear or coincident (the middle eigenvalue of their
 /// covariance at most 1e-6 of the largest: a test that does not depend on the units). Sign
-/// arbitrary. `centroid`, when given, receives their mean.
-Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid = nullptr);
+/// arbitrary. `centroid`, when given, receives their mean; `variation` the surface variation
+/// lambda0 / (lambda0 + lambda1 + lambda2) of their covariance (NaN with the normal).
+Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Eigen::Vector3f* centroid = nullptr,
+                          float* variation = nullptr);
 
 /// Unit normals by PCA of each neighbour list (pcaNormal); NaN where a point has fewer than 3
 /// neighbours or they are collinear. Orientation is arbitrary until one of the orient* calls.
-Normals estimateNormals(const Positions& points, const NeighbourGraph& graph);
+/// `variation`, when given, receives each list's surface variation (pcaNormal; NaN with the
+/// normal): what PCL writes in the `curvature` field of its normals (pcl::NormalEstimation,
+/// and pcl::MovingLeastSquares for the points it makes from a ball).
+Normals estimateNormals(const Positions& points, const NeighbourGraph& graph, std::vector<float>* variation = nullptr);
 
 /// Flips each normal to face `viewpoint` (e.g. the cloud's sensor origin). Returns flips.
 std::size_t orientNormalsTowards(const Positions& points, Normals& normals,

@@ -95,10 +95,16 @@ template <typename PointT, typename = void>
 struct HasNormal : std::false_type {};
 template <typename PointT>
 struct HasNormal<PointT, std::void_t<decltype(std::declval<PointT&>().getNormalVector3fMap())>> : std::true_type {};
+// Whether PointT has PCL's `curvature` field (PointNormal, PointXYZRGBNormal, ...).
+template <typename PointT, typename = void>
+struct HasCurvature : std::false_type {};
+template <typename PointT>
+struct HasCurvature<PointT, std::void_t<decltype(std::declval<PointT&>().curvature)>> : std::true_type {};
 }  // namespace detail
 
 /// writePositions, and for a point type with normals the normals too (one per position; a
-/// NaN normal makes the cloud not dense). The curvature field of such types is left at 0.
+/// NaN normal makes the cloud not dense). The curvature field is left as it is
+/// (writeCurvatures fills it).
 template <typename PointT>
 void writePositionsAndNormals(const Positions& p, const Normals& n, pcl::PointCloud<PointT>& cloud) {
   writePositions(p, cloud);
@@ -108,6 +114,16 @@ void writePositionsAndNormals(const Positions& p, const Normals& n, pcl::PointCl
       cloud[i].getNormalVector3fMap() = n[i];
       cloud.is_dense = cloud.is_dense && isFinite(n[i]);
     }
+  }
+}
+
+/// For a point type with PCL's `curvature` field: one value per point (a stage's surface
+/// variations, as PCL fills the field).
+template <typename PointT>
+void writeCurvatures(const std::vector<float>& c, pcl::PointCloud<PointT>& cloud) {
+  if constexpr (detail::HasCurvature<PointT>::value) {
+    if (c.size() != cloud.size()) throw InvalidParameter("curvatures", detail::toString(c.size()), "one per point");
+    for (std::size_t i = 0; i < c.size(); ++i) cloud[i].curvature = c[i];
   }
 }
 

@@ -82,10 +82,12 @@ struct MlsUpsamplingReport {
 /// With `normals`, also the unit normal of the fitted surface at each output point (the
 /// gradient of the sphere or of the RIMLS function there), oriented as the input's normals
 /// propagated over the cloud. A seed that could not be projected stays on its input point's
-/// tangent disc, with that plane's normal.
+/// tangent disc, with that plane's normal. With `curvature`, what PCL's MLS writes in the
+/// curvature field: the surface variation of the kernel ball of the input point each output
+/// point was made from (NaN where that ball has no normal).
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                       MlsUpsamplingReport* report = nullptr, const ProgressCallback& progress = {},
-                      Normals* normals = nullptr);
+                      Normals* normals = nullptr, std::vector<float>* curvature = nullptr);
 
 /// Throws InvalidParameter("output_count") unless an explicit output count (0: from the
 /// factor) is at most 1000 x the input points, the bound of the factor: a larger one is a

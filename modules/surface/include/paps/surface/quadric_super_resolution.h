@@ -158,10 +158,13 @@ QuadricSuperResolutionParameters noiseAdaptedParameters(const QuadricSuperResolu
 /// patches. NaN points are ignored. Throws InvalidInput when scans is empty or scans[0] has
 /// fewer than 10 finite points, InvalidParameter for bad parameters. With `normals`, also the
 /// unit normal of the SR surface at each output point (one per output point, NaN where the
-/// point was not projected), oriented as the input's normals propagated over the scan.
+/// point was not projected), oriented as the input's normals propagated over the scan. With
+/// `curvature`, what PCL's MLS writes in the curvature field: the surface variation of the
+/// patch ball of the point of scans[0] each output point was made from (of the denoised scan
+/// when QSR denoises first; NaN where that ball has no normal).
 Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                               QuadricSuperResolutionReport* report = nullptr, const ProgressCallback& progress = {},
-                              Normals* normals = nullptr);
+                              Normals* normals = nullptr, std::vector<float>* curvature = nullptr);
 
 /// The pcl::CloudSurfaceProcessing stage: the input cloud (with its indices) is the scan to
 /// super-resolve; addScan() adds other scans of the same object, already registered. An

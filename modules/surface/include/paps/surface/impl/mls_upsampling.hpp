@@ -1,5 +1,6 @@
 #pragma once
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/positions.h>
 #include <paps/surface/mls_upsampling.h>
 
@@ -11,10 +12,14 @@ void MlsUpsampling<PointIn, PointOut, S>::performProcessing(pcl::PointCloud<Poin
   if (this->input_->empty()) throw InvalidInput("the input cloud is empty");
   Normals normals;  // the fitted surface's, when the output type has them
   constexpr bool with_normals = detail::HasNormal<PointOut>::value;
+  // PCL's MLS also fills the curvature field (the surface variation of the input ball).
+  std::vector<float> curvature;
+  constexpr bool with_curvature = detail::HasCurvature<PointOut>::value;
   const Positions out = upsampleMls(positionsAt(*this->input_, *this->indices_), S, params_, &report_, progress_,
-                                    with_normals ? &normals : nullptr);
+                                    with_normals ? &normals : nullptr, with_curvature ? &curvature : nullptr);
   if (with_normals) this->orientTowardsViewPoint(out, normals, this->input_->sensor_origin_);
   writePositionsAndNormals(out, normals, output);
+  writeCurvatures(curvature, output);
 }
 
 }  // namespace paps

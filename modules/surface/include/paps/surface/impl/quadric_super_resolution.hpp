@@ -1,5 +1,6 @@
 #pragma once
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/positions.h>
 #include <paps/surface/quadric_super_resolution.h>
 
@@ -18,9 +19,14 @@ void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointClou
   // setComputeNormals.
   Normals normals;
   constexpr bool with_normals = detail::HasNormal<PointOut>::value;
-  const Positions out = superResolveQuadric(scans, params_, &report_, progress_, with_normals ? &normals : nullptr);
+  // PCL's MLS also fills the curvature field (the surface variation of the input ball).
+  std::vector<float> curvature;
+  constexpr bool with_curvature = detail::HasCurvature<PointOut>::value;
+  const Positions out = superResolveQuadric(scans, params_, &report_, progress_, with_normals ? &normals : nullptr,
+                                            with_curvature ? &curvature : nullptr);
   if (with_normals) this->orientTowardsViewPoint(out, normals, this->input_->sensor_origin_);
   writePositionsAndNormals(out, normals, output);
+  writeCurvatures(curvature, output);
 }
 
 }  // namespace paps

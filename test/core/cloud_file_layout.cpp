@@ -183,6 +183,31 @@ TEST(CloudIo, PlyOutputThatPclWouldWriteWrongIsRefused) {
   EXPECT_EQ(paps::loadCloud(pcd.string()).fields.back().count, 3u);
 }
 
+TEST(CloudIo, SensorOriginReadAndWrittenBack) {
+  // A PCD's VIEWPOINT origin is read, and written back by saveCloudAtomic; one that is not
+  // finite is read as none (0 0 0). PCL's own reader leaves garbage there on "nan": the value
+  // comes from our header check instead.
+  pcl::PCLPointCloud2 c;
+  pcl::toPCLPointCloud2(smallCloud(50), c);
+  const fs::path out = scratch("viewpoint.pcd");
+  paps::saveCloudAtomic(out.string(), c, Eigen::Vector3f(0.5f, -2.f, 1e30f));
+  Eigen::Vector3f origin;
+  paps::loadCloud(out.string(), &origin);
+  EXPECT_EQ(origin, Eigen::Vector3f(0.5f, -2.f, 1e30f));
+  EXPECT_THROW(paps::saveCloudAtomic(out.string(), c, Eigen::Vector3f(NAN, 0.f, 0.f)), paps::InvalidParameter);
+  std::string bytes = readBytes(out);
+  const std::size_t at = bytes.find("VIEWPOINT");
+  ASSERT_NE(at, std::string::npos);
+  const std::size_t eol = bytes.find('\n', at);
+  for (const std::string vp : {"VIEWPOINT nan 1 2 1 0 0 0", "VIEWPOINT 1 inf 2 1 0 0 0", "VIEWPOINT 1 2 1e39 1 0 0 0"}) {
+    const fs::path bad = scratch("viewpoint_bad.pcd");
+    std::ofstream(bad, std::ios::binary) << bytes.substr(0, at) + vp + bytes.substr(eol);
+    origin.setConstant(7.f);
+    EXPECT_EQ(paps::loadCloud(bad.string(), &origin).width, 50u) << vp;
+    EXPECT_EQ(origin, Eigen::Vector3f::Zero()) << vp;
+  }
+}
+
 TEST(CloudFileLayout, AsciiDataThatIsNotNumbersIsRefused) {
   // PCL's readers turn a word that is not a number, or a short row, into zeros or NaN without
   // a word: the file is refused and the line named. Empty lines are skipped, as PCL does, and

@@ -206,8 +206,9 @@ PcdLayout readPcdLayout(const std::string& path) {
       bool numbers = t.size() == 8;
       for (std::size_t i = 1; numbers && i < t.size(); ++i) {
         char* end = nullptr;
-        std::strtod(t[i].c_str(), &end);
+        const double v = std::strtod(t[i].c_str(), &end);
         numbers = end == t[i].c_str() + t[i].size();
+        if (i <= 3) L.origin[i - 1] = v;
       }
       if (!numbers) throw bad("bad VIEWPOINT line '" + line.substr(0, 80) + "' (expected 7 numbers)");
     }

@@ -83,7 +83,11 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   const std::string ext = extensionOf(path);
   // PCL's readers trust the header (allocation from its counts, a crash without FIELDS):
   // the header is checked against the file first, and a bad one is one clear error.
-  if (ext == ".pcd") checkPcdAsciiRows(path, readPcdLayout(path));
+  PcdLayout layout;
+  if (ext == ".pcd") {
+    layout = readPcdLayout(path);
+    checkPcdAsciiRows(path, layout);
+  }
   else if (ext == ".ply") readPlyLayoutForPcl(path);
   else {
     std::error_code ec;
@@ -100,16 +104,17 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
     Eigen::Vector4f o = Eigen::Vector4f::Zero();
     Eigen::Quaternionf q;
     int version = 0;
-    const int status = pcl::PCDReader().read(path, cloud, o, q, version);
-    // A VIEWPOINT that is not finite tells nothing: read as none.
-    if (origin && status >= 0 && o.head<3>().allFinite()) *origin = o.head<3>();
-    return status;
+    return pcl::PCDReader().read(path, cloud, o, q, version);
   }, thrown);
   if (rc < 0)
     throw IoError("cannot read '" + path + "': not a valid " + ext.substr(1) + " file" +
                   (thrown.empty() ? "" : " (" + thrown + ")"));
   if (cloud.data.size() < static_cast<std::size_t>(cloud.row_step) * cloud.height)
     throw IoError("cannot read '" + path + "': truncated data");
+  // The VIEWPOINT as our header check read it (PCL's reader leaves garbage on "nan"); one
+  // that is not finite in float tells nothing: read as none.
+  const Eigen::Vector3d o(layout.origin[0], layout.origin[1], layout.origin[2]);
+  if (origin && o.allFinite() && o.cwiseAbs().maxCoeff() < 3e38) *origin = o.cast<float>();
   try {
     findXyz(cloud);
   } catch (const InvalidInput& e) {

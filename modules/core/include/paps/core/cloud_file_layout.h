@@ -23,6 +23,9 @@ struct PcdLayout {
   std::uint64_t data_offset = 0;  ///< bytes from the start of the file to the data
   std::uint64_t point_step = 0;   ///< bytes of one point in binary data
   std::uint64_t file_size = 0;
+  /// The sensor origin of the VIEWPOINT line (0 0 0 without one). PCL's reader leaves it
+  /// undefined on "nan" or "inf" (garbage, not NaN): this is the value to trust.
+  double origin[3] = {0, 0, 0};
 
   /// Index of a field by name, -1 when absent.
   int field(const std::string& name) const;

@@ -298,6 +298,46 @@ TEST(CellGrid, CappedListsInACrowdedCellComeFromTheTreeUnchanged) {
   EXPECT_GT(copies_checked, 5);
 }
 
+TEST(CellGrid, CappedListsOfPilesOfCopiesAreTheBruteForceLists) {
+  // Positions stored many times, their copies scattered through the indices (as a merged or
+  // quantised scan has them), beside ordinary points in the same cells: a pile at least as
+  // large as the cap takes its list without a scan (itself, then its lowest-index copies),
+  // which must be the brute-force list. Piles of exactly the cap, one less, one more, and a
+  // pile whose copies are +0 and -0 (the same position) are all there.
+  paps::Random rng(21);
+  const int cap = 30;
+  const std::vector<Eigen::Vector3f> piles = {{0.01f, 0.02f, 0.03f}, {0.02f, 0.01f, 0.f}, {0.05f, 0.05f, 0.05f},
+                                              {0.3f, 0.3f, 0.3f}, {0.f, 0.07f, 0.01f}};
+  const std::vector<int> sizes = {cap, cap - 1, cap + 1, 500, 3 * cap};
+  Positions p;
+  std::vector<int> left(sizes);
+  for (int i = 0; i < 3000; ++i) {
+    p.emplace_back(0.4f * static_cast<float>(rng.uniform(0, 1)), 0.4f * static_cast<float>(rng.uniform(0, 1)),
+                   0.1f * static_cast<float>(rng.uniform(0, 1)));
+    const int k = static_cast<int>(rng.uniform(0, 5));
+    if (left[k] > 0) {
+      --left[k];
+      Eigen::Vector3f q = piles[k];
+      if (k == 4 && left[k] % 2) q.x() = -0.f;  // -0 and +0: one position
+      p.push_back(q);
+    }
+  }
+  for (int k = 0; k < 5; ++k) ASSERT_EQ(left[k], 0) << k;
+  const float r = 0.05f;
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  const NeighbourGraph g = grid.radiusGraph(p.size(), r, false, {}, cap);
+  int in_piles = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    std::vector<int> want = bruteBall(p, p[i], r);
+    std::rotate(want.begin(), std::find(want.begin(), want.end(), int(i)), std::find(want.begin(), want.end(), int(i)) + 1);
+    want.resize(std::min<std::size_t>(want.size(), cap));
+    ASSERT_EQ(std::vector<int>(g.begin(i), g.end(i)), want) << "point " << i;
+    in_piles += std::find(piles.begin(), piles.end(), p[i]) != piles.end();
+  }
+  EXPECT_EQ(in_piles, cap + cap - 1 + cap + 1 + 500 + 3 * cap);
+}
+
 TEST(CellGrid, OpenBallExcludesTheBoundary) {
   // Points exactly at distance 1 on a lattice: the closed ball has them, the open one not.
   Positions p;

@@ -44,7 +44,7 @@ int write(const std::string& path, int count, const std::string& format) {
   const int side = static_cast<int>(std::ceil(std::sqrt(static_cast<double>(count))));
   unsigned state = 7u;
   // "rough": noise as large as the spacing, where the normals' orientation is ambiguous.
-  const float amplitude = format == "rough" ? 0.03f : 0.004f;
+  const float amplitude = format == "rough" || format == "rough-doubled" ? 0.03f : 0.004f;
   auto noise = [&state, amplitude] {
     state = state * 1664525u + 1013904223u;
     return (static_cast<float>(state >> 8) / 16777216.f - 0.5f) * amplitude;
@@ -72,6 +72,12 @@ int write(const std::string& path, int count, const std::string& format) {
     cloud.height = static_cast<std::uint32_t>(count / side);
     for (std::size_t k = 3; k < cloud.size(); k += 10) cloud[k].x = cloud[k].y = cloud[k].z = NAN;
     cloud.is_dense = false;
+  }
+  // "doubled", "rough-doubled": every point stored twice (the copies after the originals), as
+  // scans written twice or merged are.
+  if (format == "doubled" || format == "rough-doubled") {
+    const std::size_t n = cloud.size();
+    for (std::size_t k = 0; k < n; ++k) cloud.push_back(cloud[k]);
   }
   // "sensor-below": the file says its sensor was 2 m under the surface (PCD VIEWPOINT).
   if (format == "sensor-below") cloud.sensor_origin_ = Eigen::Vector4f(0.3f, 0.3f, -2.f, 0.f);
@@ -242,6 +248,24 @@ int normals(const std::string& path, double max_degrees, const std::string& side
   return 0;
 }
 
+// B holds twice A's points (B's first half, then its second half), each half equal to A byte
+// for byte: a stage gave every copy of a point what it gives the point alone.
+int halves(const std::string& a_path, const std::string& b_path) {
+  pcl::PCLPointCloud2 a, b;
+  if (pcl::io::loadPCDFile(a_path, a) != 0) return fail("cannot read " + a_path);
+  if (pcl::io::loadPCDFile(b_path, b) != 0) return fail("cannot read " + b_path);
+  if (a.point_step != b.point_step || 2 * a.data.size() != b.data.size())
+    return fail("different layouts, or not twice the points");
+  const std::size_t n = a.data.size() / a.point_step;
+  std::size_t differ = 0;
+  for (std::size_t h = 0; h < 2; ++h)
+    for (std::size_t i = 0; i < n; ++i)
+      differ += std::memcmp(&a.data[i * a.point_step], &b.data[(h * n + i) * a.point_step], a.point_step) != 0;
+  if (differ) return fail(std::to_string(differ) + " of " + std::to_string(2 * n) + " copies differ from the point alone");
+  std::printf("%zu points, each copy as the point alone\n", n);
+  return 0;
+}
+
 // Prints the sensor origin a .pcd stores (VIEWPOINT), "x y z".
 int origin(const std::string& path) {
   pcl::PCLPointCloud2 blob;
@@ -262,6 +286,7 @@ int main(int argc, char** argv) {
   if (mode == "permute" && argc == 4) return permute(argv[2], argv[3]);
   if (mode == "same-points" && argc == 4) return samePoints(argv[2], argv[3]);
   if (mode == "origin" && argc == 3) return origin(argv[2]);
+  if (mode == "halves" && argc == 4) return halves(argv[2], argv[3]);
   if (mode == "normals" && (argc == 4 || argc == 5)) return normals(argv[2], std::atof(argv[3]), argc == 5 ? argv[4] : "");
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");

@@ -268,6 +268,24 @@ elseif(CASE STREQUAL "superres_denoise_choice")
   expect_one_error_line("denoise")
   run_paps(superres ${input} ${output} --denoise on --factor 2 --quiet)
   expect_success_saying("denoised first")
+elseif(CASE STREQUAL "curvature_copies")
+  # A copy adds no geometry: with every point stored twice, curvature gives each copy what it
+  # gives the point alone, orientation included (the propagated hints are made on the distinct
+  # positions, as the Wavejet fits are; on the copies' graph, 2 of these 1,800 rows differed).
+  foreach(count 900 10000)
+    set(single ${dir}/single.pcd)
+    set(input ${single})
+    write_input(${count} rough)
+    run_paps(curvature ${input} ${dir}/single_out.pcd --quiet)
+    set(input ${dir}/doubled.pcd)
+    write_input(${count} rough-doubled)
+    run_paps(curvature ${input} ${output} --quiet)
+    expect_success_saying("distinct positions")
+    execute_process(COMMAND ${TOOL} halves ${dir}/single_out.pcd ${output} RESULT_VARIABLE crc ERROR_VARIABLE cerr)
+    if(NOT crc STREQUAL "0")
+      message(FATAL_ERROR "${count} points stored twice: ${cerr}")
+    endif()
+  endforeach()
 elseif(CASE STREQUAL "superres_normals")
   # --normals: every method writes a unit normal per output point, close to the surface's
   # and with one orientation (checked by the cloud tool against the written surface).

@@ -363,9 +363,6 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
           ++ill_posed;
         ++fitted;
         collinear += fits[gi].status == QuadricFit::Status::Degenerate;
-        if (!fits[gi].frame.valid()) continue;
-        const int nv = lr.describe(fits[gi], P, g.begin(i), g.count(i), &desc[gi * B], &valid[gi * B]);
-        usable[gi] = nv * 2 >= B;
         pr.advance();
       }
     }
@@ -379,6 +376,28 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     throw InvalidInput("every ball of the patch radius " + detail::toString(R) +
                        " m holds only collinear or coincident points (no surface anywhere): the cloud is points on "
                        "lines or piles of copies; give a larger patch radius (--radius) if it is a surface sampled in lines");
+  // Descriptors, once the cloud is known to hold a surface somewhere: a cloud of piles of
+  // copies is refused above without describing every patch first (1M points on 20 positions:
+  // 75 s before the error).
+  for (std::size_t s = 0; s < sc.size(); ++s) {
+    if (sc[s].nh.radius <= 0) continue;
+    const Positions& P = *sc[s].points;
+    const NeighbourGraph& g = sc[s].nh.graph;
+    ProgressReporter pr(progress, "patch descriptors", P.size());
+    const std::int64_t n = static_cast<std::int64_t>(P.size());
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::int64_t i = 0; i < n; ++i) {
+      if (pr.cancelled()) continue;
+      const std::size_t gi = sc[s].offset + i;
+      if (isFinite(P[i]) && fits[gi].frame.valid()) {
+        const int nv = lr.describe(fits[gi], P, g.begin(i), g.count(i), &desc[gi * B], &valid[gi * B]);
+        usable[gi] = nv * 2 >= B;
+      }
+      pr.advance();
+    }
+    pr.throwIfCancelled();
+    pr.finish();
+  }
   rep.widened_fits = widened;
   rep.thin_balls = thin_balls;
   rep.flat_fits = flat;

@@ -169,6 +169,18 @@ TEST(MlsUpsampling, PclStageAndBadInput) {
       EXPECT_NE(std::string(e.what()).find("piles of copies"), std::string::npos) << e.what();
     }
   }
+  // A surface stored four times (three points in four are copies: the distinct positions are
+  // looked at first) is not refused: it has normals there.
+  const Positions sphere = spherePoints(1500, 1.f, 9);
+  Positions four;
+  for (int c = 0; c < 4; ++c) four.insert(four.end(), sphere.begin(), sphere.end());
+  for (const MlsSurface surface : {MlsSurface::Apss, MlsSurface::Rimls}) {
+    MlsUpsamplingParameters p;
+    p.factor = 1;
+    const Positions out = upsampleMls(four, surface, p);
+    EXPECT_EQ(out.size(), four.size());
+    EXPECT_LT(maxRadiusError(out, 1.f), 0.02f);
+  }
   huge.output_count = 100000;  // 1000x: the bound itself is allowed
   EXPECT_NO_THROW(checkOutputCount(huge.output_count, 100));
 }

@@ -166,22 +166,24 @@ bool hasField(const pcl::PCLPointCloud2& c, const char* name) {
   return false;
 }
 
-void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n) {
+void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<float>* curvature) {
   pcl::PointCloud<pcl::Normal> nc;
   nc.resize(n.size());
   for (std::size_t i = 0; i < n.size(); ++i) {
     nc[i].getNormalVector3fMap() = n[i];
-    nc[i].curvature = 0.f;
+    nc[i].curvature = curvature ? (*curvature)[i] : 0.f;
   }
   if (!hasField(cloud, "normal_x")) {
     pcl::PCLPointCloud2 nb;
     pcl::toPCLPointCloud2(nc, nb);
-    nb.fields.erase(std::remove_if(nb.fields.begin(), nb.fields.end(),
-                                   [](const pcl::PCLPointField& f) { return f.name == "curvature"; }),
-                    nb.fields.end());
+    if (!curvature)
+      nb.fields.erase(std::remove_if(nb.fields.begin(), nb.fields.end(),
+                                     [](const pcl::PCLPointField& f) { return f.name == "curvature"; }),
+                      nb.fields.end());
     cloud = appendFields(cloud, nb);  // in the input's width x height
     return;
   }
+  if (curvature) throw InvalidParameter("curvature", "given", "a cloud without normal fields (a new cloud)");
   std::size_t off[3] = {0, 0, 0};
   for (const auto& f : cloud.fields) {
     if (f.datatype != pcl::PCLPointField::FLOAT32 &&

@@ -58,8 +58,10 @@ void takeThreadsOption(int& argc, char** argv);
 /// Whether the cloud has a field of that name.
 bool hasField(const pcl::PCLPointCloud2& c, const char* name);
 
-/// Writes one normal per point into float32 normal_x/y/z, appending the three fields (no
-/// curvature) when the cloud has none. Throws InvalidInput when its normal fields are not float32.
-void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n);
+/// Writes one normal per point into float32 normal_x/y/z, appending the three fields when the
+/// cloud has none, with PCL's `curvature` field after them when `curvature` (one per point) is
+/// given (only for a cloud without normal fields). Throws InvalidInput when its normal fields
+/// are not float32.
+void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<float>* curvature = nullptr);
 
 }  // namespace paps::cli

@@ -124,14 +124,8 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
   // order, as the Wavejet stage: on a shuffled cloud the normals' loop waits on memory (1M
   // shuffled points: about 1.3 s of 8 s in input order), and the propagation's blocks would
   // depend on the input order.
-  const std::vector<int> rep = exactDuplicateRepresentatives(p);
-  std::vector<int> slot(p.size(), -1);
-  Positions distinct;
-  for (std::size_t i = 0; i < p.size(); ++i)
-    if (rep[i] == static_cast<int>(i)) {
-      slot[i] = static_cast<int>(distinct.size());
-      distinct.push_back(p[i]);
-    }
+  std::vector<int> slot;
+  const Positions distinct = distinctPositions(p, exactDuplicateRepresentatives(p), &slot);
   const Normals dn = runInSpatialOrder(distinct, {}, [](const Positions& ps, const std::vector<std::uint8_t>&) {
     const NeighbourGraph g = NeighbourGraph::byCount(ps, SpatialIndex(ps), 12);
     Normals n = estimateNormals(ps, g);
@@ -140,7 +134,7 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
   });
   hints.assign(p.size(), Eigen::Vector3f::Constant(NAN));
   for (std::size_t i = 0; i < p.size(); ++i)
-    if (rep[i] >= 0) hints[i] = dn[static_cast<std::size_t>(slot[static_cast<std::size_t>(rep[i])])];
+    if (slot[i] >= 0) hints[i] = dn[static_cast<std::size_t>(slot[i])];
   std::printf("orientation: propagated over the graph of the 12 nearest distinct positions\n");
   return true;
 }

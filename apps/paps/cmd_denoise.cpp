@@ -2,6 +2,7 @@
 #include <cstdio>
 
 #include <paps/core/cloud_io.h>
+#include <paps/core/view_point_option.h>
 #include <paps/core/error.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
@@ -86,9 +87,9 @@ int runDenoise(int argc, char** argv) {
     const std::string aggregate = a.text("aggregate", "patch");
     if (aggregate == "centre") p.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
     else if (aggregate != "patch") throw InvalidParameter("aggregate", aggregate, "patch or centre");
-    if (isFinite(origin) && origin.squaredNorm() > 0) {
+    if (const auto known = knownSensorOrigin(origin)) {
       p.use_viewpoint = true;
-      p.viewpoint = origin;
+      p.viewpoint = *known;
     }
     p.noise_sigma = static_cast<float>(a.number("noise", 0));
     p.adapt_to_noise = !a.has("no-adapt");

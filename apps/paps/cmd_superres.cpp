@@ -1,6 +1,5 @@
 // paps superres IN [IN2 ...] OUT --factor F [options]
 #include <cstdio>
-#include <cstring>
 
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
@@ -206,22 +205,9 @@ int runSuperres(int argc, char** argv) {
   }
   if (normals_out) {
     if (orient == "viewpoint") orientNormalsTowards(out, normals, origin);
-    setNormals(cloud, normals);
     // PCL's `curvature` beside the normals, as its MLS writes it: the surface variation of
     // the input ball each output point was made from.
-    pcl::PCLPointCloud2 c;
-    c.width = static_cast<std::uint32_t>(curvature.size());
-    c.height = 1;
-    c.point_step = sizeof(float);
-    c.row_step = c.point_step * c.width;
-    c.fields.resize(1);
-    c.fields[0].name = "curvature";
-    c.fields[0].offset = 0;
-    c.fields[0].datatype = pcl::PCLPointField::FLOAT32;
-    c.fields[0].count = 1;
-    c.data.resize(curvature.size() * sizeof(float));
-    std::memcpy(c.data.data(), curvature.data(), c.data.size());
-    cloud = appendFields(cloud, c);
+    setNormals(cloud, normals, &curvature);
   }
   saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());

@@ -1,8 +1,8 @@
 #include <paps/core/cell_grid.h>
 
 #include <algorithm>
-#include <array>
 #include <memory>
+#include <numeric>
 
 #include <cstring>
 
@@ -225,31 +225,31 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
   std::vector<std::vector<int>> pile_low;  // per pile: its max_count lowest indices, ascending
   if (max_count > 0 && !overflow && largest_cell >= max_count) {
     pile_of.assign(static_cast<std::size_t>(m), -1);
-    auto bitsOf = [](float v) {
-      v += 0.f;  // -0 and +0 are the same position
-      std::uint32_t b;
-      std::memcpy(&b, &v, sizeof b);
-      return b;
+    // A cell's slots by position (compared by value, as exactDuplicateRepresentatives: -0
+    // equals +0), then by index: each pile is a run, its lowest indices first. Only the cells
+    // that can hold a pile are sorted.
+    auto less = [&](int a, int b) {
+      const Eigen::Vector3f& p = sorted_[static_cast<std::size_t>(a)];
+      const Eigen::Vector3f& q = sorted_[static_cast<std::size_t>(b)];
+      if (p.x() != q.x()) return p.x() < q.x();
+      if (p.y() != q.y()) return p.y() < q.y();
+      if (p.z() != q.z()) return p.z() < q.z();
+      return original_[a] < original_[b];
     };
-    std::vector<std::pair<std::array<std::uint32_t, 4>, int>> cell;
+    std::vector<int> cell;
     for (std::size_t k = 0; k + 1 < start_.size(); ++k) {
       if (start_[k + 1] - start_[k] < max_count) continue;
-      cell.clear();
-      for (int s = start_[k]; s < start_[k + 1]; ++s) {
-        const Eigen::Vector3f& p = sorted_[static_cast<std::size_t>(s)];
-        cell.push_back({{bitsOf(p.x()), bitsOf(p.y()), bitsOf(p.z()), static_cast<std::uint32_t>(original_[s])}, s});
-      }
-      std::sort(cell.begin(), cell.end());
+      cell.resize(static_cast<std::size_t>(start_[k + 1] - start_[k]));
+      std::iota(cell.begin(), cell.end(), start_[k]);
+      std::sort(cell.begin(), cell.end(), less);
       for (std::size_t a = 0, b; a < cell.size(); a = b) {
-        for (b = a + 1; b < cell.size() && std::equal(cell[b].first.begin(), cell[b].first.begin() + 3,
-                                                       cell[a].first.begin());
-             ++b) {
+        const Eigen::Vector3f& at = sorted_[static_cast<std::size_t>(cell[a])];
+        for (b = a + 1; b < cell.size() && sorted_[static_cast<std::size_t>(cell[b])] == at; ++b) {
         }
         if (b - a < static_cast<std::size_t>(max_count)) continue;
         std::vector<int> low;
-        for (std::size_t j = a; j < a + static_cast<std::size_t>(max_count); ++j)
-          low.push_back(static_cast<int>(cell[j].first[3]));
-        for (std::size_t j = a; j < b; ++j) pile_of[static_cast<std::size_t>(cell[j].second)] = static_cast<int>(pile_low.size());
+        for (std::size_t j = a; j < a + static_cast<std::size_t>(max_count); ++j) low.push_back(original_[cell[j]]);
+        for (std::size_t j = a; j < b; ++j) pile_of[static_cast<std::size_t>(cell[j])] = static_cast<int>(pile_low.size());
         pile_low.push_back(std::move(low));
       }
     }
@@ -286,21 +286,21 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
         // a query for nothing: after one, the next kTreeRest queries of the thread scan (20
         // positions stored 10,000 times each: 3.3 s without the tree, 8.3 s trying it at
         // every query).
-        bool from_tree = false;
+        bool listed = false;  // the capped list came without a scan (a pile, or the tree)
         const int pile = pile_of.empty() ? -1 : pile_of[static_cast<std::size_t>(t)];
         if (pile >= 0) {
           buf.assign(1, static_cast<std::uint32_t>(original_[t]));
           for (const int i : pile_low[static_cast<std::size_t>(pile)])
             if (i != original_[t] && buf.size() < static_cast<std::size_t>(max_count))
               buf.push_back(distanceIndexKey(0.f, i) + (std::uint64_t(1) << 32));
-          from_tree = true;  // no scan: the list is complete
+          listed = true;
         } else if (tree && crowded) {
           if (tree_rest > 0)
             --tree_rest;
-          else if (!(from_tree = cappedListFromTree(*tree, sorted_, original_, t, max_count, max_d2, knn, kd2, buf)))
+          else if (!(listed = cappedListFromTree(*tree, sorted_, original_, t, max_count, max_d2, knn, kd2, buf)))
             tree_rest = kTreeRest;
         }
-        if (from_tree) {
+        if (listed) {
           // buf holds the capped list
         } else if (guess_reach && guess < radius) {
           collect(guess, std::min(max_d2, guess * guess));
@@ -308,7 +308,7 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
         } else {
           collect(radius, max_d2);
         }
-        if (tree && !from_tree) noteCrowding();
+        if (tree && !listed) noteCrowding();
         if (max_count > 0 && buf.size() > static_cast<std::size_t>(max_count)) {
           if (overflow) {
             list.clear();

@@ -238,6 +238,24 @@ float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index
   return r;
 }
 
+Positions distinctPositions(const Positions& points, const std::vector<int>& first, std::vector<int>* slot) {
+  if (first.size() != points.size())
+    throw InvalidParameter("first", detail::toString(first.size()), "one representative per point");
+  Positions distinct;
+  std::vector<int> at(points.size(), -1);
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (first[i] == static_cast<int>(i)) {
+      at[i] = static_cast<int>(distinct.size());
+      distinct.push_back(points[i]);
+    }
+  if (slot) {
+    slot->assign(points.size(), -1);
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (first[i] >= 0) (*slot)[i] = at[static_cast<std::size_t>(first[i])];
+  }
+  return distinct;
+}
+
 std::vector<int> exactDuplicateRepresentatives(const Positions& points, std::size_t* duplicates) {
   std::vector<int> rep(points.size(), -1);
   std::vector<int> order;

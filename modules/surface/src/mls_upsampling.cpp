@@ -1107,9 +1107,7 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   std::size_t copies = 0;
   const std::vector<int> first = exactDuplicateRepresentatives(points, &copies);
   if (copies * 4 >= finite * 3) {
-    Positions distinct;
-    for (std::size_t i = 0; i < points.size(); ++i)
-      if (first[i] == static_cast<int>(i)) distinct.push_back(points[i]);
+    const Positions distinct = distinctPositions(points, first);
     const Normals n = estimateNormals(distinct, gridRadiusGraph(distinct, h, {}, cap));
     if (std::none_of(n.begin(), n.end(), [](const Eigen::Vector3f& v) { return isFinite(v); })) noNormalAnywhere();
   }

@@ -125,6 +125,11 @@ float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index
 /// at their position.
 std::vector<int> exactDuplicateRepresentatives(const Positions& points, std::size_t* duplicates = nullptr);
 
+/// The distinct positions of `points` (the representatives of exactDuplicateRepresentatives,
+/// `first`, in array order). `slot`, when given, receives for every point the index of its
+/// position among them (-1 for non-finite points).
+Positions distinctPositions(const Positions& points, const std::vector<int>& first, std::vector<int>* slot = nullptr);
+
 }  // namespace paps
 
 namespace paps {

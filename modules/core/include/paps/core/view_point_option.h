@@ -16,10 +16,9 @@ namespace paps {
 /// The sensor origin a cloud carries (pcl::PointCloud::sensor_origin_, a PCD's VIEWPOINT),
 /// when it says something: finite and not PCL's default 0 0 0, which a cloud gets whether or
 /// not anyone knows where its sensor was.
-inline std::optional<Eigen::Vector3f> knownSensorOrigin(const Eigen::Vector4f& sensor_origin) {
-  const Eigen::Vector3f o = sensor_origin.head<3>();
-  if (!isFinite(o) || o.squaredNorm() == 0) return std::nullopt;
-  return o;
+inline std::optional<Eigen::Vector3f> knownSensorOrigin(const Eigen::Vector3f& sensor_origin) {
+  if (!isFinite(sensor_origin) || sensor_origin.squaredNorm() == 0) return std::nullopt;
+  return sensor_origin;
 }
 
 class ViewPointOption {
@@ -44,7 +43,7 @@ class ViewPointOption {
   /// otherwise they keep the orientation the stage propagated.
   void orientTowardsViewPoint(const Positions& points, Normals& normals, const Eigen::Vector4f& sensor_origin) const {
     if (use_view_point_) orientNormalsTowards(points, normals, view_point_);
-    else if (const auto o = knownSensorOrigin(sensor_origin)) orientNormalsTowards(points, normals, *o);
+    else if (const auto o = knownSensorOrigin(sensor_origin.head<3>())) orientNormalsTowards(points, normals, *o);
   }
 
  private:

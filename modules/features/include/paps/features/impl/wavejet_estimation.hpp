@@ -71,7 +71,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
     }
   }
   if (!view_point_set_)
-    if (const auto origin = knownSensorOrigin(this->input_->sensor_origin_)) run.viewpoint = *origin;
+    if (const auto origin = knownSensorOrigin(this->input_->sensor_origin_.template head<3>())) run.viewpoint = *origin;
   // Widening (WavejetParameters::widening): the radius here is always explicit, so only
   // Widening::always widens, to the `widen_to` nearest points of the search surface (exact
   // duplicates are not merged here: they count as neighbours).

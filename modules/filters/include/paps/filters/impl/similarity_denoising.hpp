@@ -37,7 +37,7 @@ void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {
   // A cloud that knows where its sensor was gets its normals oriented towards it (2.1.2);
   // otherwise orientation is propagated over the neighbour graph.
   SimilarityDenoisingParameters params = params_;
-  const auto origin = knownSensorOrigin(this->input_->sensor_origin_);
+  const auto origin = knownSensorOrigin(this->input_->sensor_origin_.template head<3>());
   if (!params.use_viewpoint && origin) {
     params.use_viewpoint = true;
     params.viewpoint = *origin;

@@ -427,16 +427,25 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     {
       std::vector<int> idx;
       std::vector<float> d2;
-      std::vector<float> rev(B);
+      // The query's heights and validity (0 or 1) in both orientations: a half turn reverses
+      // the bins. Masks as floats, so that the masked distance runs on SIMD lanes.
+      std::vector<float> q[2] = {std::vector<float>(B), std::vector<float>(B)};
+      std::vector<float> qm[2] = {std::vector<float>(B), std::vector<float>(B)};
+      std::vector<std::pair<float, Similar>> out;
 #pragma omp for schedule(dynamic, 256)
       for (std::int64_t i = 0; i < n; ++i) {
         if (pr.cancelled() || !usable[i]) continue;
-        const float* a = &desc[i * B];
-        const std::uint8_t* va = &valid[i * B];
-        auto& out = cand[i];
+        for (int b = 0; b < B; ++b) {
+          q[0][b] = desc[i * B + b];
+          q[1][B - 1 - b] = q[0][b];
+          qm[0][b] = valid[i * B + b] ? 1.f : 0.f;
+          qm[1][B - 1 - b] = qm[0][b];
+        }
+        out.clear();
         for (int flip = 0; flip < 2; ++flip) {
-          if (flip) for (int b = 0; b < B; ++b) rev[b] = a[B - 1 - b];
-          index.nearestK(flip ? rev.data() : a, params.candidates, idx, d2);
+          const float* a = q[flip].data();
+          const float* ma = qm[flip].data();
+          index.nearestK(a, params.candidates, idx, d2);
           for (int c : idx) {
             const int g = rows[c];
             // An exact copy of the point (scans are often stored with every point twice) is
@@ -444,28 +453,29 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
             if (g == i || positionOf(g) == P0[i]) continue;
             const float* o = &desc[static_cast<std::size_t>(g) * B];
             const std::uint8_t* vo = &valid[static_cast<std::size_t>(g) * B];
-            double s = 0;
-            int shared = 0;
+            float s = 0.f, shared = 0.f;
+#pragma omp simd reduction(+ : s, shared)
             for (int b = 0; b < B; ++b) {
-              const int bo = flip ? B - 1 - b : b;
-              if (va[b] && vo[bo]) { const float d = a[b] - o[bo]; s += d * d; ++shared; }
+              const float both = vo[b] ? ma[b] : 0.f;
+              const float d = a[b] - o[b];
+              s += both * d * d;
+              shared += both;
             }
             if (shared * 2 < B) continue;
-            out.push_back({static_cast<float>(s / shared), {g, flip != 0, 0.f}});
+            out.push_back({s / shared, {g, flip != 0, 0.f}});
           }
         }
         std::sort(out.begin(), out.end(), [](const auto& x, const auto& y) {
           return x.first < y.first || (x.first == y.first && x.second.patch < y.second.patch);
         });
         // One entry per patch (the better orientation), at most similar_patches.
-        std::vector<std::pair<float, Similar>> kept;
+        auto& kept = cand[i];
         for (const auto& e : out) {
           bool dup = false;
           for (const auto& k : kept) dup = dup || k.second.patch == e.second.patch;
           if (!dup) kept.push_back(e);
           if (static_cast<int>(kept.size()) >= params.similar_patches) break;
         }
-        out.swap(kept);
         pr.advance();
       }
     }
@@ -518,17 +528,29 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   const int m = 2 * half + 1;
   const float sigma_sr = run.kernel_scale * s0 / std::sqrt(1.f + static_cast<float>(rep.mean_similar_weight));
   const float inv_2s2 = 1.f / (2.f * sigma_sr * sigma_sr), cut2 = 9.f * sigma_sr * sigma_sr;
+  const float reach = L + 3.f * sigma_sr;
+  // Columns of x half a cut wide over [-reach, reach]: a bin's cut meets 3 to 4 of them (the
+  // test on cut2 decides within), against the whole band without them. The window is a hair
+  // wider than the cut, so that rounding cannot leave out a point the test would keep.
+  const float cut_x = 3.0003f * sigma_sr;
+  const float inv_column = 2.f / (3.f * sigma_sr);
+  const int columns = std::max(1, static_cast<int>(std::ceil(2.f * reach * inv_column)) + 1);
+  // Column of x: -1 below (and for NaN, whose window is then empty), `columns` above.
+  auto columnOf = [&](float x) {
+    const float t = std::floor((x + reach) * inv_column);
+    return t >= 0.f ? (t < static_cast<float>(columns) ? static_cast<int>(t) : columns) : -1;
+  };
   const float inv_sigma_sr = 1.f / sigma_sr;
   const float inv_wide2 = 1.f / (2.f * s0 * s0);
-  const float reach = L + 3.f * sigma_sr;
   std::vector<float> srh(n0 * m * m, 0.f);
   {
     ProgressReporter pr(progress, "super-resolution patches", n0);
     const std::int64_t n = static_cast<std::int64_t>(n0);
 #pragma omp parallel
     {
-      std::vector<Eigen::Vector3f> mapped;
-      std::vector<float> mw;
+      std::vector<Eigen::Vector3f> mapped, by_x;
+      std::vector<float> mw, by_x_w;
+      std::vector<int> column, column_start, by_x_column, rcol;
       std::vector<float> xs(m), ys(m);
       // The points within the kernel's cut band of the current bin row (structure of arrays,
       // so that the kernel weights, their exp and the fit's sums run on SIMD packets), and the
@@ -549,7 +571,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
           for (const int* j = s.nh.graph.begin(li); j != s.nh.graph.end(li); ++j) {
             Eigen::Vector3f l = fg.frame.toLocal((*s.points)[*j] - fg.origin);
             if (flip) { l.x() = -l.x(); l.y() = -l.y(); }
-            if (std::abs(l.x()) > reach || std::abs(l.y()) > reach) continue;
+            if (!(std::abs(l.x()) <= reach && std::abs(l.y()) <= reach)) continue;  // NaN too
             const float rho = l.z() - fg.height(l.x(), l.y());
             mapped.emplace_back(l.x(), l.y(), f0.height(l.x(), l.y()) + rho);
             mw.push_back(w);
@@ -557,6 +579,27 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
         };
         gather(static_cast<int>(i), false, 1.f);
         for (const auto& s : similar[i]) gather(s.patch, s.flip, s.weight);
+        // Grouped by columns of x, half a cut wide (a stable counting sort, linear): a band
+        // then holds its points column by column, and the cut of each bin, which moves along
+        // x with the bin, lies within a window of columns (below).
+        column.resize(mapped.size());
+        column_start.assign(columns + 1, 0);
+        for (std::size_t k = 0; k < mapped.size(); ++k) {
+          column[k] = std::clamp(columnOf(mapped[k].x()), 0, columns - 1);
+          ++column_start[column[k] + 1];
+        }
+        for (int c = 0; c < columns; ++c) column_start[c + 1] += column_start[c];
+        by_x.resize(mapped.size());
+        by_x_w.resize(mapped.size());
+        by_x_column.resize(mapped.size());
+        for (std::size_t k = 0; k < mapped.size(); ++k) {
+          const int at = column_start[column[k]]++;
+          by_x[at] = mapped[k];
+          by_x_w[at] = mw[k];
+          by_x_column[at] = column[k];
+        }
+        mapped.swap(by_x);
+        mw.swap(by_x_w);
         for (int k = 0; k < m; ++k) {
           xs[k] = parabolaAbscissaForArcLength(0.5f * f0.k1, (k - half) * d_sr);
           ys[k] = parabolaAbscissaForArcLength(0.5f * f0.k2, (k - half) * d_sr);
@@ -564,6 +607,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
         const Eigen::Index nm = static_cast<Eigen::Index>(mapped.size());
         if (rx.size() < nm) {
           for (Eigen::ArrayXf* a : {&rx, &ry, &rz, &rwt, &hk, &wk, &uk, &vk, &rw, &dist2}) a->resize(nm);
+          rcol.resize(nm);
         }
         for (int by = 0; by < m; ++by) {
           // A point outside the cut's band of this row is outside the cut of all its bins.
@@ -574,16 +618,23 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
             ry[nr] = mapped[k].y();
             rz[nr] = mapped[k].z();
             rwt[nr] = mw[k];
+            rcol[nr] = by_x_column[k];
             nr += (dy * dy <= cut2);
           }
+          Eigen::Index lo = 0, hi = 0;  // the band's points in the columns the bin's cut meets
           for (int bx = 0; bx < m; ++bx) {
             const Eigen::Vector3f c(xs[bx], ys[by], f0.height(xs[bx], ys[by]));
             const Eigen::Vector3f nb = f0.normalAt(c.x(), c.y());
             // The points within the kernel's cut, in the band's order (branch-free: every
-            // point is written, the count only moves past those inside), then their height over
-            // the bin's tangent plane and kernel weight on SIMD packets.
+            // point of the x window is written, the count only moves past those inside), then
+            // their height over the bin's tangent plane and kernel weight on SIMD packets. The
+            // bins of a row go up in x, so the window only moves forward.
+            const int first_col = columnOf(c.x() - cut_x), last_col = columnOf(c.x() + cut_x);
+            while (lo < nr && rcol[lo] < first_col) ++lo;
+            hi = std::max(hi, lo);
+            while (hi < nr && rcol[hi] <= last_col) ++hi;
             Eigen::Index nk = 0;
-            for (Eigen::Index k = 0; k < nr; ++k) {
+            for (Eigen::Index k = lo; k < hi; ++k) {
               const float dx = rx[k] - c.x(), dy = ry[k] - c.y();
               uk[nk] = dx;
               vk[nk] = dy;

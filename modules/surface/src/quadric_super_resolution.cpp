@@ -424,7 +424,11 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       return DescriptorIndex(table.data(), rows.size(), B, params.search_checks);
     }();
     ProgressReporter pr(progress, "similar patches", n0);
-    const std::int64_t n = static_cast<std::int64_t>(n0);
+    // The patches are queried in the order the tree stores them: consecutive queries then
+    // walk the same branches and leaves, which stay in cache (each answer is the same in any
+    // order).
+    const std::vector<int>& tree_order = index.storageOrder();
+    const std::int64_t n = static_cast<std::int64_t>(tree_order.size());
 #pragma omp parallel
     {
       std::vector<int> idx;
@@ -435,8 +439,9 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       std::vector<float> qm[2] = {std::vector<float>(B), std::vector<float>(B)};
       std::vector<std::pair<float, Similar>> out;
 #pragma omp for schedule(dynamic, 256)
-      for (std::int64_t i = 0; i < n; ++i) {
-        if (pr.cancelled() || !usable[i]) continue;
+      for (std::int64_t t = 0; t < n; ++t) {
+        const std::int64_t i = rows[tree_order[t]];
+        if (pr.cancelled() || i >= static_cast<std::int64_t>(n0)) continue;  // other scans: sources only
         for (int b = 0; b < B; ++b) {
           q[0][b] = desc[i * B + b];
           q[1][B - 1 - b] = q[0][b];

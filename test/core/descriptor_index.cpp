@@ -54,6 +54,31 @@ TEST(DescriptorIndex, ExactSearchEqualsBruteForce) {
   }
 }
 
+// Descriptors of QSR's sizes (7 x 7 bins, 40 = 2.5 blocks): the distance is summed a block of
+// 16 dimensions at a time on SIMD lanes and a row is dropped once its partial sum passes the
+// k-th best (strictly: a row at the k-th best's distance may still win on its index). The
+// answers must be the exact nearest, ties included (coarse values: many ties, and sums of
+// integers, exact in any order of addition).
+TEST(DescriptorIndex, ExactSearchEqualsBruteForceInManyDimensions) {
+  for (std::size_t dims : {40u, 49u}) {
+    const std::size_t rows = 5000;
+    const std::vector<float> data = randomRows(rows, dims, dims);
+    const paps::DescriptorIndex index(data.data(), rows, dims, 0);
+    std::vector<int> idx;
+    std::vector<float> d2;
+    const std::vector<float> queries = randomRows(20, dims, 7);
+    for (int q = 0; q < 20; ++q) {
+      const auto expected = bruteForce(data, dims, &queries[q * dims], 12);
+      index.nearestK(&queries[q * dims], 12, idx, d2);
+      ASSERT_EQ(idx.size(), expected.size()) << dims;
+      for (std::size_t j = 0; j < idx.size(); ++j) {
+        EXPECT_EQ(d2[j], expected[j].first) << dims << " " << q << " " << j;  // integer sums: exact
+        EXPECT_EQ(idx[j], expected[j].second) << dims << " " << q << " " << j;
+      }
+    }
+  }
+}
+
 TEST(DescriptorIndex, SameTreeWithOneOrTwoThreads) {
   const std::size_t rows = 150000, dims = 16;
   const std::vector<float> data = randomRows(rows, dims, 5);

@@ -533,6 +533,21 @@ TEST(QuadricSuperResolution, NoiseParametersBadValuesAndTinyClouds) {
   Positions nine(few.begin(), few.begin() + 9);
   nine.emplace_back(NAN, NAN, NAN);
   EXPECT_THROW(superResolveQuadric({nine}, {}), InvalidInput);
+  // Extreme kernels: the SR bins' windows of x columns are capped (a kernel of 1e-6 asked for
+  // millions of columns per patch: 100K points ran for minutes). The output stays on the plane.
+  Positions grid;
+  for (int i = 0; i < 400; ++i) grid.emplace_back(0.01f * (i % 20), 0.01f * (i / 20), 0.f);
+  for (float kernel : {1e-6f, 1e3f}) {
+    p = {};
+    p.kernel_scale = kernel;
+    p.factor = 2;
+    const Positions up = superResolveQuadric({grid}, p);
+    ASSERT_EQ(up.size(), 800u) << kernel;
+    for (const auto& q : up) {
+      ASSERT_TRUE(q.allFinite()) << kernel;
+      EXPECT_NEAR(q.z(), 0.f, 1e-5f) << kernel;
+    }
+  }
   // An output count past 1000x the scan is named before any work, not an allocation failure.
   p = {};
   p.output_count = SIZE_MAX;

@@ -545,9 +545,14 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   // Columns of x half a cut wide over [-reach, reach]: a bin's cut meets 3 to 4 of them (the
   // test on cut2 decides within), against the whole band without them. The window is a hair
   // wider than the cut, so that rounding cannot leave out a point the test would keep.
+  // At most kMaxColumns: a tiny kernel (--kernel 1e-6) would ask for millions of columns; wider
+  // ones only widen the windows, which stay exact (the test on cut2 decides).
   const float cut_x = 3.0003f * sigma_sr;
-  const float inv_column = 2.f / (3.f * sigma_sr);
-  const int columns = std::max(1, static_cast<int>(std::ceil(2.f * reach * inv_column)) + 1);
+  constexpr int kMaxColumns = 1024;
+  const float wanted = std::ceil(2.f * reach * 2.f / (3.f * sigma_sr));
+  const bool capped = !(wanted < kMaxColumns);
+  const int columns = capped ? kMaxColumns + 1 : std::max(1, static_cast<int>(wanted)) + 1;
+  const float inv_column = capped ? kMaxColumns / (2.f * reach) : 2.f / (3.f * sigma_sr);
   // Column of x: -1 below (and for NaN, whose window is then empty), `columns` above.
   auto columnOf = [&](float x) {
     const float t = std::floor((x + reach) * inv_column);

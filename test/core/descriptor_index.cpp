@@ -79,6 +79,21 @@ TEST(DescriptorIndex, ExactSearchEqualsBruteForceInManyDimensions) {
   }
 }
 
+// The denoiser queries the rows themselves from the index's copy and drops its own.
+TEST(DescriptorIndex, StoredRowsAreTheGivenRowsInStorageOrder) {
+  const std::size_t rows = 3000, dims = 7;
+  const std::vector<float> data = randomRows(rows, dims, 3);
+  const paps::DescriptorIndex index(data.data(), rows, dims, 32);
+  const std::vector<int>& order = index.storageOrder();
+  ASSERT_EQ(order.size(), rows);
+  std::vector<int> seen(rows, 0);
+  for (std::size_t t = 0; t < rows; ++t) {
+    ++seen[order[t]];
+    for (std::size_t d = 0; d < dims; ++d) ASSERT_EQ(index.storedRow(t)[d], data[order[t] * dims + d]) << t;
+  }
+  EXPECT_EQ(std::count(seen.begin(), seen.end(), 1), static_cast<long>(rows));  // a permutation
+}
+
 TEST(DescriptorIndex, SameTreeWithOneOrTwoThreads) {
   const std::size_t rows = 150000, dims = 16;
   const std::vector<float> data = randomRows(rows, dims, 5);

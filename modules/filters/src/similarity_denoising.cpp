@@ -371,6 +371,10 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   // floats per point) was the largest array of the filter after the neighbour graph.
   const int k = params.similar_patches - 1;
   const DescriptorIndex index(desc.data(), rows, dims, params.search_checks);
+  // The queries are the rows themselves, read from the index's copy (below): ours goes back
+  // for the search and the update (59 MB on table_scene; the command's peak, at writing the
+  // output, did not move measurably).
+  std::vector<float>().swap(desc);
   auto isMoving = [&](std::size_t i) { return usable[i] && (movable.empty() || movable[i]); };
   std::vector<PatchMoments<float>> moments;
   if (patch_mode) moments = patchMoments(points, base, frames, graph, usable, nb.radius);
@@ -395,7 +399,7 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
       match.clear();
       match_d2.clear();
       if (k > 0) {
-        index.nearestK(&desc[rows_of_point[i] * dims], k + orientations, idx, d2);
+        index.nearestK(index.storedRow(t), k + orientations, idx, d2);  // row own_row
         for (std::size_t c = 0; c < idx.size() && static_cast<int>(match.size()) < k; ++c) {
           if (point_of_row[idx[c]] == static_cast<int>(i)) continue;
           match.push_back(idx[c]);

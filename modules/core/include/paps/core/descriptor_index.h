@@ -24,6 +24,9 @@ class DescriptorIndex {
   /// The rows in the order the tree stores them: similar rows are close in this order, so
   /// querying the rows themselves in it keeps the tree and the data in cache.
   const std::vector<int>& storageOrder() const { return order_; }
+  /// The values of row storageOrder()[t] (dims of them), as given: the index keeps a copy, so
+  /// a caller that queries the rows themselves need not keep its own.
+  const float* storedRow(std::size_t t) const { return &data_[t * dims_]; }
   std::size_t dims() const { return dims_; }
 
  private:

@@ -372,8 +372,7 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   const int k = params.similar_patches - 1;
   const DescriptorIndex index(desc.data(), rows, dims, params.search_checks);
   // The queries are the rows themselves, read from the index's copy (below): ours goes back
-  // for the search and the update (59 MB on table_scene; the command's peak, at writing the
-  // output, did not move measurably).
+  // for the search and the update (59 MB on table_scene).
   std::vector<float>().swap(desc);
   auto isMoving = [&](std::size_t i) { return usable[i] && (movable.empty() || movable[i]); };
   std::vector<PatchMoments<float>> moments;

@@ -40,6 +40,7 @@ class DescriptorIndex {
   std::size_t rows_, dims_;
   int max_checks_;
   std::vector<float> data_;  // rows in tree order
+  const float* source_ = nullptr;  // the caller's rows, while the tree is built
   std::vector<int> order_;   // tree order -> original row
   std::vector<Node> nodes_;
 };

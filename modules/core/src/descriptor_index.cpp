@@ -24,9 +24,7 @@ DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_
   // Build on the caller's rows, read through order_, then lay them out in leaf order so that
   // a leaf scan reads contiguous memory: one copy (building on a copy of its own held three
   // at once with the caller's, the denoiser's peak on table_scene).
-  source_ = data;
-  if (rows > 0) build(0, static_cast<int>(rows), nodes_, 0);
-  source_ = nullptr;
+  if (rows > 0) build(data, 0, static_cast<int>(rows), nodes_, 0);
   data_.resize(rows * dims);
   for (std::size_t r = 0; r < rows; ++r)
     std::copy_n(data + static_cast<std::size_t>(order_[r]) * dims, dims, data_.begin() + r * dims);
@@ -35,7 +33,7 @@ DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_
 // Nodes are numbered in depth-first pre-order. The two subtrees of the root are built at the
 // same time into their own lists and appended with their ids shifted, which gives the very
 // same numbering as a sequential build.
-int DescriptorIndex::build(int begin, int end, std::vector<Node>& nodes, int depth) {
+int DescriptorIndex::build(const float* values, int begin, int end, std::vector<Node>& nodes, int depth) {
   const int id = static_cast<int>(nodes.size());
   nodes.push_back({-1, 0.f, begin, end});
   if (end - begin <= kLeafSize) return id;
@@ -48,7 +46,7 @@ int DescriptorIndex::build(int begin, int end, std::vector<Node>& nodes, int dep
   for (std::size_t d = 0; d < dims_; ++d) {
     float lo = std::numeric_limits<float>::infinity(), hi = -lo;
     for (int i = begin; i < end; i += stride) {
-      const float v = source_[static_cast<std::size_t>(order_[i]) * dims_ + d];
+      const float v = values[static_cast<std::size_t>(order_[i]) * dims_ + d];
       lo = std::min(lo, v);
       hi = std::max(hi, v);
     }
@@ -58,20 +56,20 @@ int DescriptorIndex::build(int begin, int end, std::vector<Node>& nodes, int dep
   // the check budget bounds the search.
   if (!(best_spread > 0)) best = 0;
   const int mid = begin + (end - begin) / 2;
-  auto key = [&](int r) { return source_[static_cast<std::size_t>(r) * dims_ + best]; };
+  auto key = [&](int r) { return values[static_cast<std::size_t>(r) * dims_ + best]; };
   std::nth_element(order_.begin() + begin, order_.begin() + mid, order_.begin() + end,
                    [&](int a, int b) { return key(a) != key(b) ? key(a) < key(b) : a < b; });
   const float split = key(order_[mid]);
   if (depth > 0 || end - begin < 65536) {
-    const int left = build(begin, mid, nodes, depth + 1);
-    const int right = build(mid, end, nodes, depth + 1);
+    const int left = build(values, begin, mid, nodes, depth + 1);
+    const int right = build(values, mid, end, nodes, depth + 1);
     nodes[id] = {best, split, left, right};
     return id;
   }
   std::vector<Node> sub[2];  // the subtrees touch disjoint ranges of order_
 #pragma omp parallel for schedule(static, 1) num_threads(2)
   for (int side = 0; side < 2; ++side)
-    build(side == 0 ? begin : mid, side == 0 ? mid : end, sub[side], depth + 1);
+    build(values, side == 0 ? begin : mid, side == 0 ? mid : end, sub[side], depth + 1);
   const int left = static_cast<int>(nodes.size());
   const int right = left + static_cast<int>(sub[0].size());
   for (int side = 0; side < 2; ++side) {

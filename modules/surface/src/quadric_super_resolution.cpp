@@ -542,11 +542,11 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   const float sigma_sr = run.kernel_scale * s0 / std::sqrt(1.f + static_cast<float>(rep.mean_similar_weight));
   const float inv_2s2 = 1.f / (2.f * sigma_sr * sigma_sr), cut2 = 9.f * sigma_sr * sigma_sr;
   const float reach = L + 3.f * sigma_sr;
-  // Columns of x half a cut wide over [-reach, reach]: a bin's cut meets 3 to 4 of them (the
-  // test on cut2 decides within), against the whole band without them. The window is a hair
-  // wider than the cut, so that rounding cannot leave out a point the test would keep.
-  // At most kMaxColumns: a tiny kernel (--kernel 1e-6) would ask for millions of columns; wider
-  // ones only widen the windows, which stay exact (the test on cut2 decides).
+  // Columns of x half a cut wide over [-reach, reach]: a bin's cut meets 3 to 4 of them,
+  // against the whole band without them. The test on cut2 decides within the window, which is
+  // a hair wider than the cut so that rounding cannot leave out a point the test would keep.
+  // At most kMaxColumns (a tiny kernel, --kernel 1e-6, would ask for millions): wider columns
+  // only widen the windows.
   const float cut_x = 3.0003f * sigma_sr;
   constexpr int kMaxColumns = 1024;
   const float wanted = std::ceil(2.f * reach * 2.f / (3.f * sigma_sr));

@@ -35,12 +35,12 @@ class DescriptorIndex {
     float split_val;  // left: value <= split_val
     int left, right;  // child nodes, or [begin, end) of the leaf in order_
   };
-  int build(int begin, int end, std::vector<Node>& nodes, int depth);
+  // Splits rows order_[begin, end) of `values` (the caller's rows, row-major) into `nodes`.
+  int build(const float* values, int begin, int end, std::vector<Node>& nodes, int depth);
 
   std::size_t rows_, dims_;
   int max_checks_;
   std::vector<float> data_;  // rows in tree order
-  const float* source_ = nullptr;  // the caller's rows, while the tree is built
   std::vector<int> order_;   // tree order -> original row
   std::vector<Node> nodes_;
 };

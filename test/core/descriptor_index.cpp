@@ -1,6 +1,7 @@
 // Tests of paps/core/descriptor_index.h: exact search equals brute force, the tree (built in
 // parallel above 65536 rows) is the same whatever the thread count, bad parameters are named.
 #include <algorithm>
+#include <cstdint>
 #include <utility>
 #include <vector>
 
@@ -34,24 +35,29 @@ std::vector<std::pair<float, int>> bruteForce(const std::vector<float>& data, st
   return all;
 }
 
-TEST(DescriptorIndex, ExactSearchEqualsBruteForce) {
-  const std::size_t dims = 6;
-  for (std::size_t rows : {1u, 31u, 1000u, 70000u}) {  // 70000: the root subtrees built in parallel
-    const std::vector<float> data = randomRows(rows, dims, rows);
-    const paps::DescriptorIndex index(data.data(), rows, dims, 0);
-    std::vector<int> idx;
-    std::vector<float> d2;
-    const std::vector<float> queries = randomRows(20, dims, 99);
-    for (int q = 0; q < 20; ++q) {
-      const auto expected = bruteForce(data, dims, &queries[q * dims], 9);
-      index.nearestK(&queries[q * dims], 9, idx, d2);
-      ASSERT_EQ(idx.size(), expected.size()) << rows;
-      for (std::size_t j = 0; j < idx.size(); ++j) {
-        EXPECT_EQ(d2[j], expected[j].first) << rows << " " << q << " " << j;
-        EXPECT_EQ(idx[j], expected[j].second) << rows << " " << q << " " << j;
-      }
+// An exact index (max_checks 0) over `data` answers 20 random queries with the brute-force
+// k nearest: the same rows in the same order, the same squared distances.
+void expectExactAnswers(const std::vector<float>& data, std::size_t dims, int k, std::uint64_t query_seed) {
+  const std::size_t rows = data.size() / dims;
+  const paps::DescriptorIndex index(data.data(), rows, dims, 0);
+  std::vector<int> idx;
+  std::vector<float> d2;
+  const std::vector<float> queries = randomRows(20, dims, query_seed);
+  for (int q = 0; q < 20; ++q) {
+    const auto expected = bruteForce(data, dims, &queries[q * dims], k);
+    index.nearestK(&queries[q * dims], k, idx, d2);
+    ASSERT_EQ(idx.size(), expected.size()) << rows << " x " << dims;
+    for (std::size_t j = 0; j < idx.size(); ++j) {
+      EXPECT_EQ(d2[j], expected[j].first) << rows << " x " << dims << ", query " << q << ", " << j;
+      EXPECT_EQ(idx[j], expected[j].second) << rows << " x " << dims << ", query " << q << ", " << j;
     }
   }
+}
+
+TEST(DescriptorIndex, ExactSearchEqualsBruteForce) {
+  const std::size_t dims = 6;
+  for (std::size_t rows : {1u, 31u, 1000u, 70000u})  // 70000: the root subtrees built in parallel
+    expectExactAnswers(randomRows(rows, dims, rows), dims, 9, 99);
 }
 
 // Descriptors of QSR's sizes (7 x 7 bins, 40 = 2.5 blocks): the distance is summed a block of
@@ -60,23 +66,7 @@ TEST(DescriptorIndex, ExactSearchEqualsBruteForce) {
 // answers must be the exact nearest, ties included (coarse values: many ties, and sums of
 // integers, exact in any order of addition).
 TEST(DescriptorIndex, ExactSearchEqualsBruteForceInManyDimensions) {
-  for (std::size_t dims : {40u, 49u}) {
-    const std::size_t rows = 5000;
-    const std::vector<float> data = randomRows(rows, dims, dims);
-    const paps::DescriptorIndex index(data.data(), rows, dims, 0);
-    std::vector<int> idx;
-    std::vector<float> d2;
-    const std::vector<float> queries = randomRows(20, dims, 7);
-    for (int q = 0; q < 20; ++q) {
-      const auto expected = bruteForce(data, dims, &queries[q * dims], 12);
-      index.nearestK(&queries[q * dims], 12, idx, d2);
-      ASSERT_EQ(idx.size(), expected.size()) << dims;
-      for (std::size_t j = 0; j < idx.size(); ++j) {
-        EXPECT_EQ(d2[j], expected[j].first) << dims << " " << q << " " << j;  // integer sums: exact
-        EXPECT_EQ(idx[j], expected[j].second) << dims << " " << q << " " << j;
-      }
-    }
-  }
+  for (std::size_t dims : {40u, 49u}) expectExactAnswers(randomRows(5000, dims, dims), dims, 12, 7);
 }
 
 // The denoiser queries the rows themselves from the index's copy and drops its own.

@@ -5,6 +5,8 @@
 #include <numeric>
 #include <queue>
 
+#include <Eigen/Dense>
+
 #include <paps/core/error.h>
 
 namespace paps {
@@ -13,14 +15,40 @@ namespace {
 constexpr int kLeafSize = 32;  // contiguous scans are cheap; tree steps are cache misses
 // Dimensions summed between two checks of a partial distance against the k-th best.
 constexpr std::size_t kDistanceBlock = 16;
+// The covariance of the principal axes is summed over at most about this many rows (evenly
+// spaced): plenty for a d x d matrix, and it bounds the cost on large tables.
+constexpr std::size_t kCovarianceRows = 65536;
+using RowMajor = Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 }  // namespace
 
-DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_t dims, int max_checks)
+DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_t dims, int max_checks, Axes axes)
     : rows_(rows), dims_(dims), max_checks_(max_checks) {
   requirePositive("dims", dims);
   if (max_checks < 0) throw InvalidParameter("max_checks", detail::toString(max_checks), "0 (exact) or > 0");
   order_.resize(rows);
   std::iota(order_.begin(), order_.end(), 0);
+  if (axes == Axes::Principal && max_checks > 0 && dims > 1 && rows > 2 * dims) {
+    // Turned rows in data_ (given order), the tree built on them, then data_ permuted in
+    // place into leaf order: the caller's rows and one copy, as below.
+    turnToPrincipalAxes(data);
+    build(data_.data(), 0, static_cast<int>(rows), nodes_, 0);
+    std::vector<std::uint8_t> placed(rows, 0);
+    std::vector<float> held(dims);
+    for (std::size_t start = 0; start < rows; ++start) {
+      if (placed[start]) continue;
+      // Slot r takes row order_[r]: follow the cycle through start.
+      std::copy_n(data_.begin() + start * dims, dims, held.begin());
+      std::size_t r = start;
+      while (true) {
+        placed[r] = 1;
+        const std::size_t from = static_cast<std::size_t>(order_[r]);
+        if (from == start) { std::copy_n(held.begin(), dims, data_.begin() + r * dims); break; }
+        std::copy_n(data_.begin() + from * dims, dims, data_.begin() + r * dims);
+        r = from;
+      }
+    }
+    return;
+  }
   // Build on the caller's rows, read through order_, then lay them out in leaf order so that
   // a leaf scan reads contiguous memory: one copy (building on a copy of its own held three
   // at once with the caller's, the denoiser's peak on table_scene).
@@ -28,6 +56,44 @@ DescriptorIndex::DescriptorIndex(const float* data, std::size_t rows, std::size_
   data_.resize(rows * dims);
   for (std::size_t r = 0; r < rows; ++r)
     std::copy_n(data + static_cast<std::size_t>(order_[r]) * dims, dims, data_.begin() + r * dims);
+}
+
+void DescriptorIndex::turnToPrincipalAxes(const float* data) {
+  const Eigen::Index n = static_cast<Eigen::Index>(rows_), d = static_cast<Eigen::Index>(dims_);
+  const Eigen::Map<const RowMajor> x(data, n, d);
+  // Mean and covariance in double, over evenly spaced rows, in a fixed order.
+  const std::size_t stride = std::max<std::size_t>(1, rows_ / kCovarianceRows);
+  Eigen::VectorXd mean = Eigen::VectorXd::Zero(d);
+  std::size_t used = 0;
+  for (std::size_t r = 0; r < rows_; r += stride, ++used) mean += x.row(static_cast<Eigen::Index>(r)).cast<double>().transpose();
+  mean /= static_cast<double>(used);
+  Eigen::MatrixXd cov = Eigen::MatrixXd::Zero(d, d);
+  Eigen::VectorXd c(d);
+  for (std::size_t r = 0; r < rows_; r += stride) {
+    c = x.row(static_cast<Eigen::Index>(r)).cast<double>().transpose() - mean;
+    cov.selfadjointView<Eigen::Lower>().rankUpdate(c);
+  }
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(cov.selfadjointView<Eigen::Lower>());
+  // Eigen sorts eigenvalues up: reversed, the largest variance comes first. A non-finite
+  // table (it should not happen) keeps the given axes.
+  if (eig.info() != Eigen::Success || !eig.eigenvectors().allFinite()) {
+    data_.assign(data, data + rows_ * dims_);
+    return;
+  }
+  const Eigen::MatrixXf basis = eig.eigenvectors().rowwise().reverse().cast<float>();
+  mean_.resize(dims_);
+  basis_.resize(dims_ * dims_);
+  Eigen::Map<Eigen::VectorXf>(mean_.data(), d) = mean.cast<float>();
+  Eigen::Map<Eigen::MatrixXf>(basis_.data(), d, d) = basis;
+  data_.resize(rows_ * dims_);
+  const Eigen::RowVectorXf m = mean.cast<float>().transpose();
+  constexpr Eigen::Index kBlock = 4096;
+#pragma omp parallel for schedule(static)
+  for (Eigen::Index b = 0; b < n; b += kBlock) {
+    const Eigen::Index len = std::min(kBlock, n - b);
+    Eigen::Map<RowMajor> out(data_.data() + static_cast<std::size_t>(b) * dims_, len, d);
+    out.noalias() = (x.middleRows(b, len).rowwise() - m) * basis;
+  }
 }
 
 // Nodes are numbered in depth-first pre-order. The two subtrees of the root are built at the
@@ -85,6 +151,22 @@ int DescriptorIndex::build(const float* values, int begin, int end, std::vector<
 
 int DescriptorIndex::nearestK(const float* query, int k, std::vector<int>& indices,
                               std::vector<float>& sq_distances) const {
+  if (basis_.empty()) return search(query, k, indices, sq_distances);
+  const Eigen::Index d = static_cast<Eigen::Index>(dims_);
+  thread_local Eigen::VectorXf turned;
+  turned.resize(d);
+  turned.noalias() = Eigen::Map<const Eigen::MatrixXf>(basis_.data(), d, d).transpose() *
+                     (Eigen::Map<const Eigen::VectorXf>(query, d) - Eigen::Map<const Eigen::VectorXf>(mean_.data(), d));
+  return search(turned.data(), k, indices, sq_distances);
+}
+
+int DescriptorIndex::nearestKOfStored(std::size_t t, int k, std::vector<int>& indices,
+                                      std::vector<float>& sq_distances) const {
+  return search(storedRow(t), k, indices, sq_distances);
+}
+
+int DescriptorIndex::search(const float* query, int k, std::vector<int>& indices,
+                            std::vector<float>& sq_distances) const {
   indices.clear();
   sq_distances.clear();
   k = std::min<int>(k, static_cast<int>(rows_));

@@ -398,7 +398,7 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
       match.clear();
       match_d2.clear();
       if (k > 0) {
-        index.nearestK(index.storedRow(t), k + orientations, idx, d2);  // row own_row
+        index.nearestKOfStored(t, k + orientations, idx, d2);  // row own_row
         for (std::size_t c = 0; c < idx.size() && static_cast<int>(match.size()) < k; ++c) {
           if (point_of_row[idx[c]] == static_cast<int>(i)) continue;
           match.push_back(idx[c]);

@@ -421,7 +421,9 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       std::vector<float> table(rows.size() * B);  // the index keeps its own copy
       for (std::size_t r = 0; r < rows.size(); ++r)
         std::copy(&desc[rows[r] * B], &desc[rows[r] * B] + B, &table[r * B]);
-      return DescriptorIndex(table.data(), rows.size(), B, params.search_checks);
+      // On the principal axes: twice the recall of the given axes at the same checks
+      // (docs/superresolution.md, session 23).
+      return DescriptorIndex(table.data(), rows.size(), B, params.search_checks, DescriptorIndex::Axes::Principal);
     }();
     ProgressReporter pr(progress, "similar patches", n0);
     // The patches are queried in the order the tree stores them: consecutive queries then

@@ -50,8 +50,10 @@ struct QuadricSuperResolutionParameters {
   int similar_patches = 16;
   /// Kd-tree candidates per orientation before the exact masked re-ranking (1 to 1024).
   int candidates = 24;
-  /// Descriptors compared per kd-tree query (0: exact).
-  int search_checks = 128;
+  /// Descriptors compared per kd-tree query (0: exact). The tree splits the descriptors'
+  /// principal axes: 64 checks there find closer patches than 128 on the given axes
+  /// (docs/superresolution.md, "Similar patches on principal axes").
+  int search_checks = 64;
   /// Width of the aggregation kernel (2.5) in units of s0 / sqrt(1 + K), s0 the input
   /// spacing and K - 1 the mean summed similarity weight (> 0), or 0: automatic, 0.7 without
   /// `adapt_to_noise`, else from the noise (0.7 to 1.4, see noiseAdaptedParameters).

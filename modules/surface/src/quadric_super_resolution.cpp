@@ -607,8 +607,30 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
             mw.push_back(w);
           }
         };
+        // The similar patches lie anywhere in the scan: their fits, lists and points are cache
+        // misses, which made the gathering wait on memory. Their fits and lists are asked for
+        // first, and each patch's points while the previous one is gathered.
+        const std::vector<Similar>& sim = similar[i];
+        auto listOf = [&](int g) {
+          const Scan& s = sc[scan_of[g]];
+          const std::size_t li = g - s.offset;
+          return std::make_pair(s.nh.graph.begin(li), s.nh.graph.end(li));
+        };
+        auto prefetchPoints = [&](int g) {
+          const Scan& s = sc[scan_of[g]];
+          const auto [b, e] = listOf(g);
+          for (const int* j = b; j != e; ++j) __builtin_prefetch(&(*s.points)[*j]);
+        };
+        for (const auto& e : sim) {
+          __builtin_prefetch(&fits[e.patch]);
+          __builtin_prefetch(listOf(e.patch).first);
+        }
         gather(static_cast<int>(i), false, 1.f);
-        for (const auto& s : similar[i]) gather(s.patch, s.flip, s.weight);
+        if (!sim.empty()) prefetchPoints(sim[0].patch);
+        for (std::size_t k = 0; k < sim.size(); ++k) {
+          if (k + 1 < sim.size()) prefetchPoints(sim[k + 1].patch);
+          gather(sim[k].patch, sim[k].flip, sim[k].weight);
+        }
         // Grouped by columns of x, half a cut wide (a stable counting sort, linear): a band
         // then holds its points column by column, and the cut of each bin, which moves along
         // x with the bin, lies within a window of columns (below).

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <memory>
 #include <numeric>
+#include <tuple>
 
 #include <pcl/point_types.h>
 
@@ -594,12 +595,17 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
         std::fill(heights.begin(), heights.end(), 0.f);
         mapped.clear();
         mw.clear();
-        auto gather = [&](int g, bool flip, float w) {
+        // Patch g's ball: its scan's points and g's neighbour list there.
+        auto ballOf = [&](int g) {
           const Scan& s = sc[scan_of[g]];
           const std::size_t li = g - s.offset;
+          return std::make_tuple(s.points, s.nh.graph.begin(li), s.nh.graph.end(li));
+        };
+        auto gather = [&](int g, bool flip, float w) {
+          const auto [points, first, last] = ballOf(g);
           const QuadricFit& fg = fits[g];
-          for (const int* j = s.nh.graph.begin(li); j != s.nh.graph.end(li); ++j) {
-            Eigen::Vector3f l = fg.frame.toLocal((*s.points)[*j] - fg.origin);
+          for (const int* j = first; j != last; ++j) {
+            Eigen::Vector3f l = fg.frame.toLocal((*points)[*j] - fg.origin);
             if (flip) { l.x() = -l.x(); l.y() = -l.y(); }
             if (!(std::abs(l.x()) <= reach && std::abs(l.y()) <= reach)) continue;  // NaN too
             const float rho = l.z() - fg.height(l.x(), l.y());
@@ -611,19 +617,13 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
         // misses, which made the gathering wait on memory. Their fits and lists are asked for
         // first, and each patch's points while the previous one is gathered.
         const std::vector<Similar>& sim = similar[i];
-        auto listOf = [&](int g) {
-          const Scan& s = sc[scan_of[g]];
-          const std::size_t li = g - s.offset;
-          return std::make_pair(s.nh.graph.begin(li), s.nh.graph.end(li));
-        };
         auto prefetchPoints = [&](int g) {
-          const Scan& s = sc[scan_of[g]];
-          const auto [b, e] = listOf(g);
-          for (const int* j = b; j != e; ++j) __builtin_prefetch(&(*s.points)[*j]);
+          const auto [points, first, last] = ballOf(g);
+          for (const int* j = first; j != last; ++j) __builtin_prefetch(&(*points)[*j]);
         };
         for (const auto& e : sim) {
           __builtin_prefetch(&fits[e.patch]);
-          __builtin_prefetch(listOf(e.patch).first);
+          __builtin_prefetch(std::get<1>(ballOf(e.patch)));
         }
         gather(static_cast<int>(i), false, 1.f);
         if (!sim.empty()) prefetchPoints(sim[0].patch);

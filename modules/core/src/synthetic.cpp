@@ -377,5 +377,58 @@ std::vector<int> addOutliers(Positions& points, float fraction, std::uint64_t se
   return chosen;
 }
 
+namespace {
+const float kWireOffsets[4] = {-0.6f, -0.2f, 0.2f, 0.6f};
+constexpr float kWireHeight = 0.3f, kCircleRadius = 0.5f, kCircleHeight = 0.6f;
+
+}  // namespace
+
+SurfaceAndCurves plateAndWires(std::size_t count, std::uint64_t seed) {
+  if (count < 100) throw InvalidParameter("count", std::to_string(count), "at least 100");
+  // Plate area 4 at spacing h: 4 / h^2 points; curves of length L at h / 2: 2 L / h points.
+  const double length = 8 * 2.0 + 2 * kPi * kCircleRadius;
+  const double x = (-2 * length + std::sqrt(4 * length * length + 16.0 * count)) / 8.0;  // 1 / h
+  const std::size_t n_curve = std::min(count - 1, static_cast<std::size_t>(std::llround(2 * length * x)));
+  const std::size_t n_plate = count - n_curve;
+  Random rng(seed);
+  SurfaceAndCurves out;
+  out.points.reserve(count);
+  out.on_curve.reserve(count);
+  for (std::size_t i = 0; i < n_plate; ++i) {
+    const float px = static_cast<float>(rng.uniform(-1, 1)), py = static_cast<float>(rng.uniform(-1, 1));
+    out.points.emplace_back(px, py, 0.f);
+    out.on_curve.push_back(0);
+  }
+  for (std::size_t i = 0; i < n_curve; ++i) {
+    const double s = rng.uniform(0, length);
+    Eigen::Vector3f p;
+    if (s < 16) {
+      const int w = static_cast<int>(s / 2);
+      const float t = static_cast<float>(s - 2 * w) - 1.f;
+      p = w < 4 ? Eigen::Vector3f(kWireOffsets[w], t, kWireHeight) : Eigen::Vector3f(t, kWireOffsets[w - 4], kWireHeight);
+    } else {
+      const double a = (s - 16) / kCircleRadius;
+      p = Eigen::Vector3f(static_cast<float>(kCircleRadius * std::cos(a)), static_cast<float>(kCircleRadius * std::sin(a)),
+                          kCircleHeight);
+    }
+    out.points.push_back(p);
+    out.on_curve.push_back(1);
+  }
+  return out;
+}
+
+double distanceToPlateAndWires(const Eigen::Vector3f& p) {
+  const Eigen::Vector3d q = p.cast<double>();
+  auto clamp1 = [](double v) { return std::clamp(v, -1.0, 1.0); };
+  double d2 = Eigen::Vector3d(q.x() - clamp1(q.x()), q.y() - clamp1(q.y()), q.z()).squaredNorm();
+  for (float c : kWireOffsets) {
+    d2 = std::min(d2, Eigen::Vector3d(q.x() - c, q.y() - clamp1(q.y()), q.z() - kWireHeight).squaredNorm());
+    d2 = std::min(d2, Eigen::Vector3d(q.x() - clamp1(q.x()), q.y() - c, q.z() - kWireHeight).squaredNorm());
+  }
+  const double rho = std::hypot(q.x(), q.y());
+  d2 = std::min(d2, (rho - kCircleRadius) * (rho - kCircleRadius) + (q.z() - kCircleHeight) * (q.z() - kCircleHeight));
+  return std::sqrt(d2);
+}
+
 }  // namespace synthetic
 }  // namespace paps

@@ -52,6 +52,19 @@ Positions scanLinePass(const ScanLinePass& pass, std::uint64_t seed);
 /// polar grid of cells about `cell` metres: ground truth for sampling dense reference points.
 TriangleMesh wavyGroundSector(const ScanLinePass& pass, float margin = 0.2f, float cell = 0.02f);
 
+/// A surface under a net of curves, the mixed shape of manuscript Fig. 3.15: the plate
+/// [-1, 1]^2 at z = 0; eight straight wires at z = 0.3 (x = -0.6, -0.2, 0.2, 0.6 for y in
+/// [-1, 1], and the same along x), which cross; a circle of radius 0.5 at z = 0.6 around the
+/// z axis. `count` points in all, uniform on the plate and along the curves, the curves
+/// twice as densely (spacing h / 2 along them where the plate's is h).
+struct SurfaceAndCurves {
+  Positions points;
+  std::vector<std::uint8_t> on_curve;  ///< 1 for the points of the wires and the circle
+};
+SurfaceAndCurves plateAndWires(std::size_t count, std::uint64_t seed);
+/// Exact distance from p to that shape.
+double distanceToPlateAndWires(const Eigen::Vector3f& p);
+
 /// Samples a mesh uniformly by area with a fixed seed. Returns positions; the true unit
 /// normals (of the triangle each sample lies on) when `normals` is given.
 Positions sampleMesh(const TriangleMesh& mesh, std::size_t count, std::uint64_t seed,

@@ -1,0 +1,145 @@
+#pragma once
+// Local Probing Fields (manuscript chapter 3): a planar pattern of points placed near the
+// shape; a probing operator sends each pattern point to a point of the shape; the field is
+// the set of displacements (eq. 3.1). The fields of the whole shape are analysed jointly
+// (eq. 3.2): a dictionary over which they decompose sparsely, and the pose of every pattern
+// that best fits that decomposition, alternated with probing again. No height-field
+// assumption: curves, borders and surfaces are probed alike.
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include <paps/core/neighbourhood.h>
+#include <paps/core/progress.h>
+
+namespace paps {
+
+/// The sampling pattern: the nodes of a square grid of step `step` inside the disk of
+/// `radius`, in the pattern plane (manuscript 3.2.6: M ~ pi (r / tau_s)^2 nodes).
+class ProbingPattern {
+ public:
+  /// Throws InvalidParameter unless 0 < step <= radius and the pattern has at most 20,000 nodes.
+  ProbingPattern(float radius, float step);
+  float radius() const { return radius_; }
+  float step() const { return step_; }
+  int size() const { return static_cast<int>(nodes_.size()); }
+  const Eigen::Vector2f& node(int i) const { return nodes_[i]; }
+  /// The node nearest to (x, y) of the pattern plane (ties: the lower index).
+  int nearestNode(float x, float y) const;
+  /// The four nodes of the grid cell holding (x, y) and their bilinear weights (summing to
+  /// 1); false when a corner lies outside the disk.
+  bool cellCorners(float x, float y, int nodes[4], float weights[4]) const;
+
+ private:
+  float radius_, step_;
+  int half_;                        // grid cells from the centre to the border
+  std::vector<Eigen::Vector2f> nodes_;
+  std::vector<int> node_of_cell_;   // (2 half + 1)^2 cells, -1 outside the disk
+};
+
+/// One field's pose: pattern centre and frame (columns t1, t2, n); pattern node i sits at
+/// seed + frame * (u_i, 0).
+struct ProbingPose {
+  Eigen::Vector3f seed = Eigen::Vector3f::Zero();
+  Eigen::Matrix3f frame = Eigen::Matrix3f::Identity();
+};
+
+struct LocalProbingParameters {
+  /// Pattern radius r in metres (> 0), or 0: the radius whose ball holds `neighbours` points
+  /// around a typical point. The scale at which similarities are sought (manuscript 3.2.6).
+  float radius = 0.f;
+  /// Points in the ball of an automatic radius, in [8, 2000].
+  int neighbours = 100;
+  /// Pattern step tau_s in metres, or 0: as many nodes as points in the ball,
+  /// r sqrt(pi / neighbours) (a 1:1 sampling).
+  float step = 0.f;
+  /// The target area of a field: the points within target_factor x r of its first seed,
+  /// fixed for the whole analysis (manuscript 3.2.1: 1.1). In [1, 3].
+  float target_factor = 1.1f;
+  /// Spacing of the fields' seeds in metres (Poisson disk), or 0: one field per point.
+  float seed_spacing = 0.f;
+  /// d, the dictionary's atoms, in [1, 1024].
+  int atoms = 16;
+  /// L1 weight of the sparse codes in metres (>= 0), or < 0: automatic,
+  /// lambda_factor x the step tau_s (the probing accuracy).
+  float lambda = -1.f;
+  float lambda_factor = 0.5f;
+  /// Rounds of the joint analysis (dictionary, pose, probe again), in [0, 100].
+  int rounds = 4;
+  /// Dictionary updates per round (warm-started), in [1, 100].
+  int dictionary_iterations = 2;
+  /// Iterations of the initial pattern-to-shape alignment (the ICP variant of 3.1.2), in [0, 100].
+  int alignment_iterations = 3;
+  /// Initial frames: false, the PCA frame of the target area (t1 along the largest spread);
+  /// true, a random frame (the manuscript's setting), drawn from `seed`.
+  bool random_orientation = false;
+  std::uint64_t seed = 1;
+  void validate() const;
+};
+
+/// The joint analysis of the fields of one point set (manuscript 3.2): poses, probed fields,
+/// dictionary and codes. Built once on a cloud; `probe` reads the (moved) points again.
+class LocalProbingAnalysis {
+ public:
+  /// Places the fields (seeds, target areas, initial frames) and probes them, then aligns
+  /// each pattern on its target area. Non-finite points are never probed.
+  /// Throws InvalidInput when fewer than 3 points are finite, InvalidParameter for bad
+  /// parameters (also a radius wider than the cloud).
+  LocalProbingAnalysis(const Positions& points, const LocalProbingParameters& parameters,
+                       const ProgressCallback& progress = {});
+  ~LocalProbingAnalysis();
+
+  /// Runs `rounds` rounds of eq. 3.2 on the current points: dictionary and codes, pose
+  /// optimisation against D a (eqs. 3.4 to 3.6), probing again. `points` must be the cloud
+  /// the analysis was built on, possibly moved (same size, same order).
+  void analyse(const Positions& points, int rounds, const ProgressCallback& progress = {});
+  /// Probes every field again at its current pose (eq. 3.1).
+  void probe(const Positions& points);
+
+  const LocalProbingParameters& parameters() const { return params_; }
+  const ProbingPattern& pattern() const { return *pattern_; }
+  std::size_t fieldCount() const { return poses_.size(); }
+  const ProbingPose& pose(std::size_t j) const { return poses_[j]; }
+  /// Probed displacements of field j in its frame: column j, 3 M values (x, y, z per node).
+  const Eigen::MatrixXf& fields() const { return fields_; }
+  /// Index of the point node i of field j probed (-1 when its target area is empty).
+  int probedPoint(std::size_t j, int i) const { return probed_[j * pattern_->size() + i]; }
+  /// Target area of field j: point indices.
+  const int* targetBegin(std::size_t j) const { return target_idx_.data() + target_off_[j]; }
+  const int* targetEnd(std::size_t j) const { return target_idx_.data() + target_off_[j + 1]; }
+  /// Dimension of field j's target area by the dimensionality features of its covariance
+  /// (Demantke et al. 2011): 1 on a wire, 2 on a surface (also at its border), 3 for a
+  /// scattered blob; 0 when it holds fewer than 6 points (too few to tell).
+  int targetDimension(std::size_t j) const { return dimension_[j]; }
+  const Eigen::MatrixXf& dictionary() const { return dictionary_; }
+  /// Codes of the current fields over the dictionary (d x N), as of the last analyse() or
+  /// recode().
+  const Eigen::MatrixXf& codes() const { return codes_; }
+  /// Codes the current fields again over the dictionary (after probe()).
+  void recode();
+  /// D a_j: field j as the dictionary represents it (3 M values, in its frame).
+  Eigen::VectorXf reconstructed(std::size_t j) const { return dictionary_ * codes_.col(j); }
+  /// Representation error sum_j |V_j - D a_j|^2 / N after each round of analyse().
+  const std::vector<double>& roundErrors() const { return round_errors_; }
+  float radius() const { return pattern_->radius(); }
+  float lambda() const { return lambda_; }
+
+ private:
+  void align(const Positions& points, std::size_t j, const Eigen::VectorXf& goal);
+
+  LocalProbingParameters params_;
+  std::unique_ptr<ProbingPattern> pattern_;
+  std::vector<ProbingPose> poses_;
+  std::vector<std::uint8_t> dimension_;
+  std::vector<std::int64_t> target_off_;
+  std::vector<int> target_idx_;
+  Eigen::MatrixXf fields_;
+  std::vector<int> probed_;
+  Eigen::MatrixXf dictionary_, codes_;
+  std::vector<double> round_errors_;
+  float lambda_ = 0.f;
+};
+
+}  // namespace paps

@@ -1,0 +1,389 @@
+#include <paps/core/local_probing_field.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+
+#include <paps/core/error.h>
+#include <paps/core/lasso_dictionary.h>
+#include <paps/core/poisson_disk_sampling.h>
+#include <paps/core/random.h>
+
+namespace paps {
+
+// ---------------------------------------------------------------------------------------
+// Pattern
+
+ProbingPattern::ProbingPattern(float radius, float step) : radius_(radius), step_(step) {
+  requirePositive("radius", radius);
+  requirePositive("step", step);
+  if (step > radius) throw InvalidParameter("step", detail::toString(step), "at most the pattern radius " + detail::toString(radius));
+  const double ratio = radius / step;
+  if (ratio > 80) throw InvalidParameter("step", detail::toString(step), "at least radius / 80 (at most 20,000 pattern nodes)");
+  half_ = static_cast<int>(std::floor(ratio));
+  const int side = 2 * half_ + 1;
+  node_of_cell_.assign(static_cast<std::size_t>(side) * side, -1);
+  for (int y = -half_; y <= half_; ++y)
+    for (int x = -half_; x <= half_; ++x) {
+      const Eigen::Vector2f u(x * step, y * step);
+      if (u.norm() > radius * (1 + 1e-6f)) continue;
+      node_of_cell_[(y + half_) * side + (x + half_)] = static_cast<int>(nodes_.size());
+      nodes_.push_back(u);
+    }
+}
+
+int ProbingPattern::nearestNode(float x, float y) const {
+  const int side = 2 * half_ + 1;
+  const int cx = static_cast<int>(std::lround(x / step_)), cy = static_cast<int>(std::lround(y / step_));
+  if (std::abs(cx) <= half_ && std::abs(cy) <= half_) {
+    const int n = node_of_cell_[(cy + half_) * side + (cx + half_)];
+    if (n >= 0) return n;
+  }
+  // Outside the disk: the nearest node by search (rare: only points beyond the pattern).
+  int best = 0;
+  float best_d2 = INFINITY;
+  for (int i = 0; i < size(); ++i) {
+    const float d2 = (nodes_[i] - Eigen::Vector2f(x, y)).squaredNorm();
+    if (d2 < best_d2) { best_d2 = d2; best = i; }
+  }
+  return best;
+}
+
+bool ProbingPattern::cellCorners(float x, float y, int nodes[4], float weights[4]) const {
+  const int side = 2 * half_ + 1;
+  const float gx = x / step_, gy = y / step_;
+  const int x0 = static_cast<int>(std::floor(gx)), y0 = static_cast<int>(std::floor(gy));
+  if (!(x0 >= -half_ && x0 + 1 <= half_ && y0 >= -half_ && y0 + 1 <= half_)) return false;
+  const float fx = gx - x0, fy = gy - y0;
+  for (int c = 0; c < 4; ++c) {
+    const int cx = x0 + (c & 1), cy = y0 + (c >> 1);
+    nodes[c] = node_of_cell_[(cy + half_) * side + (cx + half_)];
+    if (nodes[c] < 0) return false;
+    weights[c] = ((c & 1) ? fx : 1 - fx) * ((c >> 1) ? fy : 1 - fy);
+  }
+  return true;
+}
+
+// ---------------------------------------------------------------------------------------
+// Parameters
+
+void LocalProbingParameters::validate() const {
+  if (!(radius >= 0) || !std::isfinite(radius))
+    throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
+  requireInRange("neighbours", neighbours, 8, 2000);
+  if (!(step >= 0) || !std::isfinite(step))
+    throw InvalidParameter("step", detail::toString(step), "0 (automatic) or a finite value > 0");
+  requireInRange("target_factor", target_factor, 1.f, 3.f);
+  if (!(seed_spacing >= 0) || !std::isfinite(seed_spacing))
+    throw InvalidParameter("seed_spacing", detail::toString(seed_spacing), "0 (one field per point) or a finite value > 0");
+  requireInRange("atoms", atoms, 1, 1024);
+  if (!std::isfinite(lambda)) throw InvalidParameter("lambda", detail::toString(lambda), "a finite value (< 0: automatic)");
+  requireInRange("lambda_factor", lambda_factor, 0.f, 100.f);
+  requireInRange("rounds", rounds, 0, 100);
+  requireInRange("dictionary_iterations", dictionary_iterations, 1, 100);
+  requireInRange("alignment_iterations", alignment_iterations, 0, 100);
+}
+
+// ---------------------------------------------------------------------------------------
+// Probing operator (manuscript 3.1.2): each node goes to the target point whose projection
+// on the pattern plane is nearest to it ("as orthogonal as possible").
+
+namespace {
+
+struct ProbeScratch {
+  std::vector<Eigen::Vector3f> local;  // target points in the field's frame
+  std::vector<int> cell_start, cell_points;
+  std::vector<int> cell_of;
+};
+
+// Probes one field: writes 3 M displacements (in the frame) and the probed point indices.
+// Returns false when the target area holds no finite point.
+bool probeField(const Positions& points, const int* tb, const int* te, const ProbingPose& pose,
+                const ProbingPattern& pattern, float* v, int* probed, ProbeScratch& s) {
+  const int m = pattern.size();
+  s.local.clear();
+  std::vector<int> idx;
+  for (const int* t = tb; t != te; ++t)
+    if (isFinite(points[*t])) s.local.push_back(pose.frame.transpose() * (points[*t] - pose.seed));
+  const int count = static_cast<int>(s.local.size());
+  if (count == 0) {
+    std::fill(v, v + 3 * m, 0.f);
+    std::fill(probed, probed + m, -1);
+    return false;
+  }
+  // Bucket grid of the projections, cells of one step, over the pattern's square plus one
+  // cell; points outside are clamped in (projection on a box never lengthens a distance to
+  // a node inside it, so the ring bound below stays a lower bound).
+  const float step = pattern.step();
+  const int half = static_cast<int>(std::ceil(pattern.radius() / step)) + 1;
+  const int side = 2 * half + 1;
+  const float origin = -(half + 0.5f) * step;
+  auto cellCoord = [&](float x) {
+    const int c = static_cast<int>(std::floor((x - origin) / step));
+    return std::clamp(c, 0, side - 1);
+  };
+  s.cell_start.assign(static_cast<std::size_t>(side) * side + 1, 0);
+  s.cell_of.resize(count);
+  for (int p = 0; p < count; ++p) {
+    const int c = cellCoord(s.local[p].y()) * side + cellCoord(s.local[p].x());
+    s.cell_of[p] = c;
+    ++s.cell_start[c + 1];
+  }
+  for (int c = 0; c < side * side; ++c) s.cell_start[c + 1] += s.cell_start[c];
+  s.cell_points.resize(count);
+  {
+    std::vector<int> fill(s.cell_start.begin(), s.cell_start.end() - 1);
+    for (int p = 0; p < count; ++p) s.cell_points[fill[s.cell_of[p]]++] = p;  // increasing p in each cell
+  }
+  // Index of the p-th finite target point in the cloud.
+  int* target_of = nullptr;
+  std::vector<int> finite_targets;
+  finite_targets.reserve(count);
+  for (const int* t = tb; t != te; ++t)
+    if (isFinite(points[*t])) finite_targets.push_back(*t);
+  target_of = finite_targets.data();
+
+  for (int i = 0; i < m; ++i) {
+    const Eigen::Vector2f& u = pattern.node(i);
+    const int cx = cellCoord(u.x()), cy = cellCoord(u.y());
+    int best = -1;
+    float best_d2 = INFINITY;
+    for (int ring = 0; ring < side; ++ring) {
+      for (int y = cy - ring; y <= cy + ring; ++y) {
+        if (y < 0 || y >= side) continue;
+        const bool edge_row = (y == cy - ring || y == cy + ring);
+        for (int x = cx - ring; x <= cx + ring; x += edge_row ? 1 : 2 * std::max(ring, 1)) {
+          if (x < 0 || x >= side) continue;
+          const int c = y * side + x;
+          for (int k = s.cell_start[c]; k < s.cell_start[c + 1]; ++k) {
+            const int p = s.cell_points[k];
+            const float dx = s.local[p].x() - u.x(), dy = s.local[p].y() - u.y();
+            const float d2 = dx * dx + dy * dy;
+            if (d2 < best_d2 || (d2 == best_d2 && p < best)) { best_d2 = d2; best = p; }
+          }
+          if (ring == 0) break;
+        }
+      }
+      const float bound = ring * step;
+      if (best >= 0 && best_d2 <= bound * bound) break;
+    }
+    const Eigen::Vector3f& q = s.local[best];
+    v[3 * i] = q.x() - u.x();
+    v[3 * i + 1] = q.y() - u.y();
+    v[3 * i + 2] = q.z();
+    probed[i] = target_of[best];
+  }
+  return true;
+}
+
+// Frame of the target area by PCA: t1 along the largest spread, n along the smallest;
+// `dimension` gets the dimensionality of Demantke et al. (2011): with s_k the square roots of
+// the eigenvalues (s1 >= s2 >= s3), the largest of linearity (s1 - s2) / s1, planarity
+// (s2 - s3) / s1 and scattering s3 / s1 gives 1, 2 or 3. Unlike a ratio of two
+// eigenvalues it does not depend on the noise: a noisy wire spreads equally in both
+// directions across it.
+Eigen::Matrix3f pcaFrame(const Positions& points, const int* tb, const int* te, std::uint8_t* dimension) {
+  *dimension = 0;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  int n = 0;
+  for (const int* t = tb; t != te; ++t)
+    if (isFinite(points[*t])) { mean += points[*t].cast<double>(); ++n; }
+  if (n < 3) return Eigen::Matrix3f::Identity();
+  mean /= n;
+  const bool measurable = n >= 6;  // fewer points cannot tell a wire from a surface
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const int* t = tb; t != te; ++t)
+    if (isFinite(points[*t])) {
+      const Eigen::Vector3d d = points[*t].cast<double>() - mean;
+      cov += d * d.transpose();
+    }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(cov);
+  const double s1 = std::sqrt(std::max(0.0, es.eigenvalues()[2])), s2 = std::sqrt(std::max(0.0, es.eigenvalues()[1])),
+               s3 = std::sqrt(std::max(0.0, es.eigenvalues()[0]));
+  if (s1 > 0 && measurable) {
+    const double linear = s1 - s2, planar = s2 - s3, scattered = s3;
+    *dimension = linear >= planar && linear >= scattered ? 1 : (planar >= scattered ? 2 : 3);
+  }
+  Eigen::Matrix3f f;
+  const Eigen::Vector3f t1 = es.eigenvectors().col(2).cast<float>().normalized();
+  const Eigen::Vector3f nrm = es.eigenvectors().col(0).cast<float>().normalized();
+  f.col(0) = t1;
+  f.col(1) = nrm.cross(t1).normalized();
+  f.col(2) = nrm;
+  return f;
+}
+
+Eigen::Matrix3f randomFrame(std::uint64_t seed, std::size_t j) {
+  Random rng(seed * 0x9e3779b97f4a7c15ULL + j + 1);
+  Eigen::Quaternionf q(static_cast<float>(rng.gaussian()), static_cast<float>(rng.gaussian()),
+                       static_cast<float>(rng.gaussian()), static_cast<float>(rng.gaussian()));
+  if (q.norm() < 1e-6f) q = Eigen::Quaternionf::Identity();
+  return q.normalized().toRotationMatrix();
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// Analysis
+
+LocalProbingAnalysis::~LocalProbingAnalysis() = default;
+
+LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalProbingParameters& parameters,
+                                           const ProgressCallback& progress)
+    : params_(parameters) {
+  params_.validate();
+  const std::size_t finite = countFinite(points);
+  if (finite < 3) throw InvalidInput("Local Probing Fields need at least 3 finite points, got " + std::to_string(finite));
+  requireRadiusWithinExtent("radius", params_.radius, points);
+  SpatialIndex index(points);
+  float r = params_.radius;
+  if (!(r > 0)) {
+    r = radiusForNeighbourCount(points, index, params_.neighbours);
+    if (!(r > 0)) throw InvalidInput("the points are all at one position: no pattern radius fits them");
+  }
+  float step = params_.step;
+  if (!(step > 0)) step = r * std::sqrt(3.14159265f / params_.neighbours);
+  if (step > r) throw InvalidParameter("step", detail::toString(step), "at most the pattern radius " + detail::toString(r));
+  pattern_ = std::make_unique<ProbingPattern>(r, step);
+  lambda_ = params_.lambda >= 0 ? params_.lambda : params_.lambda_factor * step;
+
+  // Seeds and target areas.
+  std::vector<int> seeds;
+  if (params_.seed_spacing > 0) {
+    seeds = poissonDiskSubset(points, params_.seed_spacing, params_.seed, progress);
+  } else {
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (isFinite(points[i])) seeds.push_back(static_cast<int>(i));
+  }
+  const std::size_t n = seeds.size();
+  const float target_r = params_.target_factor * r;
+  std::vector<std::vector<int>> lists(n);
+  ProgressReporter rep(progress, "probing fields", n);
+#pragma omp parallel
+  {
+    std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) {
+      index.radiusSearch(points[seeds[j]], target_r, lists[j], d2);
+      std::sort(lists[j].begin(), lists[j].end());
+      rep.advance();
+    }
+  }
+  rep.throwIfCancelled();
+  target_off_.assign(n + 1, 0);
+  for (std::size_t j = 0; j < n; ++j) target_off_[j + 1] = target_off_[j] + static_cast<std::int64_t>(lists[j].size());
+  target_idx_.resize(static_cast<std::size_t>(target_off_[n]));
+  for (std::size_t j = 0; j < n; ++j) {
+    std::copy(lists[j].begin(), lists[j].end(), target_idx_.begin() + target_off_[j]);
+    std::vector<int>().swap(lists[j]);
+  }
+
+  poses_.resize(n);
+  dimension_.resize(n);
+#pragma omp parallel for schedule(dynamic, 1024)
+  for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) {
+    poses_[j].seed = points[seeds[j]];
+    poses_[j].frame = pcaFrame(points, targetBegin(j), targetEnd(j), &dimension_[j]);
+    if (params_.random_orientation) poses_[j].frame = randomFrame(params_.seed, j);
+  }
+  const int m = pattern_->size();
+  fields_.resize(3 * m, static_cast<Eigen::Index>(n));
+  probed_.assign(static_cast<std::size_t>(m) * n, -1);
+  probe(points);
+  // Initial alignment: the ICP variant of 3.1.2 (minimise sum |v_i|^2).
+  const Eigen::VectorXf zero = Eigen::VectorXf::Zero(3 * m);
+  for (int it = 0; it < params_.alignment_iterations; ++it) {
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) align(points, j, zero);
+    probe(points);
+  }
+}
+
+void LocalProbingAnalysis::probe(const Positions& points) {
+  const int m = pattern_->size();
+  const std::int64_t n = static_cast<std::int64_t>(poses_.size());
+#pragma omp parallel
+  {
+    ProbeScratch scratch;
+#pragma omp for schedule(dynamic, 256)
+    for (std::int64_t j = 0; j < n; ++j)
+      probeField(points, targetBegin(j), targetEnd(j), poses_[j], *pattern_, fields_.col(j).data(),
+                 probed_.data() + j * m, scratch);
+  }
+}
+
+// Rigid motion (R_d, t_d) of the frame taking the pattern shape u + goal onto the probed
+// u + v (eq. 3.5, least squares, Kabsch/Umeyama), then the pose update of eq. 3.6: the
+// pattern's nodes plus `goal` now sit where the probed points are.
+void LocalProbingAnalysis::align(const Positions&, std::size_t j, const Eigen::VectorXf& goal) {
+  const int m = pattern_->size();
+  const int* probed = probed_.data() + j * m;
+  int valid = 0;
+  for (int i = 0; i < m; ++i) valid += probed[i] >= 0;
+  if (valid < 3) return;
+  Eigen::Matrix3Xf src(3, valid), dst(3, valid);
+  int c = 0;
+  for (int i = 0; i < m; ++i) {
+    if (probed[i] < 0) continue;
+    const Eigen::Vector3f u(pattern_->node(i).x(), pattern_->node(i).y(), 0.f);
+    src.col(c) = u + goal.segment<3>(3 * i);
+    dst.col(c) = u + fields_.col(j).segment<3>(3 * i);
+    ++c;
+  }
+  const Eigen::Matrix4f T = Eigen::umeyama(src, dst, false);
+  const Eigen::Matrix3f Rd = T.topLeftCorner<3, 3>();
+  const Eigen::Vector3f td = T.topRightCorner<3, 1>();
+  if (!Rd.allFinite() || !td.allFinite()) return;
+  ProbingPose& pose = poses_[j];
+  pose.seed += pose.frame * td;
+  pose.frame = pose.frame * Rd;
+  // Keep the frame orthonormal against float drift over many rounds.
+  Eigen::Quaternionf q(pose.frame);
+  pose.frame = q.normalized().toRotationMatrix();
+}
+
+void LocalProbingAnalysis::recode() { codes_ = lassoCodes(dictionary_, fields_, lambda_); }
+
+void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const ProgressCallback& progress) {
+  if (points.size() < (target_idx_.empty() ? 0 : static_cast<std::size_t>(*std::max_element(target_idx_.begin(), target_idx_.end())) + 1))
+    throw InvalidParameter("points", std::to_string(points.size()) + " points", "the cloud the analysis was built on");
+  requireInRange("rounds", rounds, 0, 100);
+  const std::int64_t n = static_cast<std::int64_t>(poses_.size());
+  ProgressReporter rep(progress, "joint analysis", static_cast<std::size_t>(rounds));
+  for (int round = 0; round < rounds; ++round) {
+    LassoDictionaryParameters dp;
+    dp.atoms = params_.atoms;
+    dp.lambda = lambda_;
+    dp.iterations = params_.dictionary_iterations;
+    dp.seed = params_.seed + static_cast<std::uint64_t>(round);
+    LassoDictionaryResult learned = learnDictionaryLasso(fields_, dp, dictionary_);
+    dictionary_ = std::move(learned.dictionary);
+    codes_ = std::move(learned.codes);
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::int64_t j = 0; j < n; ++j) align(points, j, reconstructed(j));
+    probe(points);
+    std::vector<double> err(n);
+#pragma omp parallel for schedule(static)
+    for (std::int64_t j = 0; j < n; ++j) err[j] = (fields_.col(j) - reconstructed(j)).cast<double>().squaredNorm();
+    double sum = 0;
+    for (double e : err) sum += e;
+    round_errors_.push_back(n ? sum / n : 0.0);
+    rep.advance();
+    rep.throwIfCancelled();
+  }
+  if (dictionary_.size() == 0) {
+    // No round asked for: a dictionary learned on the fields as they are.
+    LassoDictionaryParameters dp;
+    dp.atoms = params_.atoms;
+    dp.lambda = lambda_;
+    dp.iterations = params_.dictionary_iterations;
+    dp.seed = params_.seed;
+    dictionary_ = learnDictionaryLasso(fields_, dp).dictionary;
+  }
+  recode();
+  rep.finish();
+}
+
+}  // namespace paps

@@ -1,0 +1,147 @@
+#include <paps/filters/lpf_denoising.h>
+#include <paps/filters/impl/lpf_denoising.hpp>
+
+#include <cmath>
+
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+#include <paps/core/spatial_order.h>
+
+namespace paps {
+
+void LpfDenoisingParameters::validate() const {
+  probing.validate();
+  requireInRange("iterations", iterations, 1, 50);
+  requireInRange("rounds_per_pass", rounds_per_pass, 0, 100);
+  if (!(rate > 0 && rate <= 1)) throw InvalidParameter("rate", detail::toString(rate), "a value in (0, 1]");
+  if (!(tau_p >= 0) || !std::isfinite(tau_p))
+    throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (the pattern step) or a finite value > 0");
+}
+
+namespace {
+
+// For every point, the fields whose target area holds it (the transpose of the target
+// areas, fixed for the whole run), in increasing field order.
+NeighbourGraph coveringFields(const LocalProbingAnalysis& a, std::size_t n_points) {
+  std::vector<std::int64_t> offsets(n_points + 1, 0);
+  for (std::size_t j = 0; j < a.fieldCount(); ++j)
+    for (const int* t = a.targetBegin(j); t != a.targetEnd(j); ++t) ++offsets[*t + 1];
+  for (std::size_t p = 0; p < n_points; ++p) offsets[p + 1] += offsets[p];
+  std::vector<int> fields(static_cast<std::size_t>(offsets[n_points]));
+  std::vector<std::int64_t> fill(offsets.begin(), offsets.end() - 1);
+  for (std::size_t j = 0; j < a.fieldCount(); ++j)
+    for (const int* t = a.targetBegin(j); t != a.targetEnd(j); ++t) fields[fill[*t]++] = static_cast<int>(j);
+  return NeighbourGraph::fromRows(std::move(offsets), std::move(fields));
+}
+
+// D a_j restricted to node i: the three values of the node in field j's frame.
+Eigen::Vector3f reconstructedNode(const LocalProbingAnalysis& a, std::size_t j, int i) {
+  const Eigen::MatrixXf& D = a.dictionary();
+  const auto code = a.codes().col(static_cast<Eigen::Index>(j));
+  Eigen::Vector3f out = Eigen::Vector3f::Zero();
+  for (Eigen::Index k = 0; k < code.size(); ++k)
+    if (code[k] != 0) out += code[k] * D.block<3, 1>(3 * i, k);
+  return out;
+}
+
+Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParameters& params,
+                                LpfDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
+                                const ProgressCallback& progress) {
+  LpfDenoisingReport report;
+  const std::size_t n = points.size();
+  const std::size_t finite = countFinite(points);
+  report.non_finite = n - finite;
+  if (finite < 3) {
+    // No pattern can be placed on fewer than 3 points: they pass through.
+    report.isolated = finite;
+    if (report_out) *report_out = report;
+    return points;
+  }
+  Positions cur = points;
+  LocalProbingAnalysis analysis(cur, params.probing, progress);
+  const ProbingPattern& pattern = analysis.pattern();
+  report.radius = pattern.radius();
+  report.step = pattern.step();
+  report.lambda = analysis.lambda();
+  report.pattern_nodes = pattern.size();
+  report.fields = analysis.fieldCount();
+  const float tau = params.tau_p > 0 ? params.tau_p : pattern.step();
+  const float inv2t = 1.f / (2.f * tau * tau);
+  const std::int64_t sn = static_cast<std::int64_t>(n);
+  const NeighbourGraph cover = coveringFields(analysis, n);
+  ProgressReporter rep(progress, "LPF denoising", static_cast<std::size_t>(params.iterations) * n);
+  for (int pass = 0; pass < params.iterations; ++pass) {
+    analysis.analyse(cur, pass == 0 ? params.probing.rounds : params.rounds_per_pass);
+    Positions next = cur;
+    std::size_t moved = 0, isolated = 0;
+#pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved, isolated)
+    for (std::int64_t p = 0; p < sn; ++p) {
+      rep.advance();
+      if (!isFinite(cur[p]) || (!movable.empty() && !movable[p])) continue;
+      // Every field whose target area holds the point projects it on its pattern plane and
+      // proposes the consolidated pattern there: the bilinear blend of the consolidated
+      // positions u + (D a) of the four nodes around the projection (3.3.2). On a surface
+      // that keeps the point's tangential place and takes the consolidated height; on a
+      // wire it keeps the place along the wire and takes the wire's consolidated axis.
+      Eigen::Vector3d acc = Eigen::Vector3d::Zero();
+      double wsum = 0;
+      for (const int* jp = cover.begin(p); jp != cover.end(p); ++jp) {
+        const std::size_t j = static_cast<std::size_t>(*jp);
+        if (analysis.targetDimension(j) == 0) continue;  // too few points to be a witness
+        const ProbingPose& pose = analysis.pose(j);
+        const Eigen::Vector3f l = pose.frame.transpose() * (cur[p] - pose.seed);
+        int corner[4];
+        float weight[4];
+        if (!pattern.cellCorners(l.x(), l.y(), corner, weight)) continue;  // beyond the pattern
+        Eigen::Vector3f at[4], local = Eigen::Vector3f::Zero();
+        for (int c = 0; c < 4; ++c) {
+          const Eigen::Vector2f& u = pattern.node(corner[c]);
+          at[c] = Eigen::Vector3f(u.x(), u.y(), 0.f) + reconstructedNode(analysis, j, corner[c]);
+          local += weight[c] * at[c];
+        }
+        Eigen::Vector3f move = local - l;
+        // On a surface the point moves along the pattern's normal only, so that
+        // consolidation does not drag it along the surface (measured: borders drew in by
+        // half a spacing otherwise). Across a wire it moves in every direction.
+        if (params.normal_motion_on_surfaces && analysis.targetDimension(j) == 2) move.head<2>().setZero();
+        const Eigen::Vector3f candidate = cur[p] + pose.frame * move;
+        const double w = std::exp(-static_cast<double>((candidate - cur[p]).squaredNorm()) * inv2t);
+        acc += w * candidate.cast<double>();
+        wsum += w;
+      }
+      if (!(wsum > 0)) { ++isolated; continue; }
+      const Eigen::Vector3f consensus = (acc / wsum).cast<float>();
+      next[p] = cur[p] + params.rate * (consensus - cur[p]);
+      moved += next[p] != cur[p];
+    }
+    rep.throwIfCancelled();
+    cur.swap(next);
+    analysis.probe(cur);
+    report.moved = moved;
+    report.isolated = isolated;
+  }
+  report.round_errors = analysis.roundErrors();
+  rep.finish();
+  if (report_out) *report_out = report;
+  return cur;
+}
+
+}  // namespace
+
+Positions lpfDenoisePositions(const Positions& points, const LpfDenoisingParameters& params,
+                              LpfDenoisingReport* report, const std::vector<std::uint8_t>& movable,
+                              const ProgressCallback& progress) {
+  params.validate();
+  return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
+    return denoiseInSpatialOrder(p, params, report, m, progress);
+  });
+}
+
+template class LpfDenoising<pcl::PointXYZ>;
+template class LpfDenoising<pcl::PointXYZI>;
+template class LpfDenoising<pcl::PointNormal>;
+template class LpfDenoising<pcl::PointXYZRGB>;
+template class LpfDenoising<pcl::PointXYZRGBNormal>;
+
+}  // namespace paps

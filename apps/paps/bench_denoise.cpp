@@ -272,10 +272,11 @@ int runBenchDenoise(int argc, char** argv) {
 
 int runBench(int argc, char** argv) {
   if (argc < 3 || std::string(argv[2]) == "--help") {
-    std::fputs("usage: paps bench denoise [options]\n", stderr);
+    std::fputs("usage: paps bench denoise|lpf [options]\n", stderr);
     return 2;
   }
   if (std::string(argv[2]) == "denoise") return runBenchDenoise(argc, argv);
+  if (std::string(argv[2]) == "lpf") return runBenchLpf(argc, argv);
   std::fprintf(stderr, "paps: unknown bench '%s'\n", argv[2]);
   return 2;
 }

@@ -16,6 +16,7 @@
 #include <pcl/search/kdtree.h>
 
 #include <paps/core/error.h>
+#include <paps/filters/lpf_denoising.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
 
@@ -157,6 +158,15 @@ int runBenchWorker(int argc, char** argv) {
                       report.passes > 1 ? (report.guided_passes ? "es guided" : "es refiltered") : "");
         lf << "chosen " << b << "\n";
       }
+    } else if (method == "lpf") {
+      LpfDenoisingParameters q;
+      q.probing.radius = static_cast<float>(get("radius", 0));
+      q.probing.neighbours = static_cast<int>(get("neighbours", q.probing.neighbours));
+      q.probing.atoms = static_cast<int>(get("atoms", q.probing.atoms));
+      q.iterations = static_cast<int>(get("passes", q.iterations));
+      LpfDenoisingReport report;
+      output = lpfDenoisePositions(input, q, &report);
+      lf << "radius " << report.radius << "\n";
     } else if (method == "bilateral") {
       PointBilateralParameters q;
       q.radius = static_cast<float>(get("radius", 0));
@@ -176,7 +186,7 @@ int runBenchWorker(int argc, char** argv) {
       mls.process(result);
       output = positionsOf(result);
     } else {
-      throw InvalidParameter("method", method, "ours, bilateral or mls");
+      throw InvalidParameter("method", method, "ours, lpf, bilateral or mls");
     }
     return output;
   });

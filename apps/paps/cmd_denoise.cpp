@@ -4,6 +4,7 @@
 #include <paps/core/cloud_io.h>
 #include <paps/core/view_point_option.h>
 #include <paps/core/error.h>
+#include <paps/filters/lpf_denoising.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
 
@@ -15,7 +16,8 @@ namespace paps::cli {
 const char* kDenoiseUsage =
     "usage: paps denoise IN OUT [options]\n"
     "  IN, OUT                .pcd or .ply; every field of IN is kept, only x y z move\n"
-    "  --method M             similarity (default) or bilateral\n"
+    "  --method M             similarity (default), bilateral, or lpf (Local Probing Fields:\n"
+    "                         surfaces and wires alike, slower; its options below)\n"
     "  --radius R             neighbourhood radius in metres (default: from --neighbours, grown\n"
     "                         with the measured noise; see --no-adapt)\n"
     "  --neighbours N         neighbour count of a typical point (median) that sets the base radius (default 30)\n"
@@ -38,6 +40,15 @@ const char* kDenoiseUsage =
     "  --patches K            similar patches averaged (default 32)\n"
     "  --checks N             descriptors compared per similarity query (default 48, 0 = exact)\n"
     "  --iterations N         bilateral passes (default 1)\n"
+    "LPF options (--method lpf; --radius is the pattern radius, --neighbours defaults to 100,\n"
+    "--passes to 5):\n"
+    "  --step S               pattern step in metres (default: as many nodes as points in the ball)\n"
+    "  --atoms D              dictionary atoms (default 16)\n"
+    "  --lambda L             L1 weight of the codes in metres (default: 0.5 x the step)\n"
+    "  --rounds N             rounds of the first joint analysis (default 4)\n"
+    "  --seed-spacing S       one field per S metres (default: one field per point)\n"
+    "  --free-motion          points on surfaces may also move along them (the manuscript's\n"
+    "                         rule; draws borders in)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 
@@ -51,18 +62,19 @@ std::string adaptedNote(float noise, bool measured, float scale) {
 }  // namespace
 
 int runDenoise(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt", "free-motion"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
-               "refilter", "aggregate", "own-weight", "noise", "no-adapt"});
+               "refilter", "aggregate", "own-weight", "noise", "no-adapt", "step", "atoms", "lambda",
+               "rounds", "seed-spacing", "free-motion"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireOutputApart();
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
   const std::string method = a.text("method", "similarity");
-  if (method != "similarity" && method != "bilateral")
-    throw InvalidParameter("method", method, "similarity or bilateral");
+  if (method != "similarity" && method != "bilateral" && method != "lpf")
+    throw InvalidParameter("method", method, "similarity, bilateral or lpf");
 
   Eigen::Vector3f origin;
   pcl::PCLPointCloud2 cloud = loadCloud(in_path, &origin);
@@ -119,6 +131,28 @@ int runDenoise(int argc, char** argv) {
     std::printf("normals oriented %s; moved %zu points; %zu NaN points passed through\n",
                 p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
+  } else if (method == "lpf") {
+    LpfDenoisingParameters p;
+    p.probing.radius = static_cast<float>(a.number("radius", 0));
+    p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
+    p.probing.step = static_cast<float>(a.number("step", 0));
+    p.probing.atoms = a.integer("atoms", p.probing.atoms);
+    p.probing.lambda = static_cast<float>(a.number("lambda", p.probing.lambda));
+    p.probing.rounds = a.integer("rounds", p.probing.rounds);
+    p.probing.seed_spacing = static_cast<float>(a.number("seed-spacing", 0));
+    p.iterations = a.integer("passes", p.iterations);
+    p.normal_motion_on_surfaces = !a.has("free-motion");
+    p.validate();
+    LpfDenoisingReport r;
+    out = lpfDenoisePositions(in, p, &r, {}, progress);
+    std::printf("LPF denoising: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %d atoms, lambda %g m, "
+                "%d passes; moved %zu points\n",
+                r.radius, p.probing.radius > 0 ? "" : " (chosen)", r.step, r.pattern_nodes, r.fields, p.probing.atoms,
+                r.lambda, p.iterations, r.moved);
+    if (!r.round_errors.empty())
+      std::printf("representation error per field: %.3g after the first round, %.3g after the last\n",
+                  r.round_errors.front(), r.round_errors.back());
+    if (r.isolated) std::fprintf(stderr, "warning: %zu points had no field to move them and were left in place\n", r.isolated);
   } else {
     PointBilateralParameters p;
     p.radius = static_cast<float>(a.number("radius", 0));

@@ -4,6 +4,7 @@ extern const char* kDenoiseUsage;
 int runDenoise(int argc, char** argv);
 int runBench(int argc, char** argv);
 int runBenchFiles(int argc, char** argv);
+int runBenchLpf(int argc, char** argv);
 int runCurvatureWorker(int argc, char** argv);
 int runCurvature(int argc, char** argv);
 int runEnhance(int argc, char** argv);

@@ -15,8 +15,9 @@ namespace {
 const char* kUsage =
     "PAPS: patch-aware processing of surfaces\n"
     "usage: paps COMMAND ...\n"
-    "  denoise IN OUT [options]      similarity-based denoising (or --method bilateral)\n"
+    "  denoise IN OUT [options]      similarity-based denoising (or --method bilateral|lpf)\n"
     "  bench denoise [options]       ours vs PCL MLS and the bilateral filter, in one run\n"
+    "  bench lpf [options]           Local Probing Fields denoising vs the others, surfaces and wires\n"
     "  compress IN OUT.paps [opts]   self-similarity compression (sparse patches over a dictionary)\n"
     "  decompress IN.paps OUT        decode a .paps file to .pcd or .ply\n"
     "  bench compress [options]      ours vs Draco and the PCL octree coder: rate-distortion curves\n"

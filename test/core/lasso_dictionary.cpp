@@ -41,6 +41,18 @@ TEST(LassoCodes, OrthonormalDictionaryGivesTheSoftThreshold) {
     }
 }
 
+TEST(LassoCodes, DebiasedCodesKeepTheSupportWithoutShrinking) {
+  // Relaxed LASSO on D = I: the atoms with |x| > lambda, at their full value x.
+  const Eigen::MatrixXf D = Eigen::MatrixXf::Identity(4, 4);
+  Eigen::MatrixXf X(4, 1);
+  X << 1.0f, -0.1f, -2.0f, 0.3f;
+  const Eigen::MatrixXf A = paps::lassoCodes(D, X, 0.25f, 100, true);
+  EXPECT_NEAR(A(0, 0), 1.0f, 1e-6f);
+  EXPECT_EQ(A(1, 0), 0.f);
+  EXPECT_NEAR(A(2, 0), -2.0f, 1e-6f);
+  EXPECT_NEAR(A(3, 0), 0.3f, 1e-6f);
+}
+
 TEST(LassoCodes, ZeroLambdaIsLeastSquares) {
   const Eigen::MatrixXf D = unitColumns(randomMatrix(20, 5, 1));
   const Eigen::MatrixXf X = randomMatrix(20, 8, 2);

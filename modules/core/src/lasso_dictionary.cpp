@@ -4,6 +4,8 @@
 #include <cmath>
 #include <numeric>
 
+#include <Eigen/Cholesky>
+
 #include <paps/core/error.h>
 #include <paps/core/random.h>
 
@@ -25,8 +27,9 @@ Eigen::MatrixXd gramOf(const Eigen::MatrixXf& D) {
 float softThreshold(double z, double t) { return static_cast<float>(z > t ? z - t : (z < -t ? z + t : 0.0)); }
 
 // One column: cyclic coordinate descent on the correlations r = D^T x - G a.
-void codeOne(const Eigen::MatrixXd& G, Eigen::VectorXd r, double lambda, int max_sweeps, float* a_out) {
+void codeOne(const Eigen::MatrixXd& G, Eigen::VectorXd r, double lambda, int max_sweeps, bool debias, float* a_out) {
   const long d = G.rows();
+  const Eigen::VectorXd c = debias ? r : Eigen::VectorXd();
   Eigen::VectorXd a = Eigen::VectorXd::Zero(d);
   for (int sweep = 0; sweep < max_sweeps; ++sweep) {
     double max_delta = 0, max_a = 0;
@@ -45,12 +48,30 @@ void codeOne(const Eigen::MatrixXd& G, Eigen::VectorXd r, double lambda, int max
     }
     if (max_delta <= 1e-5 * max_a) break;
   }
+  if (debias) {
+    std::vector<long> support;
+    for (long j = 0; j < d; ++j)
+      if (a[j] != 0) support.push_back(j);
+    const long s = static_cast<long>(support.size());
+    if (s > 0) {
+      Eigen::MatrixXd Gs(s, s);
+      Eigen::VectorXd cs(s);
+      for (long p = 0; p < s; ++p) {
+        cs[p] = c[support[p]];
+        for (long q = 0; q < s; ++q) Gs(p, q) = G(support[p], support[q]);
+      }
+      const Eigen::VectorXd refit = Gs.ldlt().solve(cs);
+      if (refit.allFinite())  // a singular support keeps the LASSO values
+        for (long p = 0; p < s; ++p) a[support[p]] = refit[p];
+    }
+  }
   for (long j = 0; j < d; ++j) a_out[j] = static_cast<float>(a[j]);
 }
 
 }  // namespace
 
-Eigen::MatrixXf lassoCodes(const Eigen::MatrixXf& D, const Eigen::MatrixXf& X, float lambda, int max_sweeps) {
+Eigen::MatrixXf lassoCodes(const Eigen::MatrixXf& D, const Eigen::MatrixXf& X, float lambda, int max_sweeps,
+                           bool debias) {
   if (!(lambda >= 0) || !std::isfinite(lambda))
     throw InvalidParameter("lambda", detail::toString(lambda), "a finite value >= 0");
   requireInRange("max_sweeps", max_sweeps, 1, 100000);
@@ -65,7 +86,7 @@ Eigen::MatrixXf lassoCodes(const Eigen::MatrixXf& D, const Eigen::MatrixXf& X, f
 #pragma omp parallel for schedule(dynamic, 64)
   for (long i = 0; i < n; ++i) {
     const Eigen::VectorXd c = Dd.transpose() * X.col(i).cast<double>();
-    codeOne(G, c, lambda, max_sweeps, codes.col(i).data());
+    codeOne(G, c, lambda, max_sweeps, debias, codes.col(i).data());
   }
   return codes;
 }

@@ -76,6 +76,7 @@ void LocalProbingParameters::validate() const {
   if (!(step >= 0) || !std::isfinite(step))
     throw InvalidParameter("step", detail::toString(step), "0 (automatic) or a finite value > 0");
   requireInRange("target_factor", target_factor, 1.f, 3.f);
+  requireInRange("max_target_points", max_target_points, 0, 1000000);
   if (!(seed_spacing >= 0) || !std::isfinite(seed_spacing))
     throw InvalidParameter("seed_spacing", detail::toString(seed_spacing), "0 (one field per point) or a finite value > 0");
   requireInRange("atoms", atoms, 1, 1024);
@@ -93,9 +94,9 @@ void LocalProbingParameters::validate() const {
 namespace {
 
 struct ProbeScratch {
-  std::vector<Eigen::Vector3f> local;  // target points in the field's frame
-  std::vector<int> cell_start, cell_points;
-  std::vector<int> cell_of;
+  std::vector<Eigen::Vector3f> local;  // finite target points in the field's frame
+  std::vector<int> index;              // their indices in the cloud
+  std::vector<int> cell_start, cell_points, cell_of, fill;
 };
 
 // Probes one field: writes 3 M displacements (in the frame) and the probed point indices.
@@ -104,18 +105,22 @@ bool probeField(const Positions& points, const int* tb, const int* te, const Pro
                 const ProbingPattern& pattern, float* v, int* probed, ProbeScratch& s) {
   const int m = pattern.size();
   s.local.clear();
-  std::vector<int> idx;
+  s.index.clear();
+  const Eigen::Matrix3f to_local = pose.frame.transpose();
   for (const int* t = tb; t != te; ++t)
-    if (isFinite(points[*t])) s.local.push_back(pose.frame.transpose() * (points[*t] - pose.seed));
+    if (isFinite(points[*t])) {
+      s.local.push_back(to_local * (points[*t] - pose.seed));
+      s.index.push_back(*t);
+    }
   const int count = static_cast<int>(s.local.size());
   if (count == 0) {
     std::fill(v, v + 3 * m, 0.f);
     std::fill(probed, probed + m, -1);
     return false;
   }
-  // Bucket grid of the projections, cells of one step, over the pattern's square plus one
-  // cell; points outside are clamped in (projection on a box never lengthens a distance to
-  // a node inside it, so the ring bound below stays a lower bound).
+  // Bucket grid of the projections, cells of one step centred on the nodes, over the
+  // pattern's square plus one cell; points outside are clamped in (projection on a box never
+  // lengthens a distance to a node inside it, so the ring bound below stays a lower bound).
   const float step = pattern.step();
   const int half = static_cast<int>(std::ceil(pattern.radius() / step)) + 1;
   const int side = 2 * half + 1;
@@ -133,17 +138,8 @@ bool probeField(const Positions& points, const int* tb, const int* te, const Pro
   }
   for (int c = 0; c < side * side; ++c) s.cell_start[c + 1] += s.cell_start[c];
   s.cell_points.resize(count);
-  {
-    std::vector<int> fill(s.cell_start.begin(), s.cell_start.end() - 1);
-    for (int p = 0; p < count; ++p) s.cell_points[fill[s.cell_of[p]]++] = p;  // increasing p in each cell
-  }
-  // Index of the p-th finite target point in the cloud.
-  int* target_of = nullptr;
-  std::vector<int> finite_targets;
-  finite_targets.reserve(count);
-  for (const int* t = tb; t != te; ++t)
-    if (isFinite(points[*t])) finite_targets.push_back(*t);
-  target_of = finite_targets.data();
+  s.fill.assign(s.cell_start.begin(), s.cell_start.end() - 1);
+  for (int p = 0; p < count; ++p) s.cell_points[s.fill[s.cell_of[p]]++] = p;  // increasing p in each cell
 
   for (int i = 0; i < m; ++i) {
     const Eigen::Vector2f& u = pattern.node(i);
@@ -166,14 +162,16 @@ bool probeField(const Positions& points, const int* tb, const int* te, const Pro
           if (ring == 0) break;
         }
       }
-      const float bound = ring * step;
+      // The node is at its cell's centre: every point not yet seen is at least
+      // (ring + 1/2) steps away.
+      const float bound = (ring + 0.5f) * step;
       if (best >= 0 && best_d2 <= bound * bound) break;
     }
     const Eigen::Vector3f& q = s.local[best];
     v[3 * i] = q.x() - u.x();
     v[3 * i + 1] = q.y() - u.y();
     v[3 * i + 2] = q.z();
-    probed[i] = target_of[best];
+    probed[i] = s.index[best];
   }
   return true;
 }
@@ -259,6 +257,8 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
   }
   const std::size_t n = seeds.size();
   const float target_r = params_.target_factor * r;
+  const std::size_t cap = static_cast<std::size_t>(params_.max_target_points > 0 ? params_.max_target_points
+                                                                                  : 4 * params_.neighbours);
   std::vector<std::vector<int>> lists(n);
   ProgressReporter rep(progress, "probing fields", n);
 #pragma omp parallel
@@ -268,6 +268,14 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
     for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) {
       index.radiusSearch(points[seeds[j]], target_r, lists[j], d2);
       std::sort(lists[j].begin(), lists[j].end());
+      const std::size_t count = lists[j].size();
+      if (count > cap) {
+        // An even subset: the k-th of every `count / cap` (the points are in spatial order
+        // when they come from the stages, so this spreads over the ball).
+        std::vector<int> kept(cap);
+        for (std::size_t k = 0; k < cap; ++k) kept[k] = lists[j][k * count / cap];
+        lists[j].swap(kept);
+      }
       rep.advance();
     }
   }
@@ -344,7 +352,7 @@ void LocalProbingAnalysis::align(const Positions&, std::size_t j, const Eigen::V
   pose.frame = q.normalized().toRotationMatrix();
 }
 
-void LocalProbingAnalysis::recode() { codes_ = lassoCodes(dictionary_, fields_, lambda_); }
+void LocalProbingAnalysis::recode() { codes_ = lassoCodes(dictionary_, fields_, lambda_, 100, params_.debias); }
 
 void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const ProgressCallback& progress) {
   if (points.size() < (target_idx_.empty() ? 0 : static_cast<std::size_t>(*std::max_element(target_idx_.begin(), target_idx_.end())) + 1))
@@ -360,7 +368,8 @@ void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const Pr
     dp.seed = params_.seed + static_cast<std::uint64_t>(round);
     LassoDictionaryResult learned = learnDictionaryLasso(fields_, dp, dictionary_);
     dictionary_ = std::move(learned.dictionary);
-    codes_ = std::move(learned.codes);
+    if (params_.debias) recode();
+    else codes_ = std::move(learned.codes);
 #pragma omp parallel for schedule(dynamic, 256)
     for (std::int64_t j = 0; j < n; ++j) align(points, j, reconstructed(j));
     probe(points);

@@ -20,9 +20,12 @@ namespace paps {
 /// the units of the signals (>= 0; 0 gives least squares where D^T D is invertible).
 /// Coordinate descent stops when no coefficient moves by more than 1e-5 of the largest or
 /// after `max_sweeps`. Parallel over the columns, same result for any thread count.
+/// With `debias`, the coefficients of each code's support are then refitted by least
+/// squares (the "relaxed" LASSO): the L1 penalty picks the atoms but no longer shrinks them,
+/// so a signal the support spans is reproduced without the bias of lambda.
 /// Throws InvalidParameter for a negative lambda, max_sweeps < 1 or mismatched sizes.
 Eigen::MatrixXf lassoCodes(const Eigen::MatrixXf& dictionary, const Eigen::MatrixXf& signals, float lambda,
-                           int max_sweeps = 100);
+                           int max_sweeps = 100, bool debias = false);
 
 struct LassoDictionaryParameters {
   int atoms = 16;          ///< d, in [1, 4096]

@@ -2,7 +2,7 @@
 // throw paps::Error: never crash, hang or allocate without bound (the cloud readers have their
 // own target; this one reaches the algorithms). The upsamplers' normals must be one per output
 // point, each a unit vector or NaN.
-// Input: byte 0 chooses the stage (mod 8), byte 1 the scale (mod 4: 1, 1e-4, 1e4, and a
+// Input: byte 0 chooses the stage (mod 9), byte 1 the scale (mod 4: 1, 1e-4, 1e4, and a
 // UTM-like offset of 5e5 with 1 m steps); then 3 bytes a point, each (b - 128) / 16 on a grid,
 // so copies, lines and planes come up often. At most 400 points.
 // Built and run by `scripts/fuzz.sh stages`; crash inputs land in test/stages_corpus, which
@@ -15,6 +15,7 @@
 #include <paps/compression/self_similarity_codec.h>
 #include <paps/core/error.h>
 #include <paps/features/wavejet.h>
+#include <paps/filters/lpf_denoising.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
 #include <paps/filters/wavejet_enhancement.h>
@@ -32,7 +33,7 @@ void checkNormals(const paps::Positions& out, const paps::Normals& n) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;
-  const int stage = data[0] % 8;
+  const int stage = data[0] % 9;
   const int scale_mode = data[1] % 4;
   const float scale = scale_mode == 1 ? 1e-4f : scale_mode == 2 ? 1e4f : 1.f;
   const float offset = scale_mode == 3 ? 5e5f : 0.f;
@@ -66,6 +67,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         checkNormals(paps::upsampleMls(p, stage == 5 ? paps::MlsSurface::Apss : paps::MlsSurface::Rimls, m, nullptr, {}, &n), n);
         break;
       }
+      case 8: paps::lpfDenoisePositions(p, {}); break;
       default: {
         const std::vector<std::uint8_t> bytes = paps::compression::compressPositions(p, {});
         paps::compression::decompressPositions(bytes.data(), bytes.size());

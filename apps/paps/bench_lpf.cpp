@@ -32,7 +32,11 @@ const char* kUsage =
     "                   (default 0.0015,0.003,0.005)\n"
     "  --shapes LIST    plate-wires (a plate under a net of wires and a circle) and/or\n"
     "                   fandisk (creases) (default both)\n"
-    "  --quick          one noise level, no sweeps (a smoke run)\n";
+    "  --quick          one noise level, no sweeps (a smoke run)\n"
+    "  --resample       instead: LPF resampling x4 against QSR, APSS, RIMLS and PCL MLS\n"
+    "                   upsampling at the same output count, on the plate and wires\n"
+    "                   (accuracy: outputs to the true shape; coverage: a dense sample of the\n"
+    "                   true shape to the nearest output)\n";
 
 struct Method {
   std::string name, setting;
@@ -59,10 +63,92 @@ std::vector<Method> methods(float r, bool quick) {
 
 }  // namespace
 
+#ifdef PAPS_HAVE_SURFACE
+namespace {
+int runBenchLpfResample(const Arguments& a) {
+  const std::string out_dir = a.text("out", "bench_out");
+  const std::size_t n_points = a.count("points", 20000);
+  std::vector<double> noises;
+  for (const std::string& s : splitList(a.text("noise", "0.0005,0.002"))) noises.push_back(std::atof(s.c_str()));
+  std::filesystem::create_directories(out_dir);
+  const auto clean = synthetic::plateAndWires(n_points, 3);
+  const auto dense = synthetic::plateAndWires(8 * n_points, 9);
+  const double diagonal = boundingBoxDiagonal(clean.points);
+  std::printf("bench lpf --resample: plate and wires, %zu input points, x4; errors in thousandths of the diagonal;\n"
+              "accuracy = RMS distance of the outputs to the true shape (plate: outputs below z = 0.15);\n"
+              "coverage = RMS distance from %zu points on the true shape to the nearest output\n",
+              n_points, dense.points.size());
+  std::printf("%-6s %-14s %8s %8s %8s %9s %9s %9s %9s %9s\n", "noise", "method", "points", "time(s)", "peak MB",
+              "acc.all", "acc.plate", "acc.wires", "cov.plate", "cov.wires");
+  for (double noise : noises) {
+    Positions in = clean.points;
+    synthetic::addGaussianNoise(in, static_cast<float>(noise), 5);
+    const SpatialIndex index(in);
+    const float r = radiusForNeighbourCount(in, index, 30);
+    writeRaw(out_dir + "/sr_in0.bin", in);
+    std::size_t count = 0;
+    double best_other = INFINITY, lpf_acc = 0;
+    auto row = [&](const std::string& name, const Positions& out, double seconds, double mb) {
+      double s[2] = {0, 0}, c[2] = {0, 0};
+      std::size_t ns[2] = {0, 0}, nc[2] = {0, 0};
+      for (const auto& p : out) {
+        const double d = isFinite(p) ? synthetic::distanceToPlateAndWires(p) : 1e3 * diagonal;
+        const int w = isFinite(p) && p.z() >= 0.15f;
+        s[w] += d * d;
+        ++ns[w];
+      }
+      if (!out.empty()) {
+        const SpatialIndex oi(out);
+        std::vector<int> k;
+        std::vector<float> d2;
+        for (std::size_t i = 0; i < dense.points.size(); ++i) {
+          oi.nearestK(dense.points[i], 1, k, d2);
+          c[dense.on_curve[i]] += d2.empty() ? diagonal * diagonal : d2[0];
+          ++nc[dense.on_curve[i]];
+        }
+      }
+      auto f = [&](double v, std::size_t n) { return n ? std::sqrt(v / n) / diagonal * 1e3 : NAN; };
+      const double all = f(s[0] + s[1], ns[0] + ns[1]);
+      std::printf("%-6s %-14s %8zu %8.2f %8.0f %9.3f %9.3f %9.3f %9.3f %9.3f\n", fmt("%.2f%%", noise * 100).c_str(),
+                  name.c_str(), out.size(), seconds, mb, all, f(s[0], ns[0]), f(s[1], ns[1]), f(c[0], nc[0]), f(c[1], nc[1]));
+      return all;
+    };
+    row("input", in, 0, 0);
+    for (const std::string m : {"lpf", "qsr", "apss", "rimls", "pcl-mls-plane"}) {
+      const WorkerResult w = spawnWorker({"bench-worker-sr", m, out_dir, "1"},
+                                         {{"count", static_cast<double>(count)}, {"factor", 4}, {"radius", 2 * r}},
+                                         out_dir + "/sr_out.bin", out_dir + "/sr_log.txt");
+      if (!w.ok) {
+        std::printf("%-6s %-14s failed: %s\n", fmt("%.2f%%", noise * 100).c_str(), m.c_str(), w.message.c_str());
+        if (m == "lpf") break;
+        continue;
+      }
+      if (m == "lpf") count = w.output.size();  // the others make as many points
+      const double acc = row(m == "pcl-mls-plane" ? "pcl-mls (2x r)" : m, w.output, w.seconds, w.peak_mb);
+      if (m == "lpf") lpf_acc = acc;
+      else best_other = std::min(best_other, acc);
+    }
+    if (lpf_acc > 0 && std::isfinite(best_other))
+      std::printf("  -> LPF accuracy / best other = %.3f\n", lpf_acc / best_other);
+  }
+  for (const char* scratch : {"sr_in0.bin", "sr_out.bin", "sr_log.txt"}) std::remove((out_dir + "/" + scratch).c_str());
+  return 0;
+}
+}  // namespace
+#endif
+
 int runBenchLpf(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "resample"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "points", "noise", "shapes", "quick"});
+  a.allowOnly({"out", "points", "noise", "shapes", "quick", "resample"});
+  if (a.has("resample")) {
+#ifdef PAPS_HAVE_SURFACE
+    std::setvbuf(stdout, nullptr, _IOLBF, 0);
+    return runBenchLpfResample(a);
+#else
+    throw InvalidParameter("resample", "given", "a build with the surface module");
+#endif
+  }
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
   const std::string out_dir = a.text("out", "bench_out");
   const bool quick = a.has("quick");

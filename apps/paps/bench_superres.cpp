@@ -31,6 +31,7 @@
 #include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 #include <paps/filters/similarity_denoising.h>
+#include <paps/surface/lpf_resampling.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
 
@@ -375,6 +376,10 @@ int runSuperresWorker(int argc, char** argv) {
       // -wide: seeds spread over discs as wide as QSR's (1.2 mean spacings).
       if (method.find("-wide") != std::string::npos) q.disc_scale = 1.7724539f;
       out = upsampleMls(scans[0], method.rfind("apss", 0) == 0 ? MlsSurface::Apss : MlsSurface::Rimls, q);
+    } else if (method == "lpf") {
+      LpfResamplingParameters q;
+      q.factor = static_cast<float>(get("factor", q.factor));
+      out = lpfResample(scans[0], q);
     } else if (method == "seeds-only") {
       // Control, not a method: the Poisson-disk seeds over the noisy input's tangent discs
       // (QSR's disc radius, 1.2 mean spacings), projected on no surface at all. Where this

@@ -7,6 +7,7 @@
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
+#include <paps/surface/lpf_resampling.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
 
@@ -33,7 +34,10 @@ const char* kSuperresUsage =
     "                         propagation fails, across folds between scan pieces)\n"
     "  --factor F             output count / input count (default 4, 1 to 1000)\n"
     "  --count N              exact output count (overrides --factor)\n"
-    "  --method M             qsr (default), apss or rimls\n"
+    "  --method M             qsr (default), apss, rimls, or lpf (Local Probing Fields\n"
+    "                         resampling: wires as well as surfaces; --factor is the density\n"
+    "                         ratio on surfaces, --radius the pattern radius, --neighbours its\n"
+    "                         count (default 100); no --count, no --normals)\n"
     "  --radius R             patch radius (QSR) or kernel support (APSS/RIMLS) in metres\n"
     "                         (default: from --neighbours)\n"
     "  --neighbours N         neighbour count of a typical point (median) that sets the radius (default 36 QSR, 30 others)\n"
@@ -78,8 +82,10 @@ int runSuperres(int argc, char** argv) {
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   a.requireOutputApart();
   const std::string method = a.text("method", "qsr");
-  if (method != "qsr" && method != "apss" && method != "rimls")
-    throw InvalidParameter("method", method, "qsr, apss or rimls");
+  if (method != "qsr" && method != "apss" && method != "rimls" && method != "lpf")
+    throw InvalidParameter("method", method, "qsr, apss, rimls or lpf");
+  if (method == "lpf" && (a.has("count") || a.has("normals")))
+    throw InvalidParameter(a.has("count") ? "count" : "normals", "given", "--method qsr, apss or rimls (LPF sets its density by --factor and gives no normals)");
   if (method != "qsr" && a.has("thin-disc"))
     throw InvalidParameter("thin-disc", a.text("thin-disc", ""), "--method qsr (APSS and RIMLS have no thin-ball test)");
   const std::string out_path = a.positional.back();
@@ -102,7 +108,19 @@ int runSuperres(int argc, char** argv) {
   const std::string orient = a.text("orient", "propagate");
   if (orient != "propagate" && orient != "viewpoint") throw InvalidParameter("orient", orient, "propagate or viewpoint");
   if (a.has("orient") && !normals_out) throw InvalidParameter("orient", orient, "with --normals (it orients them)");
-  if (method == "qsr") {
+  if (method == "lpf") {
+    LpfResamplingParameters p;
+    p.factor = static_cast<float>(a.number("factor", p.factor));
+    p.probing.radius = static_cast<float>(a.number("radius", 0));
+    p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
+    p.validate();
+    readScans();
+    if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
+    LpfResamplingReport r;
+    out = lpfResample(scans[0], p, &r, progress);
+    std::printf("lpf: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %zu proposals\n", r.radius,
+                p.probing.radius > 0 ? "" : " (chosen)", r.step, r.pattern_nodes, r.fields, r.proposals);
+  } else if (method == "qsr") {
     QuadricSuperResolutionParameters p;
     p.factor = static_cast<float>(a.number("factor", p.factor));
     p.output_count = count;

@@ -290,9 +290,10 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
 
   poses_.resize(n);
   dimension_.resize(n);
+  centres_.resize(n);
 #pragma omp parallel for schedule(dynamic, 1024)
   for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) {
-    poses_[j].seed = points[seeds[j]];
+    poses_[j].seed = centres_[j] = points[seeds[j]];
     poses_[j].frame = pcaFrame(points, targetBegin(j), targetEnd(j), &dimension_[j]);
     if (params_.random_orientation) poses_[j].frame = randomFrame(params_.seed, j);
   }

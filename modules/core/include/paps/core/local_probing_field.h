@@ -117,6 +117,9 @@ class LocalProbingAnalysis {
   const Eigen::MatrixXf& fields() const { return fields_; }
   /// Index of the point node i of field j probed (-1 when its target area is empty).
   int probedPoint(std::size_t j, int i) const { return probed_[j * pattern_->size() + i]; }
+  /// Centre of field j's target area (its first seed; the area is the ball of
+  /// target_factor x radius() around it).
+  const Eigen::Vector3f& targetCentre(std::size_t j) const { return centres_[j]; }
   /// Target area of field j: point indices.
   const int* targetBegin(std::size_t j) const { return target_idx_.data() + target_off_[j]; }
   const int* targetEnd(std::size_t j) const { return target_idx_.data() + target_off_[j + 1]; }
@@ -144,6 +147,7 @@ class LocalProbingAnalysis {
   std::unique_ptr<ProbingPattern> pattern_;
   std::vector<ProbingPose> poses_;
   std::vector<std::uint8_t> dimension_;
+  std::vector<Eigen::Vector3f> centres_;
   std::vector<std::int64_t> target_off_;
   std::vector<int> target_idx_;
   Eigen::MatrixXf fields_;

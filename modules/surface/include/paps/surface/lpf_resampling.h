@@ -1,0 +1,79 @@
+#pragma once
+// Resampling with Local Probing Fields (manuscript 3.3.1, eqs. 3.7 and 3.8): after the joint
+// analysis, every field proposes its pattern as the dictionary reconstructs it,
+// p_i = s + R (u_i + (D a)_i); overlapping fields propose nearly the same points, and a
+// consensus keeps one point per neighbourhood of radius tau_p, the mean of the proposals
+// that conflict there. With a pattern step finer than the input spacing the output is denser
+// than the input: upsampling, on wires (along them) as on surfaces.
+#include <cstddef>
+
+#include <pcl/point_types.h>
+#include <pcl/surface/processing.h>
+
+#include <paps/core/local_probing_field.h>
+#include <paps/core/positions.h>
+#include <paps/core/progress.h>
+#include <paps/core/thread_count.h>
+
+namespace paps {
+
+struct LpfResamplingParameters {
+  /// The fields. Their radius (0: automatic, from `neighbours`), neighbours, atoms, lambda,
+  /// rounds ... as for denoising; `seed_spacing` 0 here means `seed_spacing_radii` x r, and
+  /// `step` 0 means the 1:1 step r sqrt(pi / neighbours) over sqrt(factor).
+  LocalProbingParameters probing;
+  /// Output density over input density on surfaces (1 to 100): the pattern step is the input
+  /// spacing / sqrt(factor). Along a wire the density grows by sqrt(factor).
+  float factor = 4.f;
+  /// Spacing of the fields' seeds in pattern radii when probing.seed_spacing is 0, in
+  /// [0.05, 2]. 0.5: each point lies in about 5 target areas.
+  float seed_spacing_radii = 0.5f;
+  /// Consensus radius tau_p in metres (> 0), or 0: 0.7 x the pattern step (kept points are
+  /// at least tau_p apart; at 1 x the step the output had half the density asked for).
+  float tau_p = 0.f;
+  void validate() const;
+};
+
+struct LpfResamplingReport {
+  float radius = 0.f, step = 0.f;
+  int pattern_nodes = 0;
+  std::size_t fields = 0, proposals = 0, output = 0;
+};
+
+/// Resamples `points` (NaN entries ignored). Deterministic; the output does not depend on
+/// the thread count. Throws InvalidInput for fewer than 3 finite points, InvalidParameter
+/// for bad parameters.
+Positions lpfResample(const Positions& points, const LpfResamplingParameters& params,
+                      LpfResamplingReport* report = nullptr, const ProgressCallback& progress = {});
+
+/// The pcl::CloudSurfaceProcessing stage: positions out (LPF gives no normal on a wire).
+/// Indices are honoured (only those points are used).
+template <typename PointIn, typename PointOut = pcl::PointXYZ>
+class LpfResampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, public ThreadCountOption {
+ public:
+  void setParameters(const LpfResamplingParameters& p) { p.validate(); params_ = p; }
+  const LpfResamplingParameters& getParameters() const { return params_; }
+  void setUpsamplingFactor(float f) { auto p = params_; p.factor = f; setParameters(p); }
+  void setRadius(float r) { auto p = params_; p.probing.radius = r; setParameters(p); }
+  void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
+  const LpfResamplingReport& getReport() const { return report_; }
+  /// As pcl::CloudSurfaceProcessing::process, but without an input cloud it throws InvalidInput.
+  void process(pcl::PointCloud<PointOut>& output) override {
+    requireInputCloud(this->input_);
+    pcl::CloudSurfaceProcessing<PointIn, PointOut>::process(output);
+  }
+
+ protected:
+  void performProcessing(pcl::PointCloud<PointOut>& output) override;
+
+ private:
+  LpfResamplingParameters params_;
+  LpfResamplingReport report_;
+  ProgressCallback progress_;
+};
+
+}  // namespace paps
+
+#ifdef PAPS_NO_PRECOMPILE
+#include <paps/surface/impl/lpf_resampling.hpp>
+#endif

@@ -1,5 +1,6 @@
 #pragma once
 // Helpers shared by the tests of point-moving filters.
+#include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <limits>
@@ -15,6 +16,7 @@
 #include <paps/core/error.h>
 #include <paps/core/positions.h>
 #include <paps/core/random.h>
+#include <paps/core/synthetic.h>
 
 namespace paps::test {
 
@@ -69,6 +71,32 @@ void expectInvalidParameter(Fn fn, const std::string& name) {
     EXPECT_EQ(e.parameter(), name) << e.what();
     EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
   }
+}
+
+/// Test shapes with a known answer shared by the filters' tests.
+/// `count` points uniform on the unit sphere, with Gaussian noise of `noise` x the
+/// bounding-box diagonal (2 sqrt 3).
+inline Positions noisySphere(std::size_t count, float noise, std::uint64_t seed) {
+  Random rng(seed);
+  Positions p;
+  for (std::size_t i = 0; i < count; ++i) {
+    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    p.push_back(d.normalized());
+  }
+  synthetic::addGaussianNoise(p, noise, seed + 1);
+  return p;
+}
+
+/// RMS of | |p| - 1 | over the finite points: the exact distance to the unit sphere.
+inline double sphereRmse(const Positions& p) {
+  double s = 0;
+  std::size_t n = 0;
+  for (const auto& x : p)
+    if (isFinite(x)) {
+      s += std::pow(x.cast<double>().norm() - 1.0, 2);
+      ++n;
+    }
+  return std::sqrt(s / n);
 }
 
 // The bad-input contract every point-moving filter keeps (foundation issue), shared by the

@@ -32,28 +32,6 @@ using paps::LpfDenoisingParameters;
 using paps::LpfDenoisingReport;
 using paps::Positions;
 
-Positions noisySphere(std::size_t count, float noise, std::uint64_t seed) {
-  paps::Random rng(seed);
-  Positions p;
-  for (std::size_t i = 0; i < count; ++i) {
-    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
-    p.push_back(d.normalized());
-  }
-  paps::synthetic::addGaussianNoise(p, noise, seed + 1);
-  return p;
-}
-
-double sphereRmse(const Positions& p) {
-  double s = 0;
-  std::size_t n = 0;
-  for (const auto& x : p)
-    if (paps::isFinite(x)) {
-      s += std::pow(x.cast<double>().norm() - 1.0, 2);
-      ++n;
-    }
-  return std::sqrt(s / n);
-}
-
 // Small and quick: fewer neighbours and passes than the defaults.
 LpfDenoisingParameters quick() {
   LpfDenoisingParameters p;

@@ -34,31 +34,6 @@ using paps::PointBilateralReport;
 using paps::Positions;
 
 
-/// `count` points uniform on the unit sphere, with Gaussian noise of `noise` x the
-/// bounding-box diagonal (2 sqrt 3).
-Positions noisySphere(std::size_t count, float noise, std::uint64_t seed) {
-  paps::Random rng(seed);
-  Positions p;
-  for (std::size_t i = 0; i < count; ++i) {
-    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
-    p.push_back(d.normalized());
-  }
-  paps::synthetic::addGaussianNoise(p, noise, seed + 1);
-  return p;
-}
-
-/// RMS of | |p| - 1 | over the finite points: the exact distance to the unit sphere.
-double sphereRmse(const Positions& p) {
-  double s = 0;
-  std::size_t n = 0;
-  for (const auto& x : p)
-    if (paps::isFinite(x)) {
-      s += std::pow(x.cast<double>().norm() - 1.0, 2);
-      ++n;
-    }
-  return std::sqrt(s / n);
-}
-
 Positions smallSphere(std::size_t count = 3000) { return noisySphere(count, 0.0025f, 5); }
 
 // ---------------------------------------------------------------------------- quality

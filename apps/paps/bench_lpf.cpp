@@ -191,8 +191,12 @@ int runBenchLpf(int argc, char** argv) {
       std::size_t c[2] = {0, 0};
       for (std::size_t i = 0; i < p.size(); ++i) {
         const double v = std::isfinite(d[i]) ? d[i] : 1e3 * diagonal;  // a lost point counts, hugely
-        s[on_curve[i]] += v * v;
-        ++c[on_curve[i]];
+        // Surface or curves by where the output point is (the plate is at z = 0, the wires at
+        // 0.3 and above), not by its index: PCL's MLS with two threads does not keep the
+        // input order (its rows changed from run to run when split by index).
+        const int k = has_curves ? (isFinite(p[i]) && p[i].z() >= 0.15f) : 0;
+        s[k] += v * v;
+        ++c[k];
       }
       out[0] = c[0] ? std::sqrt(s[0] / c[0]) / diagonal * 1e3 : NAN;
       out[1] = c[1] ? std::sqrt(s[1] / c[1]) / diagonal * 1e3 : NAN;

@@ -63,7 +63,7 @@ TEST(LpfDenoising, ReducesErrorOnNoisySphere) {
   const Positions q = paps::lpfDenoisePositions(p, quick(), &r);
   const double before = sphereRmse(p), after = sphereRmse(q);
   EXPECT_LT(after, 0.5 * before) << before << " -> " << after;
-  EXPECT_EQ(r.fields, p.size());
+  EXPECT_LT(r.fields, p.size() / 2) << "one field per third of a radius, not one per point";
   EXPECT_GT(r.pattern_nodes, 20);
   EXPECT_EQ(r.round_errors.size(), 3u);  // 2 rounds, then 1 per later pass
 }

@@ -78,7 +78,8 @@ void LocalProbingParameters::validate() const {
   requireInRange("target_factor", target_factor, 1.f, 3.f);
   requireInRange("max_target_points", max_target_points, 0, 1000000);
   if (!(seed_spacing >= 0) || !std::isfinite(seed_spacing))
-    throw InvalidParameter("seed_spacing", detail::toString(seed_spacing), "0 (one field per point) or a finite value > 0");
+    throw InvalidParameter("seed_spacing", detail::toString(seed_spacing), "0 (from seed_spacing_radii) or a finite value > 0");
+  requireInRange("seed_spacing_radii", seed_spacing_radii, 0.f, 2.f);
   requireInRange("atoms", atoms, 1, 1024);
   if (!std::isfinite(lambda)) throw InvalidParameter("lambda", detail::toString(lambda), "a finite value (< 0: automatic)");
   requireInRange("lambda_factor", lambda_factor, 0.f, 100.f);
@@ -249,8 +250,9 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
 
   // Seeds and target areas.
   std::vector<int> seeds;
-  if (params_.seed_spacing > 0) {
-    seeds = poissonDiskSubset(points, params_.seed_spacing, params_.seed, progress);
+  const float seed_spacing = params_.seed_spacing > 0 ? params_.seed_spacing : params_.seed_spacing_radii * r;
+  if (seed_spacing > 0) {
+    seeds = poissonDiskSubset(points, seed_spacing, params_.seed, progress);
   } else {
     for (std::size_t i = 0; i < points.size(); ++i)
       if (isFinite(points[i])) seeds.push_back(static_cast<int>(i));

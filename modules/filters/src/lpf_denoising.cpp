@@ -1,6 +1,7 @@
 #include <paps/filters/lpf_denoising.h>
 #include <paps/filters/impl/lpf_denoising.hpp>
 
+#include <algorithm>
 #include <cmath>
 
 #include <pcl/point_types.h>
@@ -21,17 +22,35 @@ void LpfDenoisingParameters::validate() const {
 
 namespace {
 
-// For every point, the fields whose target area holds it (the transpose of the target
-// areas, fixed for the whole run), in increasing field order.
-NeighbourGraph coveringFields(const LocalProbingAnalysis& a, std::size_t n_points) {
-  std::vector<std::int64_t> offsets(n_points + 1, 0);
-  for (std::size_t j = 0; j < a.fieldCount(); ++j)
-    for (const int* t = a.targetBegin(j); t != a.targetEnd(j); ++t) ++offsets[*t + 1];
-  for (std::size_t p = 0; p < n_points; ++p) offsets[p + 1] += offsets[p];
-  std::vector<int> fields(static_cast<std::size_t>(offsets[n_points]));
-  std::vector<std::int64_t> fill(offsets.begin(), offsets.end() - 1);
-  for (std::size_t j = 0; j < a.fieldCount(); ++j)
-    for (const int* t = a.targetBegin(j); t != a.targetEnd(j); ++t) fields[fill[*t]++] = static_cast<int>(j);
+// For every point, the fields whose target ball holds it (within target_factor x r of the
+// field's centre), in increasing field order. From the balls, not from the target lists:
+// those keep an even subset where the cloud is dense (the cap), which left points of bun0's
+// dense spots in no list (12.8% of the points unmoved, against 2.1% now).
+NeighbourGraph coveringFields(const LocalProbingAnalysis& a, const Positions& points) {
+  const std::size_t nf = a.fieldCount(), n = points.size();
+  Positions centres(nf);
+  for (std::size_t j = 0; j < nf; ++j) centres[j] = a.targetCentre(j);
+  const SpatialIndex index(centres);
+  const float ball = a.parameters().target_factor * a.radius();
+  std::vector<std::vector<int>> lists(n);
+#pragma omp parallel
+  {
+    std::vector<float> d2;
+#pragma omp for schedule(dynamic, 1024)
+    for (std::int64_t p = 0; p < static_cast<std::int64_t>(n); ++p) {
+      if (!isFinite(points[p])) continue;
+      index.radiusSearch(points[p], ball, lists[p], d2);
+      std::sort(lists[p].begin(), lists[p].end());
+    }
+  }
+  std::vector<std::int64_t> offsets(n + 1, 0);
+  for (std::size_t p = 0; p < n; ++p) offsets[p + 1] = offsets[p] + static_cast<std::int64_t>(lists[p].size());
+  std::vector<int> fields;
+  fields.reserve(static_cast<std::size_t>(offsets[n]));
+  for (auto& l : lists) {
+    fields.insert(fields.end(), l.begin(), l.end());
+    std::vector<int>().swap(l);
+  }
   return NeighbourGraph::fromRows(std::move(offsets), std::move(fields));
 }
 
@@ -69,7 +88,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   const float tau = params.tau_p > 0 ? params.tau_p : pattern.step();
   const float inv2t = 1.f / (2.f * tau * tau);
   const std::int64_t sn = static_cast<std::int64_t>(n);
-  const NeighbourGraph cover = coveringFields(analysis, n);
+  const NeighbourGraph cover = coveringFields(analysis, cur);
   ProgressReporter rep(progress, "LPF denoising", static_cast<std::size_t>(params.iterations) * n);
   for (int pass = 0; pass < params.iterations; ++pass) {
     analysis.analyse(cur, pass == 0 ? params.probing.rounds : params.rounds_per_pass);

@@ -17,7 +17,6 @@ namespace paps {
 void LpfResamplingParameters::validate() const {
   probing.validate();
   requireInRange("factor", factor, 1.f, 100.f);
-  requireInRange("seed_spacing_radii", seed_spacing_radii, 0.05f, 2.f);
   if (!(tau_p >= 0) || !std::isfinite(tau_p))
     throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (the pattern step) or a finite value > 0");
 }
@@ -54,7 +53,6 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
   const float spacing = r * std::sqrt(3.14159265f / probing.neighbours);  // the 1:1 step
   probing.radius = r;
   if (!(probing.step > 0)) probing.step = spacing / std::sqrt(params.factor);
-  if (!(probing.seed_spacing > 0)) probing.seed_spacing = params.seed_spacing_radii * r;
   LocalProbingAnalysis analysis(points, probing, progress);
   analysis.analyse(points, probing.rounds, progress);
   const ProbingPattern& pattern = analysis.pattern();

@@ -63,8 +63,12 @@ struct LocalProbingParameters {
   /// in spatial order); without the cap the cost grows with the density (bun0.pcd: 3 min 50 s
   /// for 112,586 points, against 8.5 s for 50,000 even ones).
   int max_target_points = 0;
-  /// Spacing of the fields' seeds in metres (Poisson disk), or 0: one field per point.
+  /// Spacing of the fields' seeds in metres (Poisson disk), or 0: `seed_spacing_radii` x r,
+  /// or, when that is 0 too, one field per point (the manuscript's denoising setting).
   float seed_spacing = 0.f;
+  /// Seed spacing in pattern radii when `seed_spacing` is 0, in [0, 2] (0: one field per
+  /// point). The stages set their own defaults (denoising 1/3, resampling 1/2).
+  float seed_spacing_radii = 0.f;
   /// d, the dictionary's atoms, in [1, 1024].
   int atoms = 16;
   /// L1 weight of the sparse codes in metres (>= 0), or < 0: automatic,

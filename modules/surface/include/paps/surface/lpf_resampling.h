@@ -19,15 +19,17 @@ namespace paps {
 
 struct LpfResamplingParameters {
   /// The fields. Their radius (0: automatic, from `neighbours`), neighbours, atoms, lambda,
-  /// rounds ... as for denoising; `seed_spacing` 0 here means `seed_spacing_radii` x r, and
-  /// `step` 0 means the 1:1 step r sqrt(pi / neighbours) over sqrt(factor).
-  LocalProbingParameters probing;
+  /// rounds ... as for denoising; one field per half radius (each point lies in about 5
+  /// target areas), and `step` 0 means the 1:1 step r sqrt(pi / neighbours) over
+  /// sqrt(factor).
+  LocalProbingParameters probing = [] {
+    LocalProbingParameters p;
+    p.seed_spacing_radii = 0.5f;
+    return p;
+  }();
   /// Output density over input density on surfaces (1 to 100): the pattern step is the input
   /// spacing / sqrt(factor). Along a wire the density grows by sqrt(factor).
   float factor = 4.f;
-  /// Spacing of the fields' seeds in pattern radii when probing.seed_spacing is 0, in
-  /// [0.05, 2]. 0.5: each point lies in about 5 target areas.
-  float seed_spacing_radii = 0.5f;
   /// Consensus radius tau_p in metres (> 0), or 0: 0.7 x the pattern step (kept points are
   /// at least tau_p apart; at 1 x the step the output had half the density asked for).
   float tau_p = 0.f;

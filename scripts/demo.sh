@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on real data: installs what is missing, builds, fetches the sample scans,
 # denoises the real laser scan table_scene_lms400.pcd with similarity denoising, and
-# runs the quick denoising bench, which writes before/after pictures to demo_out/.
+# runs the quick denoising bench, which writes before/after pictures to demo_out/, and the
+# quick Local Probing Fields bench (a plate under wires; pictures of a wire seen end-on).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
@@ -10,4 +11,5 @@ SAMPLES=$(bash scripts/fetch_samples.sh)
 mkdir -p demo_out
 ./build/apps/paps/paps denoise "$SAMPLES/table_scene_lms400.pcd" demo_out/table_scene_denoised.pcd
 ./build/apps/paps/paps bench denoise --quick --samples "$SAMPLES" --out demo_out
+./build/apps/paps/paps bench lpf --quick --shapes plate-wires --out demo_out
 echo "demo: pictures and table in $(pwd)/demo_out"

@@ -19,6 +19,7 @@
 #include "bench_worker.h"
 #include "cli_common.h"
 #include "commands.h"
+#include "render.h"
 
 namespace paps::cli {
 
@@ -216,6 +217,7 @@ int runBenchLpf(int argc, char** argv) {
                   "-", "-", e[0], e[1], e[2]);
       std::map<std::string, std::array<double, 3>> best;  // per method: the best "all" row
       std::map<std::string, double> seconds;
+      std::map<std::string, Positions> best_output;
       for (const Method& m : methods(r, quick)) {
         const WorkerResult w = runWorker(out_dir, m.name, noisy, m.params);
         if (!w.ok) {
@@ -232,6 +234,7 @@ int runBenchLpf(int argc, char** argv) {
         if (it == best.end() || e[2] < it->second[2]) {
           best[m.name] = {e[0], e[1], e[2]};
           seconds[m.name] = w.seconds;
+          if (has_curves && noise == noises.front()) best_output[m.name] = w.output;
         }
       }
       if (!best.count("lpf")) continue;
@@ -249,6 +252,36 @@ int runBenchLpf(int argc, char** argv) {
         std::printf(", surface %.3f, curves %.3f (against the best other on curves)", lpf[0] / peer[0], lpf[1] / best_curves);
       }
       std::printf("; time LPF / that method %.1f\n", seconds["lpf"] / seconds[peer_name]);
+      if (has_curves && noise == noises.front()) {
+        // The wire x = -0.6, z = 0.3 seen end-on (along y, all of it but its ends and the
+        // crossings): its
+        // points' spread across it, 5 cm square; coloured by the distance to the true wire
+        // (red: 3 sigma).
+        View view;
+        view.axes << 1, 0, 0, 0, 0, 1, 0, 1, 0;
+        view.lo = Eigen::Vector2f(-0.625f, 0.275f);
+        view.hi = Eigen::Vector2f(-0.575f, 0.325f);
+        auto slab = [](const Positions& pts) {
+          Positions out;
+          for (const auto& q : pts)
+            if (isFinite(q) && std::abs(q.y()) < 0.95f && std::abs(std::abs(q.y()) - 0.2f) > 0.03f &&
+                std::abs(std::abs(q.y()) - 0.6f) > 0.03f)
+              out.push_back(q);  // the crossing wires (y = +-0.2, +-0.6) left out: they would hide the dot
+          return out;
+        };
+        const double vmax = 3 * noise * diagonal;
+        auto draw = [&](const Positions& pts, const std::string& name) {
+          const Positions cut = slab(pts);
+          std::vector<double> d(cut.size());
+          for (std::size_t i = 0; i < cut.size(); ++i) d[i] = synthetic::distanceToPlateAndWires(cut[i]);
+          renderValues(cut, d, vmax, view, 400, out_dir + "/lpf_wire_" + name + ".png");
+        };
+        draw(noisy, "input");
+        draw(best_output["lpf"], "lpf");
+        draw(best_output[peer_name], "best_other_" + peer_name);
+        std::printf("  wrote %s/lpf_wire_{input,lpf,best_other_%s}.png (the wire x = -0.6 seen end-on)\n", out_dir.c_str(),
+                    peer_name.c_str());
+      }
     }
   }
   for (const char* scratch : {"worker_in.bin", "worker_out.bin", "worker_log.txt"})

@@ -53,6 +53,18 @@ TEST(LassoCodes, DebiasedCodesKeepTheSupportWithoutShrinking) {
   EXPECT_NEAR(A(3, 0), 0.3f, 1e-6f);
 }
 
+TEST(LassoCodes, DebiasingKeepsTheLassoValuesOnANearlySingularSupport) {
+  // Two atoms 1e-7 apart: a least-squares refit would give huge opposite coefficients.
+  Eigen::MatrixXf D(3, 2);
+  D << 1.f, 1.f, 0.f, 1e-7f, 0.f, 0.f;
+  D.col(1).normalize();
+  Eigen::MatrixXf X(3, 1);
+  X << 2.f, 0.5f, 0.f;
+  const Eigen::MatrixXf A = paps::lassoCodes(D, X, 1e-3f, 1000, true);
+  EXPECT_TRUE(A.allFinite());
+  EXPECT_LT(A.cwiseAbs().maxCoeff(), 10.f) << A.transpose();
+}
+
 TEST(LassoCodes, ZeroLambdaIsLeastSquares) {
   const Eigen::MatrixXf D = unitColumns(randomMatrix(20, 5, 1));
   const Eigen::MatrixXf X = randomMatrix(20, 8, 2);

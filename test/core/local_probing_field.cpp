@@ -4,6 +4,7 @@
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <omp.h>
@@ -175,6 +176,28 @@ TEST(LocalProbingAnalysis, BadInputAndParametersAreNamed) {
   }
   const Positions same(100, Eigen::Vector3f(1, 2, 3));
   EXPECT_THROW(LocalProbingAnalysis(same, {}), paps::InvalidInput);
+  // Another cloud than the one analysed.
+  LocalProbingParameters ok;
+  ok.neighbours = 30;
+  LocalProbingAnalysis a(p, ok);
+  EXPECT_THROW(a.probe(tiltedPlane(400, 0.f, 6)), paps::InvalidParameter);
+  EXPECT_THROW(a.analyse(tiltedPlane(600, 0.f, 6), 1), paps::InvalidParameter);
+  EXPECT_EQ(a.pattern().nearestNode(std::nanf(""), 0.f), 0);
+  EXPECT_GE(a.pattern().nearestNode(1e30f, -1e30f), 0);
+}
+
+TEST(LocalProbingAnalysis, FieldsThatCannotFitAreRefused) {
+  // 60,000 fields of about 19,600 nodes would need 19 GB: a clear error before allocating.
+  const Positions p = tiltedPlane(60000, 0.f, 7);
+  LocalProbingParameters params;
+  params.radius = 0.05f;
+  params.step = 0.05f / 79.f;
+  try {
+    LocalProbingAnalysis a(p, params);
+    ADD_FAILURE() << "accepted";
+  } catch (const paps::InvalidParameter& e) {
+    EXPECT_NE(std::string(e.what()).find("GB"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -24,7 +24,7 @@ Eigen::MatrixXd gramOf(const Eigen::MatrixXf& D) {
   return G;
 }
 
-float softThreshold(double z, double t) { return static_cast<float>(z > t ? z - t : (z < -t ? z + t : 0.0)); }
+double softThreshold(double z, double t) { return z > t ? z - t : (z < -t ? z + t : 0.0); }
 
 // One column: cyclic coordinate descent on the correlations r = D^T x - G a.
 void codeOne(const Eigen::MatrixXd& G, Eigen::VectorXd r, double lambda, int max_sweeps, bool debias, float* a_out) {
@@ -60,9 +60,14 @@ void codeOne(const Eigen::MatrixXd& G, Eigen::VectorXd r, double lambda, int max
         cs[p] = c[support[p]];
         for (long q = 0; q < s; ++q) Gs(p, q) = G(support[p], support[q]);
       }
-      const Eigen::VectorXd refit = Gs.ldlt().solve(cs);
-      if (refit.allFinite())  // a singular support keeps the LASSO values
-        for (long p = 0; p < s; ++p) a[support[p]] = refit[p];
+      // Only a well-conditioned support is refitted: two nearly equal atoms would get huge
+      // opposite coefficients, finite but meaningless once rounded to float.
+      const Eigen::LDLT<Eigen::MatrixXd> ldlt(Gs);
+      if (ldlt.info() == Eigen::Success && ldlt.rcond() > 1e-8) {
+        const Eigen::VectorXd refit = ldlt.solve(cs);
+        if (refit.allFinite())
+          for (long p = 0; p < s; ++p) a[support[p]] = refit[p];
+      }
     }
   }
   for (long j = 0; j < d; ++j) a_out[j] = static_cast<float>(a[j]);
@@ -101,33 +106,26 @@ void LassoDictionaryParameters::validate() const {
 
 namespace {
 
-// A = sum a a^T and B = sum x a^T over fixed chunks of the signals, summed in chunk order:
-// the same bits for any thread count.
+// A = sum a a^T and B = sum x a^T, one atom p per task (row p of A, column p of B), each
+// summed over the signals in order: the same bits for any thread count, and no per-thread
+// copies of A and B (64 copies of B were 31 GB at the largest allowed sizes).
 void sufficientStatistics(const Eigen::MatrixXf& X, const Eigen::MatrixXf& codes, Eigen::MatrixXd& A,
                           Eigen::MatrixXd& B) {
   const long k = X.rows(), d = codes.rows(), n = X.cols();
-  const long chunks = std::min<long>(64, n);
-  std::vector<Eigen::MatrixXd> As(chunks, Eigen::MatrixXd::Zero(d, d)), Bs(chunks, Eigen::MatrixXd::Zero(k, d));
-#pragma omp parallel for schedule(dynamic, 1)
-  for (long c = 0; c < chunks; ++c) {
-    const long b = n * c / chunks, e = n * (c + 1) / chunks;
-    std::vector<long> nz;
-    for (long i = b; i < e; ++i) {
-      nz.clear();
-      for (long j = 0; j < d; ++j)
-        if (codes(j, i) != 0) nz.push_back(j);
-      if (nz.empty()) continue;
-      const Eigen::VectorXd x = X.col(i).cast<double>();
-      for (long p : nz) {
-        const double ap = codes(p, i);
-        Bs[c].col(p) += ap * x;
-        for (long q : nz) As[c](p, q) += ap * codes(q, i);
-      }
-    }
-  }
   A = Eigen::MatrixXd::Zero(d, d);
   B = Eigen::MatrixXd::Zero(k, d);
-  for (long c = 0; c < chunks; ++c) { A += As[c]; B += Bs[c]; }
+#pragma omp parallel for schedule(dynamic, 1)
+  for (long p = 0; p < d; ++p) {
+    Eigen::VectorXd row = Eigen::VectorXd::Zero(d), col = Eigen::VectorXd::Zero(k);
+    for (long i = 0; i < n; ++i) {
+      const double ap = codes(p, i);
+      if (ap == 0) continue;
+      row += ap * codes.col(i).cast<double>();
+      col += ap * X.col(i).cast<double>();
+    }
+    A.row(p) = row.transpose();
+    B.col(p) = col;
+  }
 }
 
 double objectiveOf(const Eigen::MatrixXf& D, const Eigen::MatrixXf& X, const Eigen::MatrixXf& codes, float lambda,

@@ -21,7 +21,7 @@ ProbingPattern::ProbingPattern(float radius, float step) : radius_(radius), step
   requirePositive("step", step);
   if (step > radius) throw InvalidParameter("step", detail::toString(step), "at most the pattern radius " + detail::toString(radius));
   const double ratio = radius / step;
-  if (ratio > 80) throw InvalidParameter("step", detail::toString(step), "at least radius / 80 (at most 20,000 pattern nodes)");
+  if (ratio > 80) throw InvalidParameter("step", detail::toString(step), "at least radius / 80 (at most about 20,100 pattern nodes)");
   half_ = static_cast<int>(std::floor(ratio));
   const int side = 2 * half_ + 1;
   node_of_cell_.assign(static_cast<std::size_t>(side) * side, -1);
@@ -36,10 +36,16 @@ ProbingPattern::ProbingPattern(float radius, float step) : radius_(radius), step
 
 int ProbingPattern::nearestNode(float x, float y) const {
   const int side = 2 * half_ + 1;
-  const int cx = static_cast<int>(std::lround(x / step_)), cy = static_cast<int>(std::lround(y / step_));
-  if (std::abs(cx) <= half_ && std::abs(cy) <= half_) {
-    const int n = node_of_cell_[(cy + half_) * side + (cx + half_)];
-    if (n >= 0) return n;
+  const float gx = x / step_, gy = y / step_;
+  if (!(std::abs(gx) <= half_ + 1.f && std::abs(gy) <= half_ + 1.f)) {
+    // Far outside (or NaN): no rounding to int of an unbounded value.
+    if (!std::isfinite(gx) || !std::isfinite(gy)) return 0;
+  } else {
+    const int cx = static_cast<int>(std::lround(gx)), cy = static_cast<int>(std::lround(gy));
+    if (std::abs(cx) <= half_ && std::abs(cy) <= half_) {
+      const int n = node_of_cell_[(cy + half_) * side + (cx + half_)];
+      if (n >= 0) return n;
+    }
   }
   // Outside the disk: the nearest node by search (rare: only points beyond the pattern).
   int best = 0;
@@ -300,6 +306,14 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
     if (params_.random_orientation) poses_[j].frame = randomFrame(params_.seed, j);
   }
   const int m = pattern_->size();
+  // The fields hold 3 floats and an index per node: refuse what cannot fit rather than
+  // failing half-way through an allocation.
+  const double bytes = 16.0 * m * static_cast<double>(n);
+  if (bytes > 8e9)
+    throw InvalidParameter("seed_spacing", detail::toString(params_.seed_spacing),
+                           "fewer fields or a coarser step: " + std::to_string(n) + " fields of " + std::to_string(m) +
+                               " nodes need " + detail::toString(bytes / 1e9) + " GB (at most 8)");
+  points_ = points.size();
   fields_.resize(3 * m, static_cast<Eigen::Index>(n));
   probed_.assign(static_cast<std::size_t>(m) * n, -1);
   probe(points);
@@ -313,6 +327,9 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
 }
 
 void LocalProbingAnalysis::probe(const Positions& points) {
+  if (points.size() != points_)
+    throw InvalidParameter("points", std::to_string(points.size()) + " points",
+                           std::to_string(points_) + " (the cloud the analysis was built on)");
   const int m = pattern_->size();
   const std::int64_t n = static_cast<std::int64_t>(poses_.size());
 #pragma omp parallel
@@ -358,8 +375,9 @@ void LocalProbingAnalysis::align(const Positions&, std::size_t j, const Eigen::V
 void LocalProbingAnalysis::recode() { codes_ = lassoCodes(dictionary_, fields_, lambda_, 100, params_.debias); }
 
 void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const ProgressCallback& progress) {
-  if (points.size() < (target_idx_.empty() ? 0 : static_cast<std::size_t>(*std::max_element(target_idx_.begin(), target_idx_.end())) + 1))
-    throw InvalidParameter("points", std::to_string(points.size()) + " points", "the cloud the analysis was built on");
+  if (points.size() != points_)
+    throw InvalidParameter("points", std::to_string(points.size()) + " points",
+                           std::to_string(points_) + " (the cloud the analysis was built on)");
   requireInRange("rounds", rounds, 0, 100);
   const std::int64_t n = static_cast<std::int64_t>(poses_.size());
   ProgressReporter rep(progress, "joint analysis", static_cast<std::size_t>(rounds));

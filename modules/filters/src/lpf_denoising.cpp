@@ -86,7 +86,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   report.pattern_nodes = pattern.size();
   report.fields = analysis.fieldCount();
   const float tau = params.tau_p > 0 ? params.tau_p : pattern.step();
-  const float inv2t = 1.f / (2.f * tau * tau);
+  const double inv2t = 1.0 / (2.0 * static_cast<double>(tau) * tau);  // double: tiny units stay finite
   const std::int64_t sn = static_cast<std::int64_t>(n);
   const NeighbourGraph cover = coveringFields(analysis, cur);
   ProgressReporter rep(progress, "LPF denoising", static_cast<std::size_t>(params.iterations) * n);
@@ -125,7 +125,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
         // half a spacing otherwise). Across a wire it moves in every direction.
         if (params.normal_motion_on_surfaces && analysis.targetDimension(j) == 2) move.head<2>().setZero();
         const Eigen::Vector3f candidate = cur[p] + pose.frame * move;
-        const double w = std::exp(-static_cast<double>((candidate - cur[p]).squaredNorm()) * inv2t);
+        const double w = std::exp(-(candidate - cur[p]).cast<double>().squaredNorm() * inv2t);
         acc += w * candidate.cast<double>();
         wsum += w;
       }

@@ -18,7 +18,7 @@ void LpfResamplingParameters::validate() const {
   probing.validate();
   requireInRange("factor", factor, 1.f, 100.f);
   if (!(tau_p >= 0) || !std::isfinite(tau_p))
-    throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (the pattern step) or a finite value > 0");
+    throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (0.7 x the pattern step) or a finite value > 0");
 }
 
 namespace {

@@ -20,13 +20,13 @@ namespace paps {
 /// `radius`, in the pattern plane (manuscript 3.2.6: M ~ pi (r / tau_s)^2 nodes).
 class ProbingPattern {
  public:
-  /// Throws InvalidParameter unless 0 < step <= radius and the pattern has at most 20,000 nodes.
+  /// Throws InvalidParameter unless 0 < step <= radius <= 80 step (about 20,100 nodes at most).
   ProbingPattern(float radius, float step);
   float radius() const { return radius_; }
   float step() const { return step_; }
   int size() const { return static_cast<int>(nodes_.size()); }
   const Eigen::Vector2f& node(int i) const { return nodes_[i]; }
-  /// The node nearest to (x, y) of the pattern plane (ties: the lower index).
+  /// The node nearest to (x, y) of the pattern plane (node 0 for NaN).
   int nearestNode(float x, float y) const;
   /// The four nodes of the grid cell holding (x, y) and their bilinear weights (summing to
   /// 1); false when a corner lies outside the disk.
@@ -101,16 +101,19 @@ class LocalProbingAnalysis {
   /// Places the fields (seeds, target areas, initial frames) and probes them, then aligns
   /// each pattern on its target area. Non-finite points are never probed.
   /// Throws InvalidInput when fewer than 3 points are finite, InvalidParameter for bad
-  /// parameters (also a radius wider than the cloud).
+  /// parameters (also a radius wider than the cloud, or fields that would need more than
+  /// 8 GB: 16 bytes a node a field).
   LocalProbingAnalysis(const Positions& points, const LocalProbingParameters& parameters,
                        const ProgressCallback& progress = {});
   ~LocalProbingAnalysis();
 
   /// Runs `rounds` rounds of eq. 3.2 on the current points: dictionary and codes, pose
   /// optimisation against D a (eqs. 3.4 to 3.6), probing again. `points` must be the cloud
-  /// the analysis was built on, possibly moved (same size, same order).
+  /// the analysis was built on, possibly moved (same size, same order; InvalidParameter for
+  /// another size).
   void analyse(const Positions& points, int rounds, const ProgressCallback& progress = {});
-  /// Probes every field again at its current pose (eq. 3.1).
+  /// Probes every field again at its current pose (eq. 3.1). `points`: the cloud the
+  /// analysis was built on, possibly moved (InvalidParameter for another size).
   void probe(const Positions& points);
 
   const LocalProbingParameters& parameters() const { return params_; }
@@ -158,6 +161,7 @@ class LocalProbingAnalysis {
   std::vector<int> probed_;
   Eigen::MatrixXf dictionary_, codes_;
   std::vector<double> round_errors_;
+  std::size_t points_ = 0;  // size of the cloud the analysis was built on
   float lambda_ = 0.f;
 };
 

@@ -28,7 +28,9 @@ struct LpfResamplingParameters {
     return p;
   }();
   /// Output density over input density on surfaces (1 to 100): the pattern step is the input
-  /// spacing / sqrt(factor). Along a wire the density grows by sqrt(factor).
+  /// spacing / sqrt(factor), the spacing read from the radius and the neighbour count,
+  /// r sqrt(pi / neighbours) (with an explicit radius, give `neighbours` as the points in that
+  /// ball, or an explicit step). Along a wire the density grows by sqrt(factor).
   float factor = 4.f;
   /// Consensus radius tau_p in metres (> 0), or 0: 0.7 x the pattern step (kept points are
   /// at least tau_p apart; at 1 x the step the output had half the density asked for).

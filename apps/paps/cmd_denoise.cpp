@@ -146,9 +146,13 @@ int runDenoise(int argc, char** argv) {
     p.validate();
     LpfDenoisingReport r;
     out = lpfDenoisePositions(in, p, &r, {}, progress);
+    char chosen[96] = " (chosen)";
+    if (r.noise_sigma > 0)
+      std::snprintf(chosen, sizeof chosen, " (chosen: noise %.3g m measured, at least %g sigma)", r.noise_sigma,
+                    p.probing.noise_sigmas);
     std::printf("LPF denoising: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %d atoms, lambda %g m, "
                 "%d passes; moved %zu points\n",
-                r.radius, p.probing.radius > 0 ? "" : " (chosen)", r.step, r.pattern_nodes, r.fields, p.probing.atoms,
+                r.radius, p.probing.radius > 0 ? "" : chosen, r.step, r.pattern_nodes, r.fields, p.probing.atoms,
                 r.lambda, p.iterations, r.moved);
     if (!r.round_errors.empty())
       std::printf("representation error per field: %.3g after the first round, %.3g after the last\n",

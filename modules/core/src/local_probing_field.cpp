@@ -8,6 +8,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/lasso_dictionary.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/poisson_disk_sampling.h>
 #include <paps/core/random.h>
 
@@ -79,6 +80,7 @@ void LocalProbingParameters::validate() const {
   if (!(radius >= 0) || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   requireInRange("neighbours", neighbours, 8, 2000);
+  requireInRange("noise_sigmas", noise_sigmas, 0.f, 100.f);
   if (!(step >= 0) || !std::isfinite(step))
     throw InvalidParameter("step", detail::toString(step), "0 (automatic) or a finite value > 0");
   requireInRange("target_factor", target_factor, 1.f, 3.f);
@@ -247,6 +249,15 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
   if (!(r > 0)) {
     r = radiusForNeighbourCount(points, index, params_.neighbours);
     if (!(r > 0)) throw InvalidInput("the points are all at one position: no pattern radius fits them");
+    if (params_.noise_sigmas > 0) {
+      try {
+        noise_sigma_ = estimateNoiseLevel(points, index, r).sigma;
+      } catch (const InvalidInput&) {
+        noise_sigma_ = 0.f;  // no ball to fit a surface in (a few points, or wires only)
+      }
+      // Wider for the noise, but never beyond half the cloud.
+      r = std::max(r, std::min(params_.noise_sigmas * noise_sigma_, 0.5f * boundingBoxDiagonal(points)));
+    }
   }
   float step = params_.step;
   if (!(step > 0)) step = r * std::sqrt(3.14159265f / params_.neighbours);

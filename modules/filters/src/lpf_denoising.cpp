@@ -83,6 +83,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   report.radius = pattern.radius();
   report.step = pattern.step();
   report.lambda = analysis.lambda();
+  report.noise_sigma = analysis.noiseSigma();
   report.pattern_nodes = pattern.size();
   report.fields = analysis.fieldCount();
   const float tau = params.tau_p > 0 ? params.tau_p : pattern.step();

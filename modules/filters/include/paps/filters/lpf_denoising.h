@@ -53,6 +53,8 @@ struct LpfDenoisingParameters {
 
 struct LpfDenoisingReport {
   float radius = 0.f, step = 0.f, lambda = 0.f;
+  /// Noise sigma measured for the automatic radius (0: not measured).
+  float noise_sigma = 0.f;
   int pattern_nodes = 0;
   std::size_t fields = 0;
   /// Representation error sum_j |V_j - D a_j|^2 / N after each round, all passes.

@@ -43,12 +43,6 @@ struct Row {
   ErrorStats error;
 };
 
-std::string fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
-
 struct Method {
   std::string name, setting;
   std::map<std::string, double> params;

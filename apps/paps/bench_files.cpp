@@ -45,12 +45,6 @@ struct Run {
   WorkerResult w;
 };
 
-std::string fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
-
 std::string status(const WorkerResult& w) {
   if (w.ok) return "ok";
   return w.timed_out ? "timeout" : "error";

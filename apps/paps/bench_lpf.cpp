@@ -44,12 +44,6 @@ struct Method {
   std::map<std::string, double> params;
 };
 
-std::string fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
-
 std::vector<Method> methods(float r, bool quick) {
   std::vector<Method> m;
   m.push_back({"lpf", "default", {}});

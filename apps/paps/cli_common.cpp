@@ -200,4 +200,10 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<
     }
 }
 
+std::string fmt(const char* format, double value) {
+  char b[64];
+  std::snprintf(b, sizeof b, format, value);
+  return b;
+}
+
 }  // namespace paps::cli

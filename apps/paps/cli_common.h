@@ -37,6 +37,9 @@ struct Arguments {
 /// "a,b,,c" -> {"a", "b", "c"}.
 std::vector<std::string> splitList(const std::string& s);
 
+/// One number through a printf format ("%.2f%%"), for table cells and labels.
+std::string fmt(const char* format, double value);
+
 /// Where scripts/fetch_samples.sh caches the sample scans: $PAPS_SAMPLES, else
 /// ~/.cache/paps/samples.
 std::string samplesDir();

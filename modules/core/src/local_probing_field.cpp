@@ -81,6 +81,7 @@ void LocalProbingParameters::validate() const {
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
   requireInRange("neighbours", neighbours, 8, 2000);
   requireInRange("noise_sigmas", noise_sigmas, 0.f, 100.f);
+  requireInRange("nodes_per_point", nodes_per_point, 1.f, 100.f);
   if (!(step >= 0) || !std::isfinite(step))
     throw InvalidParameter("step", detail::toString(step), "0 (automatic) or a finite value > 0");
   requireInRange("target_factor", target_factor, 1.f, 3.f);
@@ -260,7 +261,7 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
     }
   }
   float step = params_.step;
-  if (!(step > 0)) step = r * std::sqrt(3.14159265f / params_.neighbours);
+  if (!(step > 0)) step = r * std::sqrt(3.14159265f / (params_.neighbours * params_.nodes_per_point));
   if (step > r) throw InvalidParameter("step", detail::toString(step), "at most the pattern radius " + detail::toString(r));
   pattern_ = std::make_unique<ProbingPattern>(r, step);
   lambda_ = params_.lambda >= 0 ? params_.lambda : params_.lambda_factor * step;
@@ -332,7 +333,7 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
   const Eigen::VectorXf zero = Eigen::VectorXf::Zero(3 * m);
   for (int it = 0; it < params_.alignment_iterations; ++it) {
 #pragma omp parallel for schedule(dynamic, 256)
-    for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) align(points, j, zero);
+    for (std::int64_t j = 0; j < static_cast<std::int64_t>(n); ++j) align(j, zero);
     probe(points);
   }
 }
@@ -356,7 +357,7 @@ void LocalProbingAnalysis::probe(const Positions& points) {
 // Rigid motion (R_d, t_d) of the frame taking the pattern shape u + goal onto the probed
 // u + v (eq. 3.5, least squares, Kabsch/Umeyama), then the pose update of eq. 3.6: the
 // pattern's nodes plus `goal` now sit where the probed points are.
-void LocalProbingAnalysis::align(const Positions&, std::size_t j, const Eigen::VectorXf& goal) {
+void LocalProbingAnalysis::align(std::size_t j, const Eigen::VectorXf& goal) {
   const int m = pattern_->size();
   const int* probed = probed_.data() + j * m;
   int valid = 0;
@@ -403,7 +404,7 @@ void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const Pr
     if (params_.debias) recode();
     else codes_ = std::move(learned.codes);
 #pragma omp parallel for schedule(dynamic, 256)
-    for (std::int64_t j = 0; j < n; ++j) align(points, j, reconstructed(j));
+    for (std::int64_t j = 0; j < n; ++j) align(j, reconstructed(j));
     probe(points);
     std::vector<double> err(n);
 #pragma omp parallel for schedule(static)

@@ -9,7 +9,6 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
-#include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
 
 namespace paps {
@@ -40,22 +39,17 @@ struct CellKey {
 Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingParameters& params,
                                  LpfResamplingReport* report_out, const ProgressCallback& progress) {
   LpfResamplingReport report;
-  const std::size_t finite = countFinite(points);
-  if (finite < 3) throw InvalidInput("LPF resampling needs at least 3 finite points, got " + std::to_string(finite));
+  // The analysis resolves the radius (from the neighbour count; no noise rule here: the
+  // proposals are filtered at the input spacing that count implies) and the step (`factor`
+  // nodes a point).
   LocalProbingParameters probing = params.probing;
-  requireRadiusWithinExtent("radius", probing.radius, points);
-  float r = probing.radius;
-  if (!(r > 0)) {
-    const SpatialIndex index(points);
-    r = radiusForNeighbourCount(points, index, probing.neighbours);
-    if (!(r > 0)) throw InvalidInput("the points are all at one position: no pattern radius fits them");
-  }
-  const float spacing = r * std::sqrt(3.14159265f / probing.neighbours);  // the 1:1 step
-  probing.radius = r;
-  if (!(probing.step > 0)) probing.step = spacing / std::sqrt(params.factor);
+  probing.noise_sigmas = 0.f;
+  probing.nodes_per_point = params.factor;
   LocalProbingAnalysis analysis(points, probing, progress);
   analysis.analyse(points, probing.rounds, progress);
   const ProbingPattern& pattern = analysis.pattern();
+  const float r = analysis.radius();
+  const float spacing = r * std::sqrt(3.14159265f / probing.neighbours);  // the 1:1 step
   report.radius = r;
   report.step = pattern.step();
   report.pattern_nodes = pattern.size();

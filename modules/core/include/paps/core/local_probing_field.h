@@ -58,9 +58,12 @@ struct LocalProbingParameters {
   /// at 0.15% noise had r = 2.9 sigma and an error of 6.8e-4 in 73 s; at 6 sigma, 2.9e-4 in
   /// 24 s (docs/lpf.md).
   float noise_sigmas = 6.f;
-  /// Pattern step tau_s in metres, or 0: as many nodes as points in the ball,
-  /// r sqrt(pi / neighbours) (a 1:1 sampling).
+  /// Pattern step tau_s in metres, or 0: `nodes_per_point` nodes for every point of a
+  /// `neighbours` ball, r sqrt(pi / (neighbours x nodes_per_point)).
   float step = 0.f;
+  /// Pattern nodes per input point of an automatic step, in [1, 100]: 1 is the 1:1 sampling
+  /// of denoising; resampling asks for its density factor.
+  float nodes_per_point = 1.f;
   /// The target area of a field: the points within target_factor x r of its first seed,
   /// fixed for the whole analysis (manuscript 3.2.1: 1.1). In [1, 3].
   float target_factor = 1.1f;
@@ -156,7 +159,7 @@ class LocalProbingAnalysis {
   float lambda() const { return lambda_; }
 
  private:
-  void align(const Positions& points, std::size_t j, const Eigen::VectorXf& goal);
+  void align(std::size_t j, const Eigen::VectorXf& goal);
 
   LocalProbingParameters params_;
   std::unique_ptr<ProbingPattern> pattern_;

@@ -20,8 +20,8 @@ namespace paps {
 struct LpfResamplingParameters {
   /// The fields. Their radius (0: automatic, from `neighbours`), neighbours, atoms, lambda,
   /// rounds ... as for denoising; one field per half radius (each point lies in about 5
-  /// target areas), and `step` 0 means the 1:1 step r sqrt(pi / neighbours) over
-  /// sqrt(factor).
+  /// target areas). `step` 0 means the 1:1 step r sqrt(pi / neighbours) over sqrt(factor)
+  /// (nodes_per_point and noise_sigmas are set by the resampler: factor and 0).
   LocalProbingParameters probing = [] {
     LocalProbingParameters p;
     p.seed_spacing_radii = 0.5f;

@@ -7,6 +7,8 @@
 #include <sstream>
 
 #include <pcl/PolygonMesh.h>
+#include <pcl/conversions.h>
+#include <pcl/point_types.h>
 #include <pcl/io/ply_io.h>
 
 #include <paps/core/cloud_file_layout.h>
@@ -53,6 +55,20 @@ TriangleMesh toTriangleMesh(const pcl::PolygonMesh& mesh) {
       out.triangles.emplace_back(static_cast<int>(v[0]), static_cast<int>(v[k]),
                                  static_cast<int>(v[k + 1]));
   }
+  return out;
+}
+
+pcl::PolygonMesh toPolygonMesh(const TriangleMesh& mesh) {
+  pcl::PointCloud<pcl::PointXYZ> cloud;
+  cloud.resize(mesh.vertices.size());
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i) cloud[i].getVector3fMap() = mesh.vertices[i];
+  pcl::PolygonMesh out;
+  pcl::toPCLPointCloud2(cloud, out.cloud);
+  out.polygons.resize(mesh.triangles.size());
+  for (std::size_t f = 0; f < mesh.triangles.size(); ++f)
+    out.polygons[f].vertices = {static_cast<pcl::index_t>(mesh.triangles[f][0]),
+                                static_cast<pcl::index_t>(mesh.triangles[f][1]),
+                                static_cast<pcl::index_t>(mesh.triangles[f][2])};
   return out;
 }
 

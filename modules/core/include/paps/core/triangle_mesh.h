@@ -21,6 +21,8 @@ struct TriangleMesh {
 
 /// Converts a pcl::PolygonMesh (polygons with more than 3 vertices are fanned).
 TriangleMesh toTriangleMesh(const pcl::PolygonMesh& mesh);
+/// The mesh as a pcl::PolygonMesh (a PointXYZ cloud and triangles).
+pcl::PolygonMesh toPolygonMesh(const TriangleMesh& mesh);
 /// Loads a PLY or OBJ mesh. Throws IoError when the file is missing, unreadable or has no faces.
 TriangleMesh loadTriangleMesh(const std::string& path);
 

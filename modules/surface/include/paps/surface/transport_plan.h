@@ -1,0 +1,176 @@
+#pragma once
+// Optimal transport from a weighted point set to a simplicial complex (manuscript 5.1):
+// every vertex is one bin, every facet is tiled with bins by a centroidal Voronoi
+// tessellation, each bin has a capacity (its share of the facet's area), and a transport plan
+// sends the points' mass to the bins so that every facet receives a uniform measure
+// (eqs. 5.1 to 5.3). The cost sum m_ij |p_i - b_j|^2 is minimised by local linear programs
+// (Clp) over small stencils, starting from "every point to its nearest vertex" (5.1.5), so
+// the cost found is an upper bound of the global optimum that only ever decreases.
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+namespace paps {
+
+/// Bins of one facet: barycentric coordinates of the CVT cell centroids (they move with the
+/// facet's vertices) and capacities (cell area / facet area, summing to 1).
+struct FacetBins {
+  std::vector<Eigen::Vector3d> barycentric;
+  std::vector<double> capacity;
+};
+
+/// CVT of a triangle into `count` cells (Lloyd iterations on a fine barycentric lattice),
+/// deterministic. count >= 1.
+FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                         int count);
+
+/// One target of a local transport problem: a vertex (one bin of unconstrained capacity) or a
+/// facet with its bins (uniform measure).
+struct TransportTarget {
+  std::array<Eigen::Vector3d, 3> corners;  // a vertex uses corners[0]
+  const FacetBins* bins = nullptr;         // null: a vertex
+  bool isFacet() const { return bins != nullptr; }
+  int binCount() const { return bins ? static_cast<int>(bins->capacity.size()) : 1; }
+  Eigen::Vector3d bin(int b) const {
+    if (!bins) return corners[0];
+    const Eigen::Vector3d& w = bins->barycentric[b];
+    return w[0] * corners[0] + w[1] * corners[1] + w[2] * corners[2];
+  }
+};
+
+/// Mass sent by one point to one bin of one target.
+struct TransportEntry {
+  int target;  // index into the target list of the problem (local) or simplex id (global)
+  int bin;
+  double mass;
+};
+
+/// Solution of a local problem: cost, and for every point its entries (target = index in the
+/// target list).
+struct LocalTransport {
+  bool solved = false;  // false: the LP failed (the caller keeps its old plan)
+  double cost = 0;
+  std::vector<std::vector<TransportEntry>> entries;
+};
+
+/// Optimal transport of `points` (masses `mass`, all > 0) to `targets` with the uniformity
+/// constraint on every facet target: one linear program solved by Clp.
+LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points,
+                                   const std::vector<double>& mass,
+                                   const std::vector<TransportTarget>& targets);
+
+struct TransportParameters {
+  /// Facet bins per unit area once the points are scaled into a box of side 0.5 (the
+  /// manuscript's 200); a facet has at least one bin and at most max_bins_per_facet.
+  double bins_per_area = 200;
+  int max_bins_per_facet = 16;
+  /// Relaxation sweeps stop when a sweep lowers the cost by less than this fraction (1e-5 in
+  /// the manuscript), or after max_sweeps.
+  double tolerance = 1e-5;
+  int max_sweeps = 10;
+  void validate() const;
+};
+
+/// A simplicial complex (vertices, facets; edges are implied by the facets or given apart) and
+/// a transport plan from a point set onto it, kept consistent under local edits. Simplices are
+/// never renumbered: removed ones are marked dead.
+class TransportPlan {
+ public:
+  /// Points (finite), masses (> 0, or empty for 1 each). Throws InvalidInput on bad input.
+  TransportPlan(std::vector<Eigen::Vector3d> points, std::vector<double> masses,
+                const TransportParameters& params);
+
+  // --- the complex
+  int addVertex(const Eigen::Vector3d& p);
+  /// Adds a facet with its bins (CVT sized by its area); returns its id.
+  int addFacet(int a, int b, int c);
+  void removeFacet(int f);   // the plan must not use it any more
+  void removeVertex(int v);  // idem
+  bool vertexAlive(int v) const { return vertex_alive_[v]; }
+  bool facetAlive(int f) const { return facet_alive_[f]; }
+  int vertexCount() const { return static_cast<int>(vertices_.size()); }
+  int facetCount() const { return static_cast<int>(facets_.size()); }
+  int aliveVertexCount() const;
+  int aliveFacetCount() const;
+  const Eigen::Vector3d& vertex(int v) const { return vertices_[v]; }
+  void setVertex(int v, const Eigen::Vector3d& p) { vertices_[v] = p; }
+  const std::array<int, 3>& facet(int f) const { return facets_[f]; }
+  const FacetBins& bins(int f) const { return bins_[f]; }
+  double facetArea(int f) const;
+  /// Alive facets incident to v.
+  const std::vector<int>& facetsOf(int v) const { return vertex_facets_[v]; }
+  /// The number of bins a facet of this area gets.
+  int binCountFor(double area) const;
+
+  // --- the plan
+  /// Every point to its nearest alive vertex (the valid, crude start of 5.1.5).
+  void assignToNearestVertices();
+  std::size_t pointCount() const { return points_.size(); }
+  const Eigen::Vector3d& point(std::size_t i) const { return points_[i]; }
+  double pointMass(std::size_t i) const { return masses_[i]; }
+  double totalMass() const { return total_mass_; }
+  /// Entries of point i: target = vertex id (bin -1) or facet id (bin >= 0).
+  const std::vector<TransportEntry>& entriesOf(std::size_t i) const { return plan_[i]; }
+  /// Points with mass on a simplex.
+  const std::vector<int>& pointsOnVertex(int v) const { return vertex_points_[v]; }
+  const std::vector<int>& pointsOnFacet(int f) const { return facet_points_[f]; }
+  double massOnFacet(int f) const;
+  double massOnVertex(int v) const;
+  /// Total cost sum m_ij |p_i - b_j|^2 (recomputed).
+  double cost() const;
+
+  /// A local problem: the points with mass on any simplex of the stencil, their mass there
+  /// and its current cost.
+  struct Stencil {
+    std::vector<int> vertices, facets;  // simplex ids
+    std::vector<int> points;
+    std::vector<double> mass;           // per point: its mass on the stencil
+    double cost = 0;                    // current cost of that mass
+  };
+  Stencil gather(std::vector<int> vertices, std::vector<int> facets) const;
+  /// Targets of the stencil's simplices, in order (vertices, then facets).
+  std::vector<TransportTarget> targetsOf(const Stencil& s) const;
+  /// Replaces the plan of the stencil's mass with `solution` (targets as from targetsOf).
+  void apply(const Stencil& s, const LocalTransport& solution);
+  /// For edits of the complex: release() takes the stencil's mass off the plan (the points
+  /// then send less than their mass), the caller edits the complex, and assign() sends that
+  /// mass by `solution`, whose targets are `vertices` then `facets` (simplex ids).
+  void release(const Stencil& s);
+  void assign(const Stencil& s, const std::vector<int>& vertices, const std::vector<int>& facets,
+              const LocalTransport& solution);
+  /// Re-solves the stencil; applies and returns the decrease when the cost goes down.
+  double improve(const Stencil& s);
+  /// Stencil of facet f: the facets sharing an edge with it, and all their vertices.
+  Stencil facetStencil(int f) const;
+  /// Stencil of vertex v: its facets and all their vertices (and v).
+  Stencil vertexStencil(int v) const;
+  /// Sweeps over the facet stencils until the cost stalls (5.1.5). Returns the sweeps done.
+  int relax();
+
+  /// Vertex relocation (5.2.4): moves v halfway to the mass-weighted optimal position for the
+  /// current plan, then re-solves its stencil. Returns the distance moved.
+  double relocate(int v);
+
+ private:
+  void addEntry(int i, const TransportEntry& e);
+  void clearEntriesOn(int i, const std::vector<int>& vertices, const std::vector<int>& facets);
+
+  TransportParameters params_;
+  std::vector<Eigen::Vector3d> points_;
+  std::vector<double> masses_;
+  double total_mass_ = 0;
+  double bin_scale2_ = 1;  // (0.5 / longest box side)^2: areas in the manuscript's units
+  std::vector<Eigen::Vector3d> vertices_;
+  std::vector<char> vertex_alive_;
+  std::vector<std::array<int, 3>> facets_;
+  std::vector<char> facet_alive_;
+  std::vector<FacetBins> bins_;
+  std::vector<std::vector<int>> vertex_facets_;
+  std::vector<std::vector<TransportEntry>> plan_;  // per point; target < 0 never
+  std::vector<std::vector<int>> vertex_points_, facet_points_;
+};
+
+}  // namespace paps

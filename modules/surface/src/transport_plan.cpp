@@ -1,0 +1,495 @@
+#include <paps/surface/transport_plan.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <limits>
+#include <numeric>
+
+#include <ClpSimplex.hpp>
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_types.h>
+
+#include <paps/core/error.h>
+
+namespace paps {
+
+void TransportParameters::validate() const {
+  if (!(bins_per_area > 0) || !std::isfinite(bins_per_area) || bins_per_area > 1e6)
+    throw InvalidParameter("bins_per_area", detail::toString(bins_per_area), "in (0, 1e6]");
+  requireInRange("max_bins_per_facet", max_bins_per_facet, 1, 256);
+  if (!(tolerance >= 0) || !(tolerance < 1))
+    throw InvalidParameter("tolerance", detail::toString(tolerance), "in [0, 1)");
+  requireInRange("max_sweeps", max_sweeps, 0, 1000);
+}
+
+FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                         int count) {
+  FacetBins out;
+  if (count <= 1) {
+    out.barycentric.emplace_back(1.0 / 3, 1.0 / 3, 1.0 / 3);
+    out.capacity.push_back(1.0);
+    return out;
+  }
+  // Centres of the n^2 congruent sub-triangles of a regular subdivision: equal-area samples.
+  const int n = std::max(8, static_cast<int>(std::ceil(std::sqrt(24.0 * count))));
+  std::vector<Eigen::Vector3d> w;
+  w.reserve(static_cast<std::size_t>(n) * n);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; i + j < n; ++j) {
+      w.emplace_back((i + 1.0 / 3) / n, (j + 1.0 / 3) / n, 0);  // upward triangle
+      if (i + j + 1 < n) w.emplace_back((i + 2.0 / 3) / n, (j + 2.0 / 3) / n, 0);  // downward
+    }
+  for (auto& x : w) x[2] = 1 - x[0] - x[1];
+  std::vector<Eigen::Vector3d> pos(w.size());
+  for (std::size_t k = 0; k < w.size(); ++k) pos[k] = w[k][0] * a + w[k][1] * b + w[k][2] * c;
+  // Seeds by farthest-point sampling from the centroid: deterministic and well spread.
+  std::vector<std::size_t> seeds;
+  std::vector<double> d2(w.size(), std::numeric_limits<double>::infinity());
+  const Eigen::Vector3d g = (a + b + c) / 3;
+  std::size_t next = 0;
+  double best = std::numeric_limits<double>::infinity();
+  for (std::size_t k = 0; k < w.size(); ++k)
+    if ((pos[k] - g).squaredNorm() < best) { best = (pos[k] - g).squaredNorm(); next = k; }
+  std::vector<Eigen::Vector3d> centre_w, centre_p;
+  for (int s = 0; s < count; ++s) {
+    centre_w.push_back(w[next]);
+    centre_p.push_back(pos[next]);
+    double far = -1;
+    for (std::size_t k = 0; k < w.size(); ++k) {
+      d2[k] = std::min(d2[k], (pos[k] - pos[next]).squaredNorm());
+      if (d2[k] > far) { far = d2[k]; next = k; }
+    }
+  }
+  std::vector<int> owner(w.size(), 0);
+  std::vector<int> size(count, 0);
+  for (int it = 0; it < 30; ++it) {
+    bool changed = false;
+    for (std::size_t k = 0; k < w.size(); ++k) {
+      int o = 0;
+      double bd = (pos[k] - centre_p[0]).squaredNorm();
+      for (int s = 1; s < count; ++s) {
+        const double dd = (pos[k] - centre_p[s]).squaredNorm();
+        if (dd < bd) { bd = dd; o = s; }
+      }
+      changed |= (owner[k] != o) || it == 0;
+      owner[k] = o;
+    }
+    if (!changed) break;
+    std::vector<Eigen::Vector3d> sw(count, Eigen::Vector3d::Zero());
+    std::fill(size.begin(), size.end(), 0);
+    for (std::size_t k = 0; k < w.size(); ++k) { sw[owner[k]] += w[k]; ++size[owner[k]]; }
+    for (int s = 0; s < count; ++s)
+      if (size[s] > 0) {
+        centre_w[s] = sw[s] / size[s];
+        centre_p[s] = centre_w[s][0] * a + centre_w[s][1] * b + centre_w[s][2] * c;
+      }
+  }
+  for (int s = 0; s < count; ++s)
+    if (size[s] > 0) {
+      out.barycentric.push_back(centre_w[s]);
+      out.capacity.push_back(static_cast<double>(size[s]) / static_cast<double>(w.size()));
+    }
+  return out;
+}
+
+LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
+                                   const std::vector<TransportTarget>& targets) {
+  LocalTransport out;
+  const int np = static_cast<int>(points.size());
+  out.entries.resize(np);
+  if (np == 0) { out.solved = true; return out; }
+  if (targets.empty()) return out;
+  // Bins: (target, bin) pairs; facet bins get a row each.
+  struct Bin { int target, bin, row; Eigen::Vector3d at; };
+  std::vector<Bin> bins;
+  int rows = np;
+  for (int t = 0; t < static_cast<int>(targets.size()); ++t)
+    for (int b = 0; b < targets[t].binCount(); ++b)
+      bins.push_back({t, b, targets[t].isFacet() ? rows++ : -1, targets[t].bin(b)});
+  // Scaling: costs to [0, 1], masses to sum 1 (Clp's tolerances are absolute).
+  double total = 0;
+  for (double m : mass) total += m;
+  const int nb = static_cast<int>(bins.size());
+  std::vector<double> d2(static_cast<std::size_t>(np) * nb);
+  double dmax = 0;
+  for (int i = 0; i < np; ++i)
+    for (int k = 0; k < nb; ++k) {
+      d2[static_cast<std::size_t>(i) * nb + k] = (points[i] - bins[k].at).squaredNorm();
+      dmax = std::max(dmax, d2[static_cast<std::size_t>(i) * nb + k]);
+    }
+  const double cscale = dmax > 0 ? 1 / dmax : 1;
+  // Columns: m_ik for every point and bin, then l_t for every facet target.
+  int facet_targets = 0;
+  std::vector<int> l_col(targets.size(), -1);
+  const int nm = np * nb;
+  for (std::size_t t = 0; t < targets.size(); ++t)
+    if (targets[t].isFacet()) l_col[t] = nm + facet_targets++;
+  const int ncols = nm + facet_targets;
+  std::vector<CoinBigIndex> start;
+  std::vector<int> index;
+  std::vector<double> value, obj(ncols, 0.0), collb(ncols, 0.0), colub(ncols, COIN_DBL_MAX);
+  start.reserve(ncols + 1);
+  index.reserve(static_cast<std::size_t>(nm) * 2 + nb);
+  value.reserve(index.capacity());
+  for (int i = 0; i < np; ++i)
+    for (int k = 0; k < nb; ++k) {
+      start.push_back(static_cast<CoinBigIndex>(index.size()));
+      index.push_back(i);
+      value.push_back(1.0);
+      if (bins[k].row >= 0) { index.push_back(bins[k].row); value.push_back(1.0); }
+      obj[static_cast<std::size_t>(i) * nb + k] = d2[static_cast<std::size_t>(i) * nb + k] * cscale;
+    }
+  for (std::size_t t = 0; t < targets.size(); ++t) {
+    if (l_col[t] < 0) continue;
+    start.push_back(static_cast<CoinBigIndex>(index.size()));
+    for (int k = 0; k < nb; ++k)
+      if (bins[k].target == static_cast<int>(t)) {
+        index.push_back(bins[k].row);
+        value.push_back(-targets[t].bins->capacity[bins[k].bin]);
+      }
+  }
+  start.push_back(static_cast<CoinBigIndex>(index.size()));
+  std::vector<double> rowlb(rows, 0.0), rowub(rows, 0.0);
+  for (int i = 0; i < np; ++i) rowlb[i] = rowub[i] = mass[i] / total;
+  ClpSimplex model;
+  model.setLogLevel(0);
+  model.loadProblem(ncols, rows, start.data(), index.data(), value.data(), collb.data(), colub.data(), obj.data(),
+                    rowlb.data(), rowub.data());
+  model.scaling(0);  // the problem is scaled above
+  if (std::getenv("PAPS_LP_PRIMAL")) model.primal(); else model.dual();
+  if (!model.isProvenOptimal()) {
+    model.primal();
+    if (!model.isProvenOptimal()) return out;
+  }
+  const double* x = model.primalColumnSolution();
+  out.cost = 0;
+  for (int i = 0; i < np; ++i) {
+    // Round-off: drop crumbs, renormalise so every point sends exactly its mass.
+    double sum = 0;
+    for (int k = 0; k < nb; ++k) {
+      const double v = x[static_cast<std::size_t>(i) * nb + k];
+      if (v > 1e-12) sum += v;
+    }
+    if (!(sum > 0)) return LocalTransport{false, 0, std::vector<std::vector<TransportEntry>>(np)};
+    for (int k = 0; k < nb; ++k) {
+      const double v = x[static_cast<std::size_t>(i) * nb + k];
+      if (v <= 1e-12) continue;
+      const double m = v / sum * mass[i];
+      out.entries[i].push_back({bins[k].target, bins[k].bin, m});
+      out.cost += m * d2[static_cast<std::size_t>(i) * nb + k];
+    }
+  }
+  out.solved = true;
+  return out;
+}
+
+// ---------------------------------------------------------------- TransportPlan
+
+TransportPlan::TransportPlan(std::vector<Eigen::Vector3d> points, std::vector<double> masses,
+                             const TransportParameters& params)
+    : params_(params), points_(std::move(points)), masses_(std::move(masses)) {
+  params_.validate();
+  if (points_.empty()) throw InvalidInput("optimal transport: the point set is empty");
+  if (masses_.empty()) masses_.assign(points_.size(), 1.0);
+  if (masses_.size() != points_.size())
+    throw InvalidInput("optimal transport: " + std::to_string(masses_.size()) + " masses for " +
+                       std::to_string(points_.size()) + " points");
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+  for (std::size_t i = 0; i < points_.size(); ++i) {
+    if (!points_[i].allFinite()) throw InvalidInput("optimal transport: point " + std::to_string(i) + " is not finite");
+    if (!(masses_[i] > 0) || !std::isfinite(masses_[i]))
+      throw InvalidInput("optimal transport: mass of point " + std::to_string(i) + " is not > 0");
+    lo = lo.cwiseMin(points_[i]);
+    hi = hi.cwiseMax(points_[i]);
+    total_mass_ += masses_[i];
+  }
+  const double side = (hi - lo).maxCoeff();
+  if (!(side > 0)) throw InvalidInput("optimal transport: all points coincide");
+  bin_scale2_ = (0.5 / side) * (0.5 / side);
+  plan_.resize(points_.size());
+}
+
+int TransportPlan::addVertex(const Eigen::Vector3d& p) {
+  vertices_.push_back(p);
+  vertex_alive_.push_back(1);
+  vertex_facets_.emplace_back();
+  vertex_points_.emplace_back();
+  return static_cast<int>(vertices_.size()) - 1;
+}
+
+int TransportPlan::binCountFor(double area) const {
+  const double n = std::round(params_.bins_per_area * area * bin_scale2_);
+  return static_cast<int>(std::clamp(n, 1.0, static_cast<double>(params_.max_bins_per_facet)));
+}
+
+int TransportPlan::addFacet(int a, int b, int c) {
+  const int f = static_cast<int>(facets_.size());
+  facets_.push_back({a, b, c});
+  facet_alive_.push_back(1);
+  const double area = facetArea(f);
+  bins_.push_back(centroidalBins(vertices_[a], vertices_[b], vertices_[c], binCountFor(area)));
+  facet_points_.emplace_back();
+  for (int v : {a, b, c}) vertex_facets_[v].push_back(f);
+  return f;
+}
+
+void TransportPlan::removeFacet(int f) {
+  if (!facet_alive_[f]) return;
+  facet_alive_[f] = 0;
+  for (int v : facets_[f]) {
+    auto& l = vertex_facets_[v];
+    l.erase(std::remove(l.begin(), l.end(), f), l.end());
+  }
+  for (int i : std::vector<int>(facet_points_[f])) {
+    auto& e = plan_[i];
+    e.erase(std::remove_if(e.begin(), e.end(), [&](const TransportEntry& x) { return x.bin >= 0 && x.target == f; }),
+            e.end());
+  }
+  facet_points_[f].clear();
+}
+
+void TransportPlan::removeVertex(int v) {
+  if (!vertex_alive_[v]) return;
+  for (int f : std::vector<int>(vertex_facets_[v])) removeFacet(f);
+  vertex_alive_[v] = 0;
+  for (int i : vertex_points_[v]) {
+    auto& e = plan_[i];
+    e.erase(std::remove_if(e.begin(), e.end(), [&](const TransportEntry& x) { return x.bin < 0 && x.target == v; }),
+            e.end());
+  }
+  vertex_points_[v].clear();
+}
+
+int TransportPlan::aliveVertexCount() const {
+  return static_cast<int>(std::count(vertex_alive_.begin(), vertex_alive_.end(), 1));
+}
+int TransportPlan::aliveFacetCount() const {
+  return static_cast<int>(std::count(facet_alive_.begin(), facet_alive_.end(), 1));
+}
+
+double TransportPlan::facetArea(int f) const {
+  const auto& t = facets_[f];
+  return 0.5 * (vertices_[t[1]] - vertices_[t[0]]).cross(vertices_[t[2]] - vertices_[t[0]]).norm();
+}
+
+void TransportPlan::assignToNearestVertices() {
+  std::vector<int> alive;
+  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  for (int v = 0; v < vertexCount(); ++v)
+    if (vertex_alive_[v]) {
+      alive.push_back(v);
+      const Eigen::Vector3f p = vertices_[v].cast<float>();
+      cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+    }
+  if (alive.empty()) throw InvalidInput("optimal transport: the complex has no vertex");
+  for (auto& l : vertex_points_) l.clear();
+  for (auto& l : facet_points_) l.clear();
+  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
+  tree.setInputCloud(cloud);
+  pcl::Indices k(1);
+  std::vector<float> d(1);
+  for (std::size_t i = 0; i < points_.size(); ++i) {
+    const Eigen::Vector3f p = points_[i].cast<float>();
+    tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, k, d);
+    const int best = alive[k[0]];
+    plan_[i].assign(1, TransportEntry{best, -1, masses_[i]});
+    vertex_points_[best].push_back(static_cast<int>(i));
+  }
+}
+
+double TransportPlan::massOnFacet(int f) const {
+  double m = 0;
+  for (int i : facet_points_[f])
+    for (const auto& e : plan_[i])
+      if (e.bin >= 0 && e.target == f) m += e.mass;
+  return m;
+}
+
+double TransportPlan::massOnVertex(int v) const {
+  double m = 0;
+  for (int i : vertex_points_[v])
+    for (const auto& e : plan_[i])
+      if (e.bin < 0 && e.target == v) m += e.mass;
+  return m;
+}
+
+namespace {
+Eigen::Vector3d binPosition(const std::vector<Eigen::Vector3d>& vertices, const std::array<int, 3>& f,
+                            const FacetBins& bins, int b) {
+  const Eigen::Vector3d& w = bins.barycentric[b];
+  return w[0] * vertices[f[0]] + w[1] * vertices[f[1]] + w[2] * vertices[f[2]];
+}
+}  // namespace
+
+double TransportPlan::cost() const {
+  double c = 0;
+  for (std::size_t i = 0; i < points_.size(); ++i)
+    for (const auto& e : plan_[i]) {
+      const Eigen::Vector3d at =
+          e.bin < 0 ? vertices_[e.target] : binPosition(vertices_, facets_[e.target], bins_[e.target], e.bin);
+      c += e.mass * (points_[i] - at).squaredNorm();
+    }
+  return c;
+}
+
+TransportPlan::Stencil TransportPlan::gather(std::vector<int> vertices, std::vector<int> facets) const {
+  Stencil s;
+  std::sort(vertices.begin(), vertices.end());
+  vertices.erase(std::unique(vertices.begin(), vertices.end()), vertices.end());
+  std::sort(facets.begin(), facets.end());
+  facets.erase(std::unique(facets.begin(), facets.end()), facets.end());
+  s.vertices = std::move(vertices);
+  s.facets = std::move(facets);
+  for (int v : s.vertices) s.points.insert(s.points.end(), vertex_points_[v].begin(), vertex_points_[v].end());
+  for (int f : s.facets) s.points.insert(s.points.end(), facet_points_[f].begin(), facet_points_[f].end());
+  std::sort(s.points.begin(), s.points.end());
+  s.points.erase(std::unique(s.points.begin(), s.points.end()), s.points.end());
+  s.mass.assign(s.points.size(), 0.0);
+  for (std::size_t k = 0; k < s.points.size(); ++k) {
+    const int i = s.points[k];
+    for (const auto& e : plan_[i]) {
+      const bool in = e.bin < 0 ? std::binary_search(s.vertices.begin(), s.vertices.end(), e.target)
+                                : std::binary_search(s.facets.begin(), s.facets.end(), e.target);
+      if (!in) continue;
+      const Eigen::Vector3d at =
+          e.bin < 0 ? vertices_[e.target] : binPosition(vertices_, facets_[e.target], bins_[e.target], e.bin);
+      s.mass[k] += e.mass;
+      s.cost += e.mass * (points_[i] - at).squaredNorm();
+    }
+  }
+  return s;
+}
+
+std::vector<TransportTarget> TransportPlan::targetsOf(const Stencil& s) const {
+  std::vector<TransportTarget> t;
+  t.reserve(s.vertices.size() + s.facets.size());
+  for (int v : s.vertices) t.push_back({{vertices_[v], vertices_[v], vertices_[v]}, nullptr});
+  for (int f : s.facets) {
+    const auto& x = facets_[f];
+    t.push_back({{vertices_[x[0]], vertices_[x[1]], vertices_[x[2]]}, &bins_[f]});
+  }
+  return t;
+}
+
+void TransportPlan::addEntry(int i, const TransportEntry& e) {
+  for (auto& x : plan_[i])
+    if (x.target == e.target && x.bin == e.bin) { x.mass += e.mass; return; }
+  const bool first_on_simplex = std::none_of(plan_[i].begin(), plan_[i].end(), [&](const TransportEntry& x) {
+    return x.target == e.target && (x.bin < 0) == (e.bin < 0);
+  });
+  plan_[i].push_back(e);
+  if (first_on_simplex) (e.bin < 0 ? vertex_points_[e.target] : facet_points_[e.target]).push_back(i);
+}
+
+void TransportPlan::clearEntriesOn(int i, const std::vector<int>& vertices, const std::vector<int>& facets) {
+  auto& e = plan_[i];
+  auto in = [&](const TransportEntry& x) {
+    return x.bin < 0 ? std::binary_search(vertices.begin(), vertices.end(), x.target)
+                     : std::binary_search(facets.begin(), facets.end(), x.target);
+  };
+  for (const auto& x : e) {
+    if (!in(x)) continue;
+    auto& l = x.bin < 0 ? vertex_points_[x.target] : facet_points_[x.target];
+    l.erase(std::remove(l.begin(), l.end(), i), l.end());
+  }
+  e.erase(std::remove_if(e.begin(), e.end(), in), e.end());
+}
+
+void TransportPlan::release(const Stencil& s) {
+  for (int i : s.points) clearEntriesOn(i, s.vertices, s.facets);
+}
+
+void TransportPlan::assign(const Stencil& s, const std::vector<int>& vertices, const std::vector<int>& facets,
+                          const LocalTransport& solution) {
+  const int nv = static_cast<int>(vertices.size());
+  for (std::size_t k = 0; k < s.points.size(); ++k)
+    for (const auto& e : solution.entries[k]) {
+      if (e.target < nv) addEntry(s.points[k], {vertices[e.target], -1, e.mass});
+      else addEntry(s.points[k], {facets[e.target - nv], e.bin, e.mass});
+    }
+}
+
+void TransportPlan::apply(const Stencil& s, const LocalTransport& solution) {
+  release(s);
+  assign(s, s.vertices, s.facets, solution);
+}
+
+double TransportPlan::improve(const Stencil& s) {
+  if (s.points.empty()) return 0;
+  std::vector<Eigen::Vector3d> pts(s.points.size());
+  for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = points_[s.points[k]];
+  const LocalTransport sol = solveLocalTransport(pts, s.mass, targetsOf(s));
+  if (!sol.solved || !(sol.cost < s.cost)) return 0;
+  apply(s, sol);
+  return s.cost - sol.cost;
+}
+
+TransportPlan::Stencil TransportPlan::facetStencil(int f) const {
+  std::vector<int> fs{f}, vs;
+  const auto& t = facets_[f];
+  for (int e = 0; e < 3; ++e) {
+    const int a = t[e], b = t[(e + 1) % 3];
+    for (int g : vertex_facets_[a]) {
+      const auto& u = facets_[g];
+      if (g != f && std::find(u.begin(), u.end(), b) != u.end()) fs.push_back(g);
+    }
+  }
+  for (int g : fs) vs.insert(vs.end(), facets_[g].begin(), facets_[g].end());
+  return gather(std::move(vs), std::move(fs));
+}
+
+TransportPlan::Stencil TransportPlan::vertexStencil(int v) const {
+  std::vector<int> fs = vertex_facets_[v], vs{v};
+  for (int g : fs) vs.insert(vs.end(), facets_[g].begin(), facets_[g].end());
+  return gather(std::move(vs), std::move(fs));
+}
+
+int TransportPlan::relax() {
+  int sweeps = 0;
+  double c = cost();
+  for (; sweeps < params_.max_sweeps; ++sweeps) {
+    double gain = 0;
+    for (int f = 0; f < facetCount(); ++f)
+      if (facet_alive_[f]) gain += improve(facetStencil(f));
+    if (!(gain > params_.tolerance * c)) { ++sweeps; break; }
+    c -= gain;
+  }
+  return sweeps;
+}
+
+double TransportPlan::relocate(int v) {
+  // The position that minimises the cost of the current plan (5.2.4): the cost is quadratic in
+  // v, sum m_ij |p_i - a_j v - (rest of b_j)|^2 over the bins of v and of its facets (a_j = 1
+  // on v's own bin), so v* = sum m a (p - rest) / sum m a^2. (The manuscript averages one
+  // optimum per simplex, weighted by mass; a facet whose mass sits near its other corners
+  // then extrapolates v far off, a_j being small, and pushed vertices past the cube's faces.)
+  Eigen::Vector3d num = Eigen::Vector3d::Zero();
+  double weight = 0;
+  for (int i : vertex_points_[v])
+    for (const auto& e : plan_[i])
+      if (e.bin < 0 && e.target == v) { num += e.mass * points_[i]; weight += e.mass; }
+  for (int f : vertex_facets_[v]) {
+    const auto& t = facets_[f];
+    const int slot = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+    for (int i : facet_points_[f])
+      for (const auto& e : plan_[i]) {
+        if (e.bin < 0 || e.target != f) continue;
+        const Eigen::Vector3d& w = bins_[f].barycentric[e.bin];
+        Eigen::Vector3d rest = points_[i];
+        for (int c = 0; c < 3; ++c)
+          if (c != slot) rest -= w[c] * vertices_[t[c]];
+        num += e.mass * w[slot] * rest;
+        weight += e.mass * w[slot] * w[slot];
+      }
+  }
+  if (!(weight > 0)) return 0;
+  const Eigen::Vector3d target = num / weight;
+  const Eigen::Vector3d moved = 0.5 * (vertices_[v] + target);
+  const double dist = (moved - vertices_[v]).norm();
+  vertices_[v] = moved;
+  improve(vertexStencil(v));
+  return dist;
+}
+
+}  // namespace paps

@@ -1,0 +1,296 @@
+#include <paps/surface/transport_reconstruction.h>
+#include <paps/surface/impl/transport_reconstruction.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <numeric>
+#include <set>
+
+#include <CGAL/Delaunay_triangulation_3.h>
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Triangulation_vertex_base_with_info_3.h>
+
+#include <paps/core/error.h>
+#include <paps/core/random.h>
+
+namespace paps {
+
+void TransportReconstructionParameters::validate() const {
+  if (!(initial_fraction > 0) || !(initial_fraction <= 1))
+    throw InvalidParameter("initial_fraction", detail::toString(initial_fraction), "in (0, 1]");
+  requireInRange("target_vertices", target_vertices, 3, 100000000);
+  requireInRange("candidates", candidates, 0, 100000);
+  requireInRange("relocation_iterations", relocation_iterations, 0, 100);
+  requireInRange("final_relocation_sweeps", final_relocation_sweeps, 0, 100);
+  if (!(density_threshold >= 0) || !(density_threshold < 1))
+    throw InvalidParameter("density_threshold", detail::toString(density_threshold), "in [0, 1)");
+  transport.validate();
+}
+
+namespace {
+
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Vb = CGAL::Triangulation_vertex_base_with_info_3<int, Kernel>;
+using Tds = CGAL::Triangulation_data_structure_3<Vb>;
+using Delaunay = CGAL::Delaunay_triangulation_3<Kernel, Tds>;
+
+using Triple = std::array<int, 3>;
+Triple sorted(Triple t) {
+  std::sort(t.begin(), t.end());
+  return t;
+}
+
+// The decimated complex: the transport plan (vertices, facets, plan) plus the edges, which a
+// simplicial complex keeps even where no facet remains (a vertex on a bare edge can still be
+// collapsed).
+class Decimation {
+ public:
+  explicit Decimation(TransportPlan& plan) : plan_(plan), neighbours_(plan.vertexCount()) {
+    for (int f = 0; f < plan.facetCount(); ++f)
+      if (plan.facetAlive(f)) {
+        const auto& t = plan.facet(f);
+        for (int e = 0; e < 3; ++e) link(t[e], t[(e + 1) % 3]);
+      }
+  }
+  void link(int a, int b) {
+    if (a == b) return;
+    neighbours_[a].insert(b);
+    neighbours_[b].insert(a);
+  }
+  const std::set<int>& neighbours(int v) const { return neighbours_[v]; }
+
+  // The collapse of u onto v: the stencil before, the simplices after, and the new facets'
+  // corner triples (created only when the collapse is applied).
+  struct Collapse {
+    int u = -1, v = -1;
+    TransportPlan::Stencil before;
+    std::vector<int> vertices_after;       // ids
+    std::vector<int> kept_facets;          // ids of facets of v that stay
+    std::vector<Triple> new_facets;        // u's facets moved onto v
+    std::vector<FacetBins> new_bins;
+    LocalTransport solution;
+    double delta = INFINITY;
+  };
+
+  Collapse simulate(int u, int v) const {
+    Collapse c;
+    c.u = u;
+    c.v = v;
+    std::vector<int> fs = plan_.facetsOf(u), vs{u, v};
+    fs.insert(fs.end(), plan_.facetsOf(v).begin(), plan_.facetsOf(v).end());
+    for (int f : fs) vs.insert(vs.end(), plan_.facet(f).begin(), plan_.facet(f).end());
+    c.before = plan_.gather(vs, fs);
+    for (int x : c.before.vertices)
+      if (x != u) c.vertices_after.push_back(x);
+    std::set<Triple> seen;
+    for (int f : c.before.facets) {
+      const auto& t = plan_.facet(f);
+      if (std::find(t.begin(), t.end(), u) == t.end()) {
+        c.kept_facets.push_back(f);
+        seen.insert(sorted(t));
+      }
+    }
+    for (int f : c.before.facets) {
+      Triple t = plan_.facet(f);
+      if (std::find(t.begin(), t.end(), u) == t.end()) continue;
+      if (std::find(t.begin(), t.end(), v) != t.end()) continue;  // degenerates
+      for (int& x : t)
+        if (x == u) x = v;
+      if (!seen.insert(sorted(t)).second) continue;  // merges with an existing facet
+      c.new_facets.push_back(t);
+    }
+    std::vector<TransportTarget> targets;
+    for (int x : c.vertices_after) targets.push_back({{plan_.vertex(x), plan_.vertex(x), plan_.vertex(x)}, nullptr});
+    for (int f : c.kept_facets) {
+      const auto& t = plan_.facet(f);
+      targets.push_back({{plan_.vertex(t[0]), plan_.vertex(t[1]), plan_.vertex(t[2])}, &plan_.bins(f)});
+    }
+    c.new_bins.reserve(c.new_facets.size());
+    for (const auto& t : c.new_facets) {
+      const Eigen::Vector3d &a = plan_.vertex(t[0]), &b = plan_.vertex(t[1]), &d = plan_.vertex(t[2]);
+      const double area = 0.5 * (b - a).cross(d - a).norm();
+      c.new_bins.push_back(centroidalBins(a, b, d, plan_.binCountFor(area)));
+    }
+    for (std::size_t k = 0; k < c.new_facets.size(); ++k) {
+      const auto& t = c.new_facets[k];
+      targets.push_back({{plan_.vertex(t[0]), plan_.vertex(t[1]), plan_.vertex(t[2])}, &c.new_bins[k]});
+    }
+    std::vector<Eigen::Vector3d> pts(c.before.points.size());
+    for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = plan_.point(c.before.points[k]);
+    c.solution = solveLocalTransport(pts, c.before.mass, targets);
+    if (c.solution.solved) c.delta = c.solution.cost - c.before.cost;
+    return c;
+  }
+
+  void apply(const Collapse& c) {
+    plan_.release(c.before);
+    plan_.removeVertex(c.u);  // and its facets
+    std::vector<int> facets = c.kept_facets;
+    for (const auto& t : c.new_facets) facets.push_back(plan_.addFacet(t[0], t[1], t[2]));
+    plan_.assign(c.before, c.vertices_after, facets, c.solution);
+    for (int w : neighbours_[c.u]) {
+      neighbours_[w].erase(c.u);
+      link(c.v, w);
+    }
+    neighbours_[c.u].clear();
+  }
+
+ private:
+  TransportPlan& plan_;
+  std::vector<std::set<int>> neighbours_;
+};
+
+}  // namespace
+
+TriangleMesh transportReconstruct(const Positions& input, const TransportReconstructionParameters& params,
+                                  TransportReconstructionReport* report_out, const ProgressCallback& progress) {
+  params.validate();
+  TransportReconstructionReport report;
+  std::vector<Eigen::Vector3d> points;
+  points.reserve(input.size());
+  for (const auto& p : input)
+    if (isFinite(p)) points.push_back(p.cast<double>());
+  report.points = points.size();
+  if (points.size() < 4)
+    throw InvalidInput("transport reconstruction needs at least 4 finite points, got " + std::to_string(points.size()));
+
+  // Initial subset: a seeded shuffle, so the result does not depend on anything else.
+  std::vector<int> order(points.size());
+  std::iota(order.begin(), order.end(), 0);
+  Random rng(params.seed);
+  for (std::size_t k = order.size(); k > 1; --k) std::swap(order[k - 1], order[rng.below(k)]);
+  const std::size_t subset =
+      std::clamp<std::size_t>(static_cast<std::size_t>(std::ceil(params.initial_fraction * points.size())), 4,
+                              points.size());
+  std::vector<std::pair<Kernel::Point_3, int>> sites;
+  for (std::size_t k = 0; k < subset; ++k) {
+    const auto& p = points[order[k]];
+    sites.emplace_back(Kernel::Point_3(p.x(), p.y(), p.z()), static_cast<int>(k));
+  }
+  Delaunay dt(sites.begin(), sites.end());
+  if (dt.dimension() < 3)
+    throw InvalidInput("transport reconstruction: the initial points are coplanar or collinear (dimension " +
+                       std::to_string(dt.dimension()) + ")");
+
+  TransportPlan plan(points, {}, params.transport);
+  std::map<int, int> vertex_of_site;
+  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
+    const auto& p = v->point();
+    vertex_of_site[v->info()] = plan.addVertex(Eigen::Vector3d(p.x(), p.y(), p.z()));
+  }
+  for (auto f = dt.finite_facets_begin(); f != dt.finite_facets_end(); ++f) {
+    Triple t;
+    int k = 0;
+    for (int i = 0; i < 4; ++i)
+      if (i != f->second) t[k++] = vertex_of_site.at(f->first->vertex(i)->info());
+    plan.addFacet(t[0], t[1], t[2]);
+  }
+  report.initial_vertices = plan.vertexCount();
+  report.initial_facets = plan.facetCount();
+  if (report.initial_vertices <= params.target_vertices)
+    throw InvalidParameter("target_vertices", std::to_string(params.target_vertices),
+                           "fewer than the " + std::to_string(report.initial_vertices) +
+                               " vertices of the initial triangulation (raise initial_fraction)");
+
+  // Initial plan (5.2.2): nearest vertex, relaxation, then only the facets with mass remain.
+  plan.assignToNearestVertices();
+  plan.relax();
+  for (int f = 0; f < plan.facetCount(); ++f)
+    if (plan.facetAlive(f) && plan.pointsOnFacet(f).empty()) plan.removeFacet(f);
+  report.complex_facets = plan.aliveFacetCount();
+  report.initial_cost = plan.cost();
+
+  Decimation dec(plan);
+  // A vertex left without facets keeps an edge to its nearest Delaunay neighbour if it carries
+  // mass (so it can still be collapsed); without mass it goes.
+  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
+    const int id = vertex_of_site.at(v->info());
+    if (!plan.facetsOf(id).empty()) continue;
+    if (plan.pointsOnVertex(id).empty()) { plan.removeVertex(id); continue; }
+    std::vector<Delaunay::Vertex_handle> adj;
+    dt.finite_adjacent_vertices(v, std::back_inserter(adj));
+    int best = -1;
+    double bd = INFINITY;
+    for (auto w : adj) {
+      const int wid = vertex_of_site.at(w->info());
+      const double d = (plan.vertex(wid) - plan.vertex(id)).squaredNorm();
+      if (d < bd || (d == bd && wid < best)) { bd = d; best = wid; }
+    }
+    if (best >= 0) dec.link(id, best);
+  }
+
+  // Decimation (5.2.3) with relocation (5.2.4).
+  const int start = plan.aliveVertexCount();
+  ProgressReporter rep(progress, "transport decimation", static_cast<std::size_t>(std::max(1, start - params.target_vertices)));
+  while (plan.aliveVertexCount() > params.target_vertices) {
+    std::vector<std::pair<int, int>> half_edges;
+    for (int u = 0; u < plan.vertexCount(); ++u)
+      if (plan.vertexAlive(u))
+        for (int v : dec.neighbours(u)) half_edges.emplace_back(u, v);
+    if (half_edges.empty()) break;
+    std::vector<std::pair<int, int>> candidates;
+    if (params.candidates == 0 || static_cast<std::size_t>(params.candidates) >= half_edges.size()) {
+      candidates = half_edges;
+    } else {
+      for (int k = 0; k < params.candidates; ++k) candidates.push_back(half_edges[rng.below(half_edges.size())]);
+      std::sort(candidates.begin(), candidates.end());
+      candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+    }
+    std::vector<double> delta(candidates.size(), INFINITY);
+    const std::int64_t nc = static_cast<std::int64_t>(candidates.size());
+#pragma omp parallel for schedule(dynamic, 1)
+    for (std::int64_t k = 0; k < nc; ++k) delta[k] = dec.simulate(candidates[k].first, candidates[k].second).delta;
+    report.simulations += static_cast<int>(nc);
+    std::size_t best = 0;
+    for (std::size_t k = 1; k < candidates.size(); ++k)
+      if (delta[k] < delta[best]) best = k;  // ties: the first in (u, v) order
+    if (!std::isfinite(delta[best])) break;
+    const auto collapse = dec.simulate(candidates[best].first, candidates[best].second);
+    dec.apply(collapse);
+    ++report.collapses;
+    for (int it = 0; it < params.relocation_iterations; ++it) plan.relocate(collapse.v);
+    rep.advance();
+    if (rep.cancelled()) break;
+  }
+  rep.throwIfCancelled();
+  rep.finish();
+  for (int sweep = 0; sweep < params.final_relocation_sweeps; ++sweep)
+    for (int v = 0; v < plan.vertexCount(); ++v)
+      if (plan.vertexAlive(v)) plan.relocate(v);
+  report.final_cost = plan.cost();
+  report.rms_transport = std::sqrt(report.final_cost / plan.totalMass());
+
+  // Post-processing (5.2.5): facets of low mass density go.
+  double mass = 0, area = 0;
+  for (int f = 0; f < plan.facetCount(); ++f)
+    if (plan.facetAlive(f)) { mass += plan.massOnFacet(f); area += plan.facetArea(f); }
+  const double mean_density = area > 0 ? mass / area : 0;
+  TriangleMesh out;
+  std::vector<int> index(plan.vertexCount(), -1);
+  for (int f = 0; f < plan.facetCount(); ++f) {
+    if (!plan.facetAlive(f)) continue;
+    const double a = plan.facetArea(f), m = plan.massOnFacet(f);
+    if (!(m > 0) || !(a > 0) || m / a < params.density_threshold * mean_density) continue;
+    Eigen::Vector3i t;
+    for (int k = 0; k < 3; ++k) {
+      int& id = index[plan.facet(f)[k]];
+      if (id < 0) {
+        id = static_cast<int>(out.vertices.size());
+        out.vertices.push_back(plan.vertex(plan.facet(f)[k]).cast<float>());
+      }
+      t[k] = id;
+    }
+    out.triangles.push_back(t);
+  }
+  report.output_vertices = static_cast<int>(out.vertices.size());
+  report.output_facets = static_cast<int>(out.triangles.size());
+  if (report_out) *report_out = report;
+  return out;
+}
+
+template class TransportReconstruction<pcl::PointXYZ>;
+template class TransportReconstruction<pcl::PointNormal>;
+template class TransportReconstruction<pcl::PointXYZRGBNormal>;
+
+}  // namespace paps

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
 #include <limits>
 #include <numeric>
 
@@ -43,27 +44,39 @@ FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, con
   for (auto& x : w) x[2] = 1 - x[0] - x[1];
   std::vector<Eigen::Vector3d> pos(w.size());
   for (std::size_t k = 0; k < w.size(); ++k) pos[k] = w[k][0] * a + w[k][1] * b + w[k][2] * c;
-  // Seeds by farthest-point sampling from the centroid: deterministic and well spread.
-  std::vector<std::size_t> seeds;
-  std::vector<double> d2(w.size(), std::numeric_limits<double>::infinity());
-  const Eigen::Vector3d g = (a + b + c) / 3;
-  std::size_t next = 0;
-  double best = std::numeric_limits<double>::infinity();
-  for (std::size_t k = 0; k < w.size(); ++k)
-    if ((pos[k] - g).squaredNorm() < best) { best = (pos[k] - g).squaredNorm(); next = k; }
-  std::vector<Eigen::Vector3d> centre_w, centre_p;
-  for (int s = 0; s < count; ++s) {
-    centre_w.push_back(w[next]);
-    centre_p.push_back(pos[next]);
-    double far = -1;
-    for (std::size_t k = 0; k < w.size(); ++k) {
-      d2[k] = std::min(d2[k], (pos[k] - pos[next]).squaredNorm());
-      if (d2[k] > far) { far = d2[k]; next = k; }
-    }
-  }
+  // Start from equal-count cells (recursive bisection along the longest extent), then Lloyd:
+  // seeds by farthest points put cells in the corners that Lloyd then left small.
   std::vector<int> owner(w.size(), 0);
+  {
+    std::vector<int> all(w.size());
+    std::iota(all.begin(), all.end(), 0);
+    int next_cell = 0;
+    std::function<void(std::vector<int>, int)> split = [&](std::vector<int> ids, int k) {
+      if (k == 1) {
+        for (int i : ids) owner[i] = next_cell;
+        ++next_cell;
+        return;
+      }
+      Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+      for (int i : ids) { lo = lo.cwiseMin(pos[i]); hi = hi.cwiseMax(pos[i]); }
+      int axis;
+      (hi - lo).maxCoeff(&axis);
+      std::stable_sort(ids.begin(), ids.end(), [&](int x, int y) { return pos[x][axis] < pos[y][axis]; });
+      const int k1 = k / 2;
+      const std::size_t n1 = (ids.size() * k1 + k / 2) / k;
+      split(std::vector<int>(ids.begin(), ids.begin() + n1), k1);
+      split(std::vector<int>(ids.begin() + n1, ids.end()), k - k1);
+    };
+    split(all, count);
+  }
+  std::vector<Eigen::Vector3d> centre_w(count, Eigen::Vector3d::Zero()), centre_p(count);
   std::vector<int> size(count, 0);
-  for (int it = 0; it < 30; ++it) {
+  for (std::size_t k = 0; k < w.size(); ++k) { centre_w[owner[k]] += w[k]; ++size[owner[k]]; }
+  for (int s = 0; s < count; ++s) {
+    centre_w[s] /= std::max(1, size[s]);
+    centre_p[s] = centre_w[s][0] * a + centre_w[s][1] * b + centre_w[s][2] * c;
+  }
+  for (int it = 0; it < 200; ++it) {  // Lloyd until no sample changes cell
     bool changed = false;
     for (std::size_t k = 0; k < w.size(); ++k) {
       int o = 0;
@@ -72,7 +85,7 @@ FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, con
         const double dd = (pos[k] - centre_p[s]).squaredNorm();
         if (dd < bd) { bd = dd; o = s; }
       }
-      changed |= (owner[k] != o) || it == 0;
+      changed |= owner[k] != o;
       owner[k] = o;
     }
     if (!changed) break;

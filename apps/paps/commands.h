@@ -15,4 +15,8 @@ int runBenchCompress(int argc, char** argv);
 int runSuperres(int argc, char** argv);
 int runBenchSuperres(int argc, char** argv);
 int runSuperresWorker(int argc, char** argv);
+int runReconstruct(int argc, char** argv);
+int runRecoverFeatures(int argc, char** argv);
+int runBenchTransport(int argc, char** argv);
+int runTransportWorker(int argc, char** argv);
 }  // namespace paps::cli

@@ -25,6 +25,9 @@ const char* kUsage =
     "  bench curvature [options]     Wavejets vs PCL and CGAL jets on analytic surfaces and a scan\n"
     "  superres IN [IN2..] OUT --factor F   QSR super-resolution (or --method apss|rimls)\n"
     "  bench superres [options]      QSR vs APSS, RIMLS and PCL MLS upsampling (Table 2.2 protocol)\n"
+    "  reconstruct IN OUT.ply [opts] surface reconstruction by optimal transport (a mesh of few vertices)\n"
+    "  recover-features MESH IN OUT.ply   sharpen a smooth mesh's creases by optimal transport to IN\n"
+    "  bench transport [options]     OT feature recovery and reconstruction vs PCL Poisson and GP3\n"
     "  bench files IN [IN..]         ours vs the peers on your own clouds: time, memory, output\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
@@ -59,6 +62,10 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "superres")) return paps::cli::runSuperres(argc, argv);
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "superres")) return paps::cli::runBenchSuperres(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker-sr")) return paps::cli::runSuperresWorker(argc, argv);
+    if (!std::strcmp(argv[1], "reconstruct")) return paps::cli::runReconstruct(argc, argv);
+    if (!std::strcmp(argv[1], "recover-features")) return paps::cli::runRecoverFeatures(argc, argv);
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "transport")) return paps::cli::runBenchTransport(argc, argv);
+    if (!std::strcmp(argv[1], "bench-worker-ot")) return paps::cli::runTransportWorker(argc, argv);
 #endif
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "files")) return paps::cli::runBenchFiles(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);

@@ -1,0 +1,200 @@
+// paps reconstruct IN OUT.ply [options]: surface reconstruction by optimal transport.
+// paps recover-features MESH IN OUT.ply [options]: crease recovery of a smooth mesh by
+// optimal transport to the points it was made from.
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <unistd.h>
+
+#include <pcl/console/print.h>
+#include <pcl/io/ply_io.h>
+
+#include <paps/core/cloud_file_layout.h>
+#include <paps/core/cloud_io.h>
+#include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
+#include <paps/core/triangle_mesh.h>
+#include <paps/surface/transport_feature_recovery.h>
+#include <paps/surface/transport_reconstruction.h>
+
+#include "cli_common.h"
+#include "commands.h"
+
+namespace paps::cli {
+
+namespace {
+
+const char* kReconstructUsage =
+    "usage: paps reconstruct IN OUT.ply [options]\n"
+    "  IN                       the points (.pcd, .ply, or .xyz: one 'x y z' a line)\n"
+    "  OUT.ply                  the mesh (binary PLY: x y z vertices, triangles); a simplicial\n"
+    "                           complex, possibly non-manifold, with creases and borders kept\n"
+    "  --vertices N             decimation stops at N vertices (default 50, at least 3)\n"
+    "  --initial-fraction F     share of the points in the initial Delaunay triangulation,\n"
+    "                           in (0, 1] (default 0.1)\n"
+    "  --candidates K           half-edge collapses simulated per step, drawn at random\n"
+    "                           (default 40; 0: every half-edge, slow)\n"
+    "  --seed S                 seed of the random draws (default 1); same seed, same mesh\n"
+    "  --density-threshold T    facets whose mass density is below T x the mean are dropped,\n"
+    "                           in [0, 1) (default 0.1)\n"
+    "  --quiet, --timings       no progress bar / wall time of each stage\n"
+    "Costly: meant for thousands to tens of thousands of points and tens to hundreds of vertices.\n";
+
+const char* kRecoverUsage =
+    "usage: paps recover-features MESH IN OUT.ply [options]\n"
+    "  MESH                     a smooth mesh made from IN (.ply or .obj; Poisson, MLS...)\n"
+    "  IN                       the points (.pcd, .ply, or .xyz: one 'x y z' a line)\n"
+    "  OUT.ply                  MESH with its vertices moved onto the creases and corners the\n"
+    "                           points describe (binary PLY)\n"
+    "  --sweeps N               relocation sweeps over all vertices, 1 to 1000 (default 10)\n"
+    "  --density-threshold T    facets whose mass density is below T x the mean are dropped,\n"
+    "                           in [0, 1) (default 0: every facet kept, a closed mesh stays closed)\n"
+    "  --quiet, --timings       no progress bar / wall time of each stage\n";
+
+std::string lowerExtension(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (auto& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+// An ASCII point list: one point a line, x y z first (separated by spaces, tabs or commas),
+// further columns ignored; empty lines and lines starting with '#' skipped.
+Positions loadXyz(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw IoError("cannot read '" + path + "': it is a folder");
+  if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+  std::ifstream f(path);
+  if (!f) throw IoError("cannot read '" + path + "': not readable");
+  Positions out;
+  std::string line;
+  std::size_t number = 0;
+  while (std::getline(f, line)) {
+    ++number;
+    for (auto& c : line)
+      if (c == ',' || c == '\t' || c == '\r') c = ' ';
+    const auto first = line.find_first_not_of(' ');
+    if (first == std::string::npos || line[first] == '#') continue;
+    std::istringstream s(line);
+    float x, y, z;
+    if (!(s >> x >> y >> z))
+      throw IoError("cannot read '" + path + "': line " + std::to_string(number) + " does not start with three numbers");
+    out.emplace_back(x, y, z);
+  }
+  if (out.empty()) throw IoError("cannot read '" + path + "': no points");
+  return out;
+}
+
+Positions loadPoints(const std::string& path) {
+  Positions p = lowerExtension(path) == ".xyz" ? loadXyz(path) : loadPositions(path);
+  printRead(path, p);
+  return p;
+}
+
+// The output must be a .ply in an existing folder: checked before any work.
+void checkMeshOutput(const std::string& path) {
+  checkOutputPath(path);
+  if (lowerExtension(path) != ".ply")
+    throw InvalidParameter("OUT", path, "a .ply file (the mesh is written as binary PLY)");
+}
+
+void checkDensityThreshold(const Arguments& a) {
+  const double t = a.number("density-threshold", 0);
+  if (!(t >= 0 && t < 1)) throw InvalidParameter("density-threshold", a.text("density-threshold", ""), "a fraction in [0, 1)");
+}
+
+// Writes the mesh as binary PLY to a temporary file beside `path`, then renames it: the target
+// is complete or untouched, and no temporary is left behind (not even on Ctrl-C).
+void saveMeshAtomic(const std::string& path, const TriangleMesh& mesh) {
+  checkMeshOutput(path);
+  const std::filesystem::path target(path);
+  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
+  const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + ".ply")).string();
+  const TemporaryFileGuard guard(tmp);
+  std::error_code ec;
+  const pcl::PolygonMesh pm = toPolygonMesh(mesh);
+  const auto level = pcl::console::getVerbosityLevel();
+  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
+  const int rc = pcl::io::savePLYFileBinary(tmp, pm);
+  pcl::console::setVerbosityLevel(level);
+  if (rc < 0) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError("cannot write '" + path + "': the PLY writer failed");
+  }
+  std::filesystem::rename(tmp, target, ec);
+  if (ec) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError("cannot write '" + path + "': " + ec.message());
+  }
+}
+
+}  // namespace
+
+int runReconstruct(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
+  if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
+  a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "quiet", "timings"});
+  if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
+  a.requireOutputApart();
+  const std::string in_path = a.positional[0], out_path = a.positional[1];
+  // Parameters and the output path are checked before the points are read.
+  TransportReconstructionParameters p;
+  p.target_vertices = a.integer("vertices", p.target_vertices);
+  p.initial_fraction = static_cast<float>(a.number("initial-fraction", p.initial_fraction));
+  p.candidates = a.integer("candidates", p.candidates);
+  p.seed = a.count("seed", p.seed);
+  p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
+  // Each option checked under its own name (the library's message names its fields).
+  requireInRange("vertices", p.target_vertices, 3, 100000000);
+  if (!(p.initial_fraction > 0 && p.initial_fraction <= 1))
+    throw InvalidParameter("initial-fraction", a.text("initial-fraction", ""), "a fraction in (0, 1]");
+  requireInRange("candidates", p.candidates, 0, 100000);
+  checkDensityThreshold(a);
+  p.validate();
+  checkMeshOutput(out_path);
+  const Positions points = loadPoints(in_path);
+  TransportReconstructionReport r;
+  const TriangleMesh mesh = transportReconstruct(points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
+  std::printf("reconstruct: Delaunay of %d points (%d facets), %d facets with mass; %d collapses (%d simulated)\n",
+              r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations);
+  std::printf("reconstruct: transport cost %.4g -> %.4g, RMS transport distance %g m\n", r.initial_cost, r.final_cost,
+              r.rms_transport);
+  if (mesh.triangles.empty())
+    throw InvalidInput("the reconstruction kept no facet (try a lower --density-threshold or more --vertices)");
+  saveMeshAtomic(out_path, mesh);
+  std::printf("wrote %s: %zu vertices, %zu facets\n", out_path.c_str(), mesh.vertices.size(), mesh.triangles.size());
+  return 0;
+}
+
+int runRecoverFeatures(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
+  if (a.has("help")) { std::fputs(kRecoverUsage, stdout); return 0; }
+  a.allowOnly({"sweeps", "density-threshold", "quiet", "timings"});
+  if (a.positional.size() != 3)
+    throw InvalidParameter("arguments", std::to_string(a.positional.size()), "MESH IN OUT.ply");
+  a.requireOutputApart();
+  const std::string mesh_path = a.positional[0], in_path = a.positional[1], out_path = a.positional[2];
+  TransportFeatureRecoveryParameters p;
+  p.sweeps = a.integer("sweeps", p.sweeps);
+  p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
+  requireInRange("sweeps", p.sweeps, 1, 1000);
+  checkDensityThreshold(a);
+  p.validate();
+  checkMeshOutput(out_path);
+  const TriangleMesh smooth = loadTriangleMesh(mesh_path);
+  std::printf("read %s: %zu vertices, %zu facets\n", mesh_path.c_str(), smooth.vertices.size(), smooth.triangles.size());
+  const Positions points = loadPoints(in_path);
+  TransportFeatureRecoveryReport r;
+  const TriangleMesh mesh = transportRecoverFeatures(smooth, points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
+  std::printf("recover-features: transport cost %.4g -> %.4g (relaxed) -> %.4g after %d sweeps; vertices moved "
+              "%g m on average, at most %g m\n",
+              r.initial_cost, r.relaxed_cost, r.final_cost, p.sweeps, r.mean_move, r.max_move);
+  if (mesh.triangles.empty())
+    throw InvalidInput("no facet kept (try a lower --density-threshold)");
+  saveMeshAtomic(out_path, mesh);
+  std::printf("wrote %s: %zu vertices, %zu facets\n", out_path.c_str(), mesh.vertices.size(), mesh.triangles.size());
+  return 0;
+}
+
+}  // namespace paps::cli

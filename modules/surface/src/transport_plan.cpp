@@ -76,7 +76,7 @@ FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, con
     centre_w[s] /= std::max(1, size[s]);
     centre_p[s] = centre_w[s][0] * a + centre_w[s][1] * b + centre_w[s][2] * c;
   }
-  for (int it = 0; it < 200; ++it) {  // Lloyd until no sample changes cell
+  for (int it = 0; it < 30; ++it) {  // Lloyd (the bisection start is already close)
     bool changed = false;
     for (std::size_t k = 0; k < w.size(); ++k) {
       int o = 0;
@@ -170,6 +170,10 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   model.loadProblem(ncols, rows, start.data(), index.data(), value.data(), collb.data(), colub.data(), obj.data(),
                     rowlb.data(), rowub.data());
   model.scaling(0);  // the problem is scaled above
+  // No random perturbation: the same problem gives the same plan, whatever was solved before
+  // in the process (two reconstructions in one process differed without this).
+  model.setPerturbation(50);
+  model.setRandomSeed(1234567);
   if (std::getenv("PAPS_LP_PRIMAL")) model.primal(); else model.dual();
   if (!model.isProvenOptimal()) {
     model.primal();

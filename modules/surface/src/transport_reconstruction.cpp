@@ -174,18 +174,29 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
                        std::to_string(dt.dimension()) + ")");
 
   TransportPlan plan(points, {}, params.transport);
+  // Vertex ids by site index and facets in sorted order: CGAL's iteration order depends on
+  // its spatial sort, which draws from a process-wide random generator (two runs in one
+  // process gave different meshes when ids followed it).
   std::map<int, int> vertex_of_site;
-  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
-    const auto& p = v->point();
-    vertex_of_site[v->info()] = plan.addVertex(Eigen::Vector3d(p.x(), p.y(), p.z()));
+  {
+    std::vector<std::pair<int, Eigen::Vector3d>> sorted_sites;
+    for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
+      const auto& p = v->point();
+      sorted_sites.emplace_back(v->info(), Eigen::Vector3d(p.x(), p.y(), p.z()));
+    }
+    std::sort(sorted_sites.begin(), sorted_sites.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (const auto& [site, p] : sorted_sites) vertex_of_site[site] = plan.addVertex(p);
   }
+  std::vector<Triple> dt_facets;
   for (auto f = dt.finite_facets_begin(); f != dt.finite_facets_end(); ++f) {
     Triple t;
     int k = 0;
     for (int i = 0; i < 4; ++i)
       if (i != f->second) t[k++] = vertex_of_site.at(f->first->vertex(i)->info());
-    plan.addFacet(t[0], t[1], t[2]);
+    dt_facets.push_back(sorted(t));
   }
+  std::sort(dt_facets.begin(), dt_facets.end());
+  for (const auto& t : dt_facets) plan.addFacet(t[0], t[1], t[2]);
   report.initial_vertices = plan.vertexCount();
   report.initial_facets = plan.facetCount();
   if (report.initial_vertices <= params.target_vertices)
@@ -204,12 +215,13 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   Decimation dec(plan);
   // A vertex left without facets keeps an edge to its nearest Delaunay neighbour if it carries
   // mass (so it can still be collapsed); without mass it goes.
-  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) {
-    const int id = vertex_of_site.at(v->info());
+  std::vector<Delaunay::Vertex_handle> by_id(plan.vertexCount());
+  for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) by_id[vertex_of_site.at(v->info())] = v;
+  for (int id = 0; id < static_cast<int>(by_id.size()); ++id) {
     if (!plan.facetsOf(id).empty()) continue;
     if (plan.pointsOnVertex(id).empty()) { plan.removeVertex(id); continue; }
     std::vector<Delaunay::Vertex_handle> adj;
-    dt.finite_adjacent_vertices(v, std::back_inserter(adj));
+    dt.finite_adjacent_vertices(by_id[id], std::back_inserter(adj));
     int best = -1;
     double bd = INFINITY;
     for (auto w : adj) {

@@ -95,6 +95,27 @@ TEST(LocalTransport, FacetReceivesUniformMeasure) {
   EXPECT_GT(s.cost / 300, 0.001);
 }
 
+TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
+  // Four facets of a square and its vertices; points on the square with a little height.
+  paps::Random rng(11);
+  std::vector<Vector3d> pts;
+  for (int i = 0; i < 200; ++i) pts.emplace_back(rng.uniform(), rng.uniform(), 0.02 * rng.uniform());
+  const Vector3d c(0.5, 0.5, 0), q[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  std::vector<paps::FacetBins> bins;
+  for (int k = 0; k < 4; ++k) bins.push_back(paps::centroidalBins(q[k], q[(k + 1) % 4], c, 8));
+  std::vector<paps::TransportTarget> t;
+  for (const Vector3d& v : {q[0], q[1], q[2], q[3], c}) t.push_back({{v, v, v}, nullptr});
+  for (int k = 0; k < 4; ++k) t.push_back({{q[k], q[(k + 1) % 4], c}, &bins[k]});
+  const std::vector<double> mass(pts.size(), 1.0);
+  const auto full = paps::solveLocalTransport(pts, mass, t, 0);
+  const auto near = paps::solveLocalTransport(pts, mass, t, 8);
+  ASSERT_TRUE(full.solved);
+  ASSERT_TRUE(near.solved);
+  EXPECT_GE(near.cost, full.cost * (1 - 1e-9));  // a restriction cannot do better
+  EXPECT_LT(near.cost, full.cost * 1.05);
+  for (const auto& es : near.entries) EXPECT_LE(es.size(), 8u);
+}
+
 TEST(TransportPlan, RelaxationLowersCostAndKeepsMass) {
   TransportPlan plan(squareSamples(2000, 5), {}, {});
   // A 3 x 3 grid of vertices, 8 facets over the unit square.

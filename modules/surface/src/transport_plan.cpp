@@ -22,6 +22,7 @@ void TransportParameters::validate() const {
   if (!(tolerance >= 0) || !(tolerance < 1))
     throw InvalidParameter("tolerance", detail::toString(tolerance), "in [0, 1)");
   requireInRange("max_sweeps", max_sweeps, 0, 1000);
+  requireInRange("bins_per_point", bins_per_point, 0, 100000);
 }
 
 FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
@@ -107,7 +108,7 @@ FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, con
 }
 
 LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
-                                   const std::vector<TransportTarget>& targets) {
+                                   const std::vector<TransportTarget>& targets, int bins_per_point) {
   LocalTransport out;
   const int np = static_cast<int>(points.size());
   out.entries.resize(np);
@@ -120,22 +121,36 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   for (int t = 0; t < static_cast<int>(targets.size()); ++t)
     for (int b = 0; b < targets[t].binCount(); ++b)
       bins.push_back({t, b, targets[t].isFacet() ? rows++ : -1, targets[t].bin(b)});
+  const int nb = static_cast<int>(bins.size());
+  // Each point's candidate bins: all, or its nearest `bins_per_point` plus its nearest vertex
+  // bin (vertex bins take any mass, so the problem stays feasible).
+  std::vector<std::vector<std::pair<double, int>>> cand(np);
+  double dmax = 0;
+  for (int i = 0; i < np; ++i) {
+    auto& c = cand[i];
+    c.reserve(nb);
+    for (int k = 0; k < nb; ++k) c.emplace_back((points[i] - bins[k].at).squaredNorm(), k);
+    if (bins_per_point > 0 && bins_per_point < nb) {
+      std::sort(c.begin(), c.end());
+      int vertex = -1;
+      for (int k = 0; k < nb && vertex < 0; ++k)
+        if (bins[c[k].second].row < 0) vertex = k;
+      if (vertex >= bins_per_point) std::swap(c[bins_per_point - 1], c[vertex]);
+      c.resize(bins_per_point);
+      std::sort(c.begin(), c.end(), [](const auto& x, const auto& y) { return x.second < y.second; });
+    }
+    for (const auto& x : c) dmax = std::max(dmax, x.first);
+  }
   // Scaling: costs to [0, 1], masses to sum 1 (Clp's tolerances are absolute).
   double total = 0;
   for (double m : mass) total += m;
-  const int nb = static_cast<int>(bins.size());
-  std::vector<double> d2(static_cast<std::size_t>(np) * nb);
-  double dmax = 0;
-  for (int i = 0; i < np; ++i)
-    for (int k = 0; k < nb; ++k) {
-      d2[static_cast<std::size_t>(i) * nb + k] = (points[i] - bins[k].at).squaredNorm();
-      dmax = std::max(dmax, d2[static_cast<std::size_t>(i) * nb + k]);
-    }
   const double cscale = dmax > 0 ? 1 / dmax : 1;
-  // Columns: m_ik for every point and bin, then l_t for every facet target.
+  // Columns: m_ik for every point and candidate bin, then l_t for every facet target.
+  std::vector<int> first(np + 1, 0);
+  for (int i = 0; i < np; ++i) first[i + 1] = first[i] + static_cast<int>(cand[i].size());
+  const int nm = first[np];
   int facet_targets = 0;
   std::vector<int> l_col(targets.size(), -1);
-  const int nm = np * nb;
   for (std::size_t t = 0; t < targets.size(); ++t)
     if (targets[t].isFacet()) l_col[t] = nm + facet_targets++;
   const int ncols = nm + facet_targets;
@@ -146,12 +161,13 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   index.reserve(static_cast<std::size_t>(nm) * 2 + nb);
   value.reserve(index.capacity());
   for (int i = 0; i < np; ++i)
-    for (int k = 0; k < nb; ++k) {
+    for (std::size_t c = 0; c < cand[i].size(); ++c) {
+      const int k = cand[i][c].second;
       start.push_back(static_cast<CoinBigIndex>(index.size()));
       index.push_back(i);
       value.push_back(1.0);
       if (bins[k].row >= 0) { index.push_back(bins[k].row); value.push_back(1.0); }
-      obj[static_cast<std::size_t>(i) * nb + k] = d2[static_cast<std::size_t>(i) * nb + k] * cscale;
+      obj[first[i] + c] = cand[i][c].first * cscale;
     }
   for (std::size_t t = 0; t < targets.size(); ++t) {
     if (l_col[t] < 0) continue;
@@ -174,7 +190,7 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   // in the process (two reconstructions in one process differed without this).
   model.setPerturbation(50);
   model.setRandomSeed(1234567);
-  if (std::getenv("PAPS_LP_PRIMAL")) model.primal(); else model.dual();
+  model.dual();
   if (!model.isProvenOptimal()) {
     model.primal();
     if (!model.isProvenOptimal()) return out;
@@ -184,17 +200,15 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   for (int i = 0; i < np; ++i) {
     // Round-off: drop crumbs, renormalise so every point sends exactly its mass.
     double sum = 0;
-    for (int k = 0; k < nb; ++k) {
-      const double v = x[static_cast<std::size_t>(i) * nb + k];
-      if (v > 1e-12) sum += v;
-    }
+    for (int c = first[i]; c < first[i + 1]; ++c)
+      if (x[c] > 1e-12) sum += x[c];
     if (!(sum > 0)) return LocalTransport{false, 0, std::vector<std::vector<TransportEntry>>(np)};
-    for (int k = 0; k < nb; ++k) {
-      const double v = x[static_cast<std::size_t>(i) * nb + k];
-      if (v <= 1e-12) continue;
-      const double m = v / sum * mass[i];
+    for (int c = first[i]; c < first[i + 1]; ++c) {
+      if (x[c] <= 1e-12) continue;
+      const auto& [d2, k] = cand[i][c - first[i]];
+      const double m = x[c] / sum * mass[i];
       out.entries[i].push_back({bins[k].target, bins[k].bin, m});
-      out.cost += m * d2[static_cast<std::size_t>(i) * nb + k];
+      out.cost += m * d2;
     }
   }
   out.solved = true;
@@ -436,7 +450,7 @@ double TransportPlan::improve(const Stencil& s) {
   if (s.points.empty()) return 0;
   std::vector<Eigen::Vector3d> pts(s.points.size());
   for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = points_[s.points[k]];
-  const LocalTransport sol = solveLocalTransport(pts, s.mass, targetsOf(s));
+  const LocalTransport sol = solveLocalTransport(pts, s.mass, targetsOf(s), params_.bins_per_point);
   if (!sol.solved || !(sol.cost < s.cost)) return 0;
   apply(s, sol);
   return s.cost - sol.cost;

@@ -118,7 +118,7 @@ class Decimation {
     }
     std::vector<Eigen::Vector3d> pts(c.before.points.size());
     for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = plan_.point(c.before.points[k]);
-    c.solution = solveLocalTransport(pts, c.before.mass, targets);
+    c.solution = solveLocalTransport(pts, c.before.mass, targets, plan_.parameters().bins_per_point);
     if (c.solution.solved) c.delta = c.solution.cost - c.before.cost;
     return c;
   }

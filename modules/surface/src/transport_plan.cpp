@@ -131,12 +131,13 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
     c.reserve(nb);
     for (int k = 0; k < nb; ++k) c.emplace_back((points[i] - bins[k].at).squaredNorm(), k);
     if (bins_per_point > 0 && bins_per_point < nb) {
-      std::sort(c.begin(), c.end());
-      int vertex = -1;
-      for (int k = 0; k < nb && vertex < 0; ++k)
-        if (bins[c[k].second].row < 0) vertex = k;
-      if (vertex >= bins_per_point) std::swap(c[bins_per_point - 1], c[vertex]);
+      std::pair<double, int> vertex{INFINITY, -1};
+      for (const auto& x : c)
+        if (bins[x.second].row < 0 && x < vertex) vertex = x;
+      std::nth_element(c.begin(), c.begin() + (bins_per_point - 1), c.end());
       c.resize(bins_per_point);
+      if (vertex.second >= 0 && std::find(c.begin(), c.end(), vertex) == c.end())
+        *std::max_element(c.begin(), c.end()) = vertex;  // in place of the farthest kept
       std::sort(c.begin(), c.end(), [](const auto& x, const auto& y) { return x.second < y.second; });
     }
     for (const auto& x : c) dmax = std::max(dmax, x.first);
@@ -181,7 +182,9 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   start.push_back(static_cast<CoinBigIndex>(index.size()));
   std::vector<double> rowlb(rows, 0.0), rowub(rows, 0.0);
   for (int i = 0; i < np; ++i) rowlb[i] = rowub[i] = mass[i] / total;
-  ClpSimplex model;
+  // One model per thread, reloaded for every problem from an all-slack basis: building a
+  // ClpSimplex (its message tables) cost as much as solving these small programs.
+  static thread_local ClpSimplex model;
   model.setLogLevel(0);
   model.loadProblem(ncols, rows, start.data(), index.data(), value.data(), collb.data(), colub.data(), obj.data(),
                     rowlb.data(), rowub.data());
@@ -190,6 +193,7 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   // in the process (two reconstructions in one process differed without this).
   model.setPerturbation(50);
   model.setRandomSeed(1234567);
+  model.allSlackBasis(true);
   model.dual();
   if (!model.isProvenOptimal()) {
     model.primal();

@@ -32,7 +32,9 @@ TEST(TransportFeatureRecovery, RecoversTheCornersOfACube) {
   const paps::Positions points = paps::synthetic::sampleMesh(truth, 20000, 3);
   const TriangleMesh rounded = roundedCube();
   paps::TransportFeatureRecoveryReport report;
-  const TriangleMesh out = paps::transportRecoverFeatures(rounded, points, {}, &report);
+  paps::TransportFeatureRecoveryParameters p;
+  p.sweeps = 5;  // clean points
+  const TriangleMesh out = paps::transportRecoverFeatures(rounded, points, p, &report);
   ASSERT_EQ(out.vertices.size(), rounded.vertices.size());
   ASSERT_EQ(out.triangles.size(), rounded.triangles.size());
   const paps::PointToMeshDistance cube(truth);
@@ -43,6 +45,8 @@ TEST(TransportFeatureRecovery, RecoversTheCornersOfACube) {
   EXPECT_LT(report.final_cost, report.relaxed_cost);
   EXPECT_LE(report.relaxed_cost, report.initial_cost);
   EXPECT_GT(report.max_move, 0.0);
+  ASSERT_EQ(report.sweep_moves.size(), 5u);
+  EXPECT_LT(report.sweep_moves[4], report.sweep_moves[0]);  // converging
 }
 
 TEST(TransportFeatureRecovery, SameMeshWithOneOrTwoThreadsAndThroughThePclStage) {

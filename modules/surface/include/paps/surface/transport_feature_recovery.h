@@ -6,6 +6,7 @@
 // vertices onto the creases the points describe; a final filter on facet density removes
 // the facets no point supports (holes and open borders come back).
 #include <cstddef>
+#include <vector>
 
 #include <pcl/PolygonMesh.h>
 #include <pcl/point_cloud.h>
@@ -22,8 +23,11 @@ namespace paps {
 
 struct TransportFeatureRecoveryParameters {
   /// Relocation sweeps over all vertices (in vertex order, each followed by the update of
-  /// its stencil's plan), 1 to 1000.
-  int sweeps = 10;
+  /// its stencil's plan), 1 to 1000. Each sweep moves the vertices halfway to their optimum:
+  /// on noisy points later sweeps fit the noise (fandisk, 0.2% noise: one sweep brings the
+  /// mesh's RMS error from Poisson's 0.84 to 0.69, five sweeps to 1.07, in 1e-3 of the
+  /// diagonal), while on clean points five sweeps do better than one (0.32 against 0.39).
+  int sweeps = 1;
   /// Facets whose mass density is below this fraction of the mean are dropped, in [0, 1);
   /// 0 keeps every facet (a closed mesh stays closed).
   float density_threshold = 0.f;
@@ -38,6 +42,7 @@ struct TransportFeatureRecoveryReport {
   int vertices = 0, facets = 0, output_facets = 0, relaxation_sweeps = 0;
   double initial_cost = 0, relaxed_cost = 0, final_cost = 0;
   double mean_move = 0, max_move = 0;  // vertex displacement, metres
+  std::vector<double> sweep_moves;     // RMS vertex move of each sweep, metres
 };
 
 /// Relocates the vertices of `mesh` towards `points` (NaN entries ignored). Deterministic.

@@ -13,6 +13,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/metrics.h>
+#include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 #include <paps/surface/transport_feature_recovery.h>
 
@@ -76,6 +77,19 @@ TEST(TransportFeatureRecovery, SameMeshWithOneOrTwoThreadsAndThroughThePclStage)
   ASSERT_EQ(back.vertices.size(), one.vertices.size());
   for (std::size_t v = 0; v < one.vertices.size(); ++v) ASSERT_EQ(back.vertices[v], one.vertices[v]) << v;
   EXPECT_EQ(stage.getReport().vertices, static_cast<int>(one.vertices.size()));
+}
+
+TEST(TransportFeatureRecovery, SameMeshForShuffledPoints) {
+  const TriangleMesh truth = paps::synthetic::cube(0.5f, 4);
+  const paps::Positions points = paps::synthetic::sampleMesh(truth, 3000, 8);
+  paps::Positions shuffled = points;
+  paps::Random rng(3);
+  for (std::size_t k = shuffled.size(); k > 1; --k) std::swap(shuffled[k - 1], shuffled[rng.below(k)]);
+  TriangleMesh rounded = truth;
+  for (auto& v : rounded.vertices) v = 0.7f * v + 0.3f * 0.3f * v.normalized();
+  const TriangleMesh a = paps::transportRecoverFeatures(rounded, points, {});
+  const TriangleMesh b = paps::transportRecoverFeatures(rounded, shuffled, {});
+  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]) << v;
 }
 
 TEST(TransportFeatureRecovery, DensityFilterOpensWhatNoPointSupports) {

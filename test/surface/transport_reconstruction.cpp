@@ -14,6 +14,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/metrics.h>
+#include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 #include <paps/surface/transport_reconstruction.h>
 
@@ -93,6 +94,19 @@ TEST(TransportReconstruction, SameMeshWithOneOrTwoThreadsAndThroughThePclStage) 
   ASSERT_EQ(back.vertices.size(), one.vertices.size());
   for (std::size_t v = 0; v < one.vertices.size(); ++v) ASSERT_EQ(back.vertices[v], one.vertices[v]);
   EXPECT_EQ(stage.getReport().output_facets, static_cast<int>(one.triangles.size()));
+}
+
+TEST(TransportReconstruction, SameMeshForShuffledPoints) {
+  const paps::Positions points = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 4), 400, 6);
+  paps::Positions shuffled = points;
+  paps::Random rng(2);
+  for (std::size_t k = shuffled.size(); k > 1; --k) std::swap(shuffled[k - 1], shuffled[rng.below(k)]);
+  const TriangleMesh a = paps::transportReconstruct(points, smallRun());
+  const TriangleMesh b = paps::transportReconstruct(shuffled, smallRun());
+  ASSERT_EQ(a.vertices.size(), b.vertices.size());
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
+  for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
 }
 
 TEST(TransportReconstruction, RejectsBadInput) {

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include <paps/core/error.h>
+#include <paps/core/spatial_order.h>
 
 namespace paps {
 
@@ -21,10 +22,11 @@ TriangleMesh transportRecoverFeatures(const TriangleMesh& mesh, const Positions&
   params.validate();
   TransportFeatureRecoveryReport report;
   if (mesh.vertices.empty() || mesh.triangles.empty()) throw InvalidInput("feature recovery: the mesh is empty");
+  // In spatial order (finite points only): the output does not depend on the input order.
   std::vector<Eigen::Vector3d> points;
   points.reserve(input.size());
-  for (const auto& p : input)
-    if (isFinite(p)) points.push_back(p.cast<double>());
+  for (int k : spatialOrderAll(input))
+    if (isFinite(input[k])) points.push_back(input[k].cast<double>());
   if (points.empty()) throw InvalidInput("feature recovery: the point set has no finite point");
   report.points = points.size();
   for (const auto& v : mesh.vertices)

@@ -12,6 +12,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
 #include <paps/core/error.h>
+#include <paps/core/spatial_order.h>
 #include <paps/core/random.h>
 
 namespace paps {
@@ -147,10 +148,11 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
                                   TransportReconstructionReport* report_out, const ProgressCallback& progress) {
   params.validate();
   TransportReconstructionReport report;
+  // In spatial order (finite points only): the output does not depend on the input order.
   std::vector<Eigen::Vector3d> points;
   points.reserve(input.size());
-  for (const auto& p : input)
-    if (isFinite(p)) points.push_back(p.cast<double>());
+  for (int k : spatialOrderAll(input))
+    if (isFinite(input[k])) points.push_back(input[k].cast<double>());
   report.points = points.size();
   if (points.size() < 4)
     throw InvalidInput("transport reconstruction needs at least 4 finite points, got " + std::to_string(points.size()));

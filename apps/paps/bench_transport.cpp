@@ -2,10 +2,13 @@
 // PCL, in one run, each method in its own process (time, peak memory):
 //  (a) feature recovery: PCL Poisson on a sampled fandisk block (creases and corners
 //      rounded off), then TransportFeatureRecovery on that same Poisson mesh with the same
-//      points; errors of the vertices and of both meshes against the true shape;
-//  (b) reconstruction: TransportReconstruction against PCL Poisson and PCL's greedy
-//      projection triangulation on a sampled cube (noise 0 and 0.5%).
+//      points (one relocation sweep, the default, and five); errors of the vertices and of
+//      the meshes against the true shape;
+//  (b) reconstruction: TransportReconstruction against PCL Poisson, the same Poisson mesh
+//      decimated (VTK's quadric decimation through PCL) to as many vertices as ours, and PCL's
+//      greedy projection triangulation on a sampled cube (noise 0 and 0.5%).
 // Errors are in thousandths of the ground truth's bounding-box diagonal.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -18,6 +21,7 @@
 #include <pcl/search/kdtree.h>
 #include <pcl/surface/gp3.h>
 #include <pcl/surface/poisson.h>
+#include <pcl/surface/vtk_smoothing/vtk_mesh_quadric_decimation.h>
 
 #include <paps/core/error.h>
 #include <paps/core/metrics.h>
@@ -41,9 +45,13 @@ const char* kUsage =
     "  --quick     fewer points, Poisson depth 5, one noise level per part (a smoke run)\n"
     "(a) feature recovery on a fandisk block: PCL Poisson (normals by PCL's NormalEstimationOMP,\n"
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
-    "    Poisson mesh with the same points (its time: the recovery alone, and Poisson + recovery)\n"
-    "(b) reconstruction of a cube: ours (30 vertices) vs PCL Poisson (depth 5) and PCL's greedy\n"
-    "    projection triangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours)\n"
+    "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
+    "    (its time: the recovery alone, and Poisson + recovery)\n"
+    "(b) reconstruction of a cube (3000 points, noise 0 and 0.5%; --quick: 800 points, noise 0):\n"
+    "    ours (30 vertices) vs PCL Poisson (depth 5), that Poisson mesh decimated by VTK's quadric\n"
+    "    decimation (pcl::MeshQuadricDecimationVTK) to ours' vertex count (reduction factor\n"
+    "    1 - ours/Poisson vertices; its time: Poisson + decimation), and PCL's greedy projection\n"
+    "    triangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours)\n"
     "Errors in thousandths of the bounding-box diagonal: vertices to the true mesh (RMS),\n"
     "50000 samples of the output to the true mesh (mesh->gt) and of the true mesh to the output\n"
     "(gt->mesh, whose max measures rounded creases and corners and holes).\n";
@@ -132,14 +140,33 @@ int runTransportWorker(int argc, char** argv) {
     const auto t0 = std::chrono::steady_clock::now();
     auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
     TriangleMesh mesh;
-    if (method == "poisson" || method == "gp3") {
+    if (method == "poisson" || method == "poisson-decimated" || method == "gp3") {
       const auto cloud = withNormals(input, 20);
       pcl::PolygonMesh pm;
-      if (method == "poisson") {
+      if (method == "poisson" || method == "poisson-decimated") {
         pcl::Poisson<pcl::PointNormal> poisson;
         poisson.setDepth(static_cast<int>(params.get("depth", 6)));
         poisson.setInputCloud(cloud);
         poisson.reconstruct(pm);
+        if (method == "poisson-decimated") {
+          // To as many vertices as ours: VTK's target reduction is a fraction of the
+          // triangles, which on a closed mesh is near the fraction of the vertices.
+          const double target = params.get("vertices", 0);
+          const double poisson_vertices = static_cast<double>(pm.cloud.width * pm.cloud.height);
+          if (!(target > 0) || poisson_vertices <= 0)
+            throw InvalidParameter("vertices", std::to_string(target), "a positive vertex count (ours)");
+          const double factor = std::clamp(1.0 - target / poisson_vertices, 0.0, 1.0);
+          const double poisson_seconds = elapsed();
+          pcl::MeshQuadricDecimationVTK decimation;
+          decimation.setInputMesh(pcl::make_shared<pcl::PolygonMesh>(pm));
+          decimation.setTargetReductionFactor(static_cast<float>(factor));
+          pcl::PolygonMesh decimated;
+          decimation.process(decimated);
+          lf << "chosen " << fmt("from Poisson's %.0f vertices", poisson_vertices) << " and " << pm.polygons.size()
+             << fmt(" facets, target reduction factor %.4f", factor) << fmt(" (Poisson %.2f s", poisson_seconds)
+             << fmt(", decimation %.2f s)", elapsed() - poisson_seconds) << "\n";
+          pm = std::move(decimated);
+        }
       } else {
         pcl::GreedyProjectionTriangulation<pcl::PointNormal> gp3;
         gp3.setSearchRadius(params.get("radius", 0));
@@ -155,9 +182,25 @@ int runTransportWorker(int argc, char** argv) {
       }
       seconds = elapsed();
       mesh = toTriangleMesh(pm);
+      if (method == "poisson-decimated") {
+        // Count only the vertices the facets use.
+        std::vector<int> id(mesh.vertices.size(), -1);
+        Positions used;
+        for (auto& t : mesh.triangles)
+          for (int c = 0; c < 3; ++c) {
+            int& k = id[static_cast<std::size_t>(t[c])];
+            if (k < 0) {
+              k = static_cast<int>(used.size());
+              used.push_back(mesh.vertices[static_cast<std::size_t>(t[c])]);
+            }
+            t[c] = k;
+          }
+        mesh.vertices = std::move(used);
+      }
     } else if (method == "ot-recovery") {
       const TriangleMesh smooth = readMeshRaw(dir + "/ot_mesh.bin");
       TransportFeatureRecoveryParameters p;
+      p.sweeps = static_cast<int>(params.get("sweeps", p.sweeps));
       TransportFeatureRecoveryReport r;
       const auto t1 = std::chrono::steady_clock::now();
       mesh = transportRecoverFeatures(smooth, input, p, &r);
@@ -171,7 +214,7 @@ int runTransportWorker(int argc, char** argv) {
       seconds = elapsed();
       lf << "chosen " << r.collapses << " collapses, " << r.simulations << " simulations\n";
     } else {
-      throw InvalidParameter("method", method, "poisson, gp3, ot-recovery or ot-reconstruction");
+      throw InvalidParameter("method", method, "poisson, poisson-decimated, gp3, ot-recovery or ot-reconstruction");
     }
     Positions tri(mesh.triangles.size());
     for (std::size_t i = 0; i < tri.size(); ++i) tri[i] = mesh.triangles[i].cast<float>();
@@ -211,7 +254,7 @@ int runBenchTransport(int argc, char** argv) {
                 "depth %d;\nerrors in 1e-3 of the bounding-box diagonal (%.3f m); mesh->gt: 50000 samples of the "
                 "output, gt->mesh: 50000 samples of the true mesh\n",
                 gt.triangles.size(), n, depth, diagonal);
-    std::printf("%-6s %-22s %7s %7s %8s %8s %8s %8s %9s %9s %9s %9s\n", "noise", "method", "verts", "facets", "time(s)",
+    std::printf("%-6s %-34s %7s %7s %8s %8s %8s %8s %9s %9s %9s %9s\n", "noise", "method", "verts", "facets", "time(s)",
                 "total(s)", "peak MB", "vert.rms", "m>gt.rms", "m>gt.max", "gt>m.rms", "gt>m.max");
     for (const double noise : quick ? std::vector<double>{0.0005} : std::vector<double>{0, 0.0005, 0.002}) {
       Positions points = clean;
@@ -219,37 +262,42 @@ int runBenchTransport(int argc, char** argv) {
       const std::string noise_s = fmt("%.2f%%", noise * 100);
       auto print = [&](const std::string& name, const WorkerResult& w, const TriangleMesh& m, double total) {
         if (!w.ok) {
-          std::printf("%-6s %-22s failed: %s\n", noise_s.c_str(), name.c_str(), w.message.c_str());
+          std::printf("%-6s %-34s failed: %s\n", noise_s.c_str(), name.c_str(), w.message.c_str());
           csvRow("recovery", noise, name, w, m, total, MeshScore());
           return;
         }
         const MeshScore s = score(m, gt_distance, gt_samples, diagonal);
-        std::printf("%-6s %-22s %7zu %7zu %8.2f %8.2f %8.0f %8s %9s %9s %9s %9s\n", noise_s.c_str(), name.c_str(),
+        std::printf("%-6s %-34s %7zu %7zu %8.2f %8.2f %8.0f %8s %9s %9s %9s %9s\n", noise_s.c_str(), name.c_str(),
                     m.vertices.size(), m.triangles.size(), w.seconds, total, w.peak_mb, cell("%.3f", s.vertex_rms).c_str(),
                     cell("%.3f", s.to_gt_rms).c_str(), cell("%.2f", s.to_gt_max).c_str(),
                     cell("%.3f", s.from_gt_rms).c_str(), cell("%.2f", s.from_gt_max).c_str());
         csvRow("recovery", noise, name, w, m, total, s);
       };
-      TriangleMesh poisson, recovered;
+      TriangleMesh poisson;
       const WorkerResult wp = runMeshWorker(out_dir, "poisson", points, {{"depth", depth}}, poisson);
       print("PCL Poisson", wp, poisson, wp.seconds);
       if (!wp.ok || poisson.triangles.empty()) continue;
       writeMeshRaw(out_dir + "/ot_mesh.bin", poisson);
-      const WorkerResult wr = runMeshWorker(out_dir, "ot-recovery", points, {}, recovered);
-      print("Poisson + OT recovery", wr, recovered, wp.seconds + wr.seconds);
+      for (const int sweeps : {1, 5}) {
+        TriangleMesh recovered;
+        const WorkerResult wr = runMeshWorker(out_dir, "ot-recovery", points, {{"sweeps", sweeps}}, recovered);
+        print("Poisson + OT recovery (" + std::to_string(sweeps) + (sweeps == 1 ? " sweep)" : " sweeps)"), wr, recovered,
+              wp.seconds + wr.seconds);
+      }
     }
   }
 
   // (b) Reconstruction.
   {
-    const std::size_t n = quick ? 800 : 2000;
+    const std::size_t n = quick ? 800 : 3000;
     const TriangleMesh gt = synthetic::cube(0.5f, 4);
     const Positions clean = synthetic::sampleMesh(gt, n, 7);
     const double diagonal = gt.boundingBoxDiagonal();
     const PointToMeshDistance gt_distance(gt);
     const Positions gt_samples = synthetic::sampleMesh(gt, 50000, 4);
     std::printf("\nbench transport (b): reconstruction of cube(0.5, 4), %zu points; ours with 30 vertices, PCL Poisson "
-                "depth 5, PCL GreedyProjectionTriangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours);\n"
+                "depth 5, the same Poisson mesh\nquadric-decimated (VTK through PCL) to ours' vertex count (time: Poisson + decimation), PCL "
+                "GreedyProjectionTriangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours);\n"
                 "errors in 1e-3 of the bounding-box diagonal (%.3f m)\n",
                 n, diagonal);
     std::printf("%-6s %-34s %7s %7s %9s %9s %9s %9s %8s %8s\n", "noise", "method", "verts", "facets", "m>gt.rms",
@@ -274,13 +322,23 @@ int runBenchTransport(int argc, char** argv) {
         std::string name, method;
         std::map<std::string, double> params;
       };
+      // Ours first: the decimated Poisson row takes ours' vertex count.
       const std::vector<Row> rows = {
           {"ours (OT reconstruction)", "ot-reconstruction", {{"vertices", 30}}},
           {"PCL Poisson", "poisson", {{"depth", 5}}},
+          {"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}}},
           {"PCL GreedyProjectionTriangulation", "gp3", {{"radius", 3 * spacing}, {"mu", 2.5}, {"neighbours", 100}}}};
-      for (const Row& r : rows) {
+      std::size_t ours_vertices = 0;
+      for (Row r : rows) {
         TriangleMesh m;
-        const WorkerResult w = runMeshWorker(out_dir, r.method, points, r.params, m);
+        WorkerResult w;
+        if (r.method == "poisson-decimated" && ours_vertices == 0) {
+          w.message = "no vertex count to decimate to (ours failed or gave no vertices)";
+        } else {
+          if (r.method == "poisson-decimated") r.params["vertices"] = static_cast<double>(ours_vertices);
+          w = runMeshWorker(out_dir, r.method, points, r.params, m);
+        }
+        if (r.method == "ot-reconstruction" && w.ok) ours_vertices = m.vertices.size();
         if (!w.ok) {
           std::printf("%-6s %-34s failed: %s\n", noise_s.c_str(), r.name.c_str(), w.message.c_str());
           csvRow("reconstruction", noise, r.name, w, m, w.seconds, MeshScore());
@@ -291,6 +349,7 @@ int runBenchTransport(int argc, char** argv) {
                     m.vertices.size(), m.triangles.size(), cell("%.3f", s.to_gt_rms).c_str(),
                     cell("%.2f", s.to_gt_max).c_str(), cell("%.3f", s.from_gt_rms).c_str(),
                     cell("%.2f", s.from_gt_max).c_str(), w.seconds, w.peak_mb);
+        if (r.method == "poisson-decimated" && !w.chosen.empty()) std::printf("%-6s   %s\n", "", w.chosen.c_str());
         csvRow("reconstruction", noise, r.name, w, m, w.seconds, s);
       }
     }

@@ -499,11 +499,11 @@ double TransportPlan::relocate(int v) {
   // on v's own bin), so v* = sum m a (p - rest) / sum m a^2. (The manuscript averages one
   // optimum per simplex, weighted by mass; a facet whose mass sits near its other corners
   // then extrapolates v far off, a_j being small, and pushed vertices past the cube's faces.)
-  Eigen::Vector3d num = Eigen::Vector3d::Zero();
-  double weight = 0;
+  Eigen::Vector3d num = Eigen::Vector3d::Zero(), vnum = Eigen::Vector3d::Zero();
+  double weight = 0, vweight = 0;
   for (int i : vertex_points_[v])
     for (const auto& e : plan_[i])
-      if (e.bin < 0 && e.target == v) { num += e.mass * points_[i]; weight += e.mass; }
+      if (e.bin < 0 && e.target == v) { vnum += e.mass * points_[i]; vweight += e.mass; }
   for (int f : vertex_facets_[v]) {
     const auto& t = facets_[f];
     const int slot = t[0] == v ? 0 : t[1] == v ? 1 : 2;
@@ -518,6 +518,8 @@ double TransportPlan::relocate(int v) {
         weight += e.mass * w[slot] * w[slot];
       }
   }
+  num += vnum;
+  weight += vweight;
   if (!(weight > 0)) return 0;
   const Eigen::Vector3d target = num / weight;
   const Eigen::Vector3d moved = 0.5 * (vertices_[v] + target);

@@ -56,13 +56,8 @@ TriangleMesh transportRecoverFeatures(const TriangleMesh& mesh, const Positions&
   }();
   ProgressReporter rep(progress, "transport feature recovery", static_cast<std::size_t>(params.sweeps) * nv);
   for (int sweep = 0; sweep < params.sweeps && !rep.cancelled(); ++sweep) {
-    double sum2 = 0;
-    for (int v = 0; v < nv; ++v) {
-      const double d = plan.relocate(v);
-      sum2 += d * d;
-      rep.advance();
-    }
-    report.sweep_moves.push_back(std::sqrt(sum2 / nv));
+    report.sweep_moves.push_back(plan.relocateAll());
+    rep.advance(nv);
   }
   rep.throwIfCancelled();
   rep.finish();

@@ -242,14 +242,13 @@ TransportPlan::TransportPlan(std::vector<Eigen::Vector3d> points, std::vector<do
   const double side = (hi - lo).maxCoeff();
   if (!(side > 0)) throw InvalidInput("optimal transport: all points coincide");
   bin_scale2_ = (0.5 / side) * (0.5 / side);
-  plan_.resize(points_.size());
 }
 
 int TransportPlan::addVertex(const Eigen::Vector3d& p) {
   vertices_.push_back(p);
   vertex_alive_.push_back(1);
   vertex_facets_.emplace_back();
-  vertex_points_.emplace_back();
+  vertex_shares_.emplace_back();
   return static_cast<int>(vertices_.size()) - 1;
 }
 
@@ -264,7 +263,7 @@ int TransportPlan::addFacet(int a, int b, int c) {
   facet_alive_.push_back(1);
   const double area = facetArea(f);
   bins_.push_back(centroidalBins(vertices_[a], vertices_[b], vertices_[c], binCountFor(area)));
-  facet_points_.emplace_back();
+  facet_shares_.emplace_back();
   for (int v : {a, b, c}) vertex_facets_[v].push_back(f);
   return f;
 }
@@ -276,24 +275,14 @@ void TransportPlan::removeFacet(int f) {
     auto& l = vertex_facets_[v];
     l.erase(std::remove(l.begin(), l.end(), f), l.end());
   }
-  for (int i : std::vector<int>(facet_points_[f])) {
-    auto& e = plan_[i];
-    e.erase(std::remove_if(e.begin(), e.end(), [&](const TransportEntry& x) { return x.bin >= 0 && x.target == f; }),
-            e.end());
-  }
-  facet_points_[f].clear();
+  std::vector<Share>().swap(facet_shares_[f]);
 }
 
 void TransportPlan::removeVertex(int v) {
   if (!vertex_alive_[v]) return;
   for (int f : std::vector<int>(vertex_facets_[v])) removeFacet(f);
   vertex_alive_[v] = 0;
-  for (int i : vertex_points_[v]) {
-    auto& e = plan_[i];
-    e.erase(std::remove_if(e.begin(), e.end(), [&](const TransportEntry& x) { return x.bin < 0 && x.target == v; }),
-            e.end());
-  }
-  vertex_points_[v].clear();
+  std::vector<Share>().swap(vertex_shares_[v]);
 }
 
 int TransportPlan::aliveVertexCount() const {
@@ -318,8 +307,8 @@ void TransportPlan::assignToNearestVertices() {
       cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
     }
   if (alive.empty()) throw InvalidInput("optimal transport: the complex has no vertex");
-  for (auto& l : vertex_points_) l.clear();
-  for (auto& l : facet_points_) l.clear();
+  for (auto& l : vertex_shares_) l.clear();
+  for (auto& l : facet_shares_) l.clear();
   pcl::KdTreeFLANN<pcl::PointXYZ> tree;
   tree.setInputCloud(cloud);
   pcl::Indices k(1);
@@ -327,25 +316,28 @@ void TransportPlan::assignToNearestVertices() {
   for (std::size_t i = 0; i < points_.size(); ++i) {
     const Eigen::Vector3f p = points_[i].cast<float>();
     tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, k, d);
-    const int best = alive[k[0]];
-    plan_[i].assign(1, TransportEntry{best, -1, masses_[i]});
-    vertex_points_[best].push_back(static_cast<int>(i));
+    vertex_shares_[alive[k[0]]].push_back({static_cast<int>(i), -1, masses_[i]});
   }
+}
+
+std::vector<double> TransportPlan::massSent() const {
+  std::vector<double> m(points_.size(), 0.0);
+  for (const auto& l : vertex_shares_)
+    for (const auto& x : l) m[x.point] += x.mass;
+  for (const auto& l : facet_shares_)
+    for (const auto& x : l) m[x.point] += x.mass;
+  return m;
 }
 
 double TransportPlan::massOnFacet(int f) const {
   double m = 0;
-  for (int i : facet_points_[f])
-    for (const auto& e : plan_[i])
-      if (e.bin >= 0 && e.target == f) m += e.mass;
+  for (const auto& x : facet_shares_[f]) m += x.mass;
   return m;
 }
 
 double TransportPlan::massOnVertex(int v) const {
   double m = 0;
-  for (int i : vertex_points_[v])
-    for (const auto& e : plan_[i])
-      if (e.bin < 0 && e.target == v) m += e.mass;
+  for (const auto& x : vertex_shares_[v]) m += x.mass;
   return m;
 }
 
@@ -359,12 +351,11 @@ Eigen::Vector3d binPosition(const std::vector<Eigen::Vector3d>& vertices, const 
 
 double TransportPlan::cost() const {
   double c = 0;
-  for (std::size_t i = 0; i < points_.size(); ++i)
-    for (const auto& e : plan_[i]) {
-      const Eigen::Vector3d at =
-          e.bin < 0 ? vertices_[e.target] : binPosition(vertices_, facets_[e.target], bins_[e.target], e.bin);
-      c += e.mass * (points_[i] - at).squaredNorm();
-    }
+  for (int v = 0; v < vertexCount(); ++v)
+    for (const auto& x : vertex_shares_[v]) c += x.mass * (points_[x.point] - vertices_[v]).squaredNorm();
+  for (int f = 0; f < facetCount(); ++f)
+    for (const auto& x : facet_shares_[f])
+      c += x.mass * (points_[x.point] - binPosition(vertices_, facets_[f], bins_[f], x.bin)).squaredNorm();
   return c;
 }
 
@@ -376,23 +367,24 @@ TransportPlan::Stencil TransportPlan::gather(std::vector<int> vertices, std::vec
   facets.erase(std::unique(facets.begin(), facets.end()), facets.end());
   s.vertices = std::move(vertices);
   s.facets = std::move(facets);
-  for (int v : s.vertices) s.points.insert(s.points.end(), vertex_points_[v].begin(), vertex_points_[v].end());
-  for (int f : s.facets) s.points.insert(s.points.end(), facet_points_[f].begin(), facet_points_[f].end());
+  for (int v : s.vertices)
+    for (const auto& x : vertex_shares_[v]) s.points.push_back(x.point);
+  for (int f : s.facets)
+    for (const auto& x : facet_shares_[f]) s.points.push_back(x.point);
   std::sort(s.points.begin(), s.points.end());
   s.points.erase(std::unique(s.points.begin(), s.points.end()), s.points.end());
   s.mass.assign(s.points.size(), 0.0);
-  for (std::size_t k = 0; k < s.points.size(); ++k) {
-    const int i = s.points[k];
-    for (const auto& e : plan_[i]) {
-      const bool in = e.bin < 0 ? std::binary_search(s.vertices.begin(), s.vertices.end(), e.target)
-                                : std::binary_search(s.facets.begin(), s.facets.end(), e.target);
-      if (!in) continue;
-      const Eigen::Vector3d at =
-          e.bin < 0 ? vertices_[e.target] : binPosition(vertices_, facets_[e.target], bins_[e.target], e.bin);
-      s.mass[k] += e.mass;
-      s.cost += e.mass * (points_[i] - at).squaredNorm();
+  auto slot = [&](int i) { return std::lower_bound(s.points.begin(), s.points.end(), i) - s.points.begin(); };
+  for (int v : s.vertices)
+    for (const auto& x : vertex_shares_[v]) {
+      s.mass[slot(x.point)] += x.mass;
+      s.cost += x.mass * (points_[x.point] - vertices_[v]).squaredNorm();
     }
-  }
+  for (int f : s.facets)
+    for (const auto& x : facet_shares_[f]) {
+      s.mass[slot(x.point)] += x.mass;
+      s.cost += x.mass * (points_[x.point] - binPosition(vertices_, facets_[f], bins_[f], x.bin)).squaredNorm();
+    }
   return s;
 }
 
@@ -407,32 +399,9 @@ std::vector<TransportTarget> TransportPlan::targetsOf(const Stencil& s) const {
   return t;
 }
 
-void TransportPlan::addEntry(int i, const TransportEntry& e) {
-  for (auto& x : plan_[i])
-    if (x.target == e.target && x.bin == e.bin) { x.mass += e.mass; return; }
-  const bool first_on_simplex = std::none_of(plan_[i].begin(), plan_[i].end(), [&](const TransportEntry& x) {
-    return x.target == e.target && (x.bin < 0) == (e.bin < 0);
-  });
-  plan_[i].push_back(e);
-  if (first_on_simplex) (e.bin < 0 ? vertex_points_[e.target] : facet_points_[e.target]).push_back(i);
-}
-
-void TransportPlan::clearEntriesOn(int i, const std::vector<int>& vertices, const std::vector<int>& facets) {
-  auto& e = plan_[i];
-  auto in = [&](const TransportEntry& x) {
-    return x.bin < 0 ? std::binary_search(vertices.begin(), vertices.end(), x.target)
-                     : std::binary_search(facets.begin(), facets.end(), x.target);
-  };
-  for (const auto& x : e) {
-    if (!in(x)) continue;
-    auto& l = x.bin < 0 ? vertex_points_[x.target] : facet_points_[x.target];
-    l.erase(std::remove(l.begin(), l.end(), i), l.end());
-  }
-  e.erase(std::remove_if(e.begin(), e.end(), in), e.end());
-}
-
 void TransportPlan::release(const Stencil& s) {
-  for (int i : s.points) clearEntriesOn(i, s.vertices, s.facets);
+  for (int v : s.vertices) vertex_shares_[v].clear();
+  for (int f : s.facets) facet_shares_[f].clear();
 }
 
 void TransportPlan::assign(const Stencil& s, const std::vector<int>& vertices, const std::vector<int>& facets,
@@ -440,8 +409,8 @@ void TransportPlan::assign(const Stencil& s, const std::vector<int>& vertices, c
   const int nv = static_cast<int>(vertices.size());
   for (std::size_t k = 0; k < s.points.size(); ++k)
     for (const auto& e : solution.entries[k]) {
-      if (e.target < nv) addEntry(s.points[k], {vertices[e.target], -1, e.mass});
-      else addEntry(s.points[k], {facets[e.target - nv], e.bin, e.mass});
+      if (e.target < nv) vertex_shares_[vertices[e.target]].push_back({s.points[k], -1, e.mass});
+      else facet_shares_[facets[e.target - nv]].push_back({s.points[k], e.bin, e.mass});
     }
 }
 
@@ -460,8 +429,9 @@ double TransportPlan::improve(const Stencil& s) {
   return s.cost - sol.cost;
 }
 
-TransportPlan::Stencil TransportPlan::facetStencil(int f) const {
-  std::vector<int> fs{f}, vs;
+void TransportPlan::facetStencilSimplices(int f, std::vector<int>& vs, std::vector<int>& fs) const {
+  fs.assign(1, f);
+  vs.clear();
   const auto& t = facets_[f];
   for (int e = 0; e < 3; ++e) {
     const int a = t[e], b = t[(e + 1) % 3];
@@ -471,28 +441,71 @@ TransportPlan::Stencil TransportPlan::facetStencil(int f) const {
     }
   }
   for (int g : fs) vs.insert(vs.end(), facets_[g].begin(), facets_[g].end());
+}
+
+void TransportPlan::vertexStencilSimplices(int v, std::vector<int>& vs, std::vector<int>& fs) const {
+  fs = vertex_facets_[v];
+  vs.assign(1, v);
+  for (int g : fs) vs.insert(vs.end(), facets_[g].begin(), facets_[g].end());
+}
+
+TransportPlan::Stencil TransportPlan::facetStencil(int f) const {
+  std::vector<int> vs, fs;
+  facetStencilSimplices(f, vs, fs);
   return gather(std::move(vs), std::move(fs));
 }
 
 TransportPlan::Stencil TransportPlan::vertexStencil(int v) const {
-  std::vector<int> fs = vertex_facets_[v], vs{v};
-  for (int g : fs) vs.insert(vs.end(), facets_[g].begin(), facets_[g].end());
+  std::vector<int> vs, fs;
+  vertexStencilSimplices(v, vs, fs);
   return gather(std::move(vs), std::move(fs));
 }
 
+void TransportPlan::forEachIndependent(const std::vector<int>& items,
+                                       const std::function<void(int, std::vector<int>&, std::vector<int>&)>& simplices,
+                                       const std::function<void(int)>& work) {
+  // Greedy rounds: an item joins the round unless one of its simplices is already taken in it.
+  std::vector<int> vertex_round(vertices_.size(), -1), facet_round(facets_.size(), -1);
+  std::vector<int> remaining = items, next, round;
+  std::vector<int> vs, fs;
+  for (int r = 0; !remaining.empty(); ++r) {
+    next.clear();
+    round.clear();
+    for (int item : remaining) {
+      simplices(item, vs, fs);
+      bool free = true;
+      for (int v : vs) free = free && vertex_round[v] != r;
+      for (int f : fs) free = free && facet_round[f] != r;
+      if (!free) { next.push_back(item); continue; }
+      for (int v : vs) vertex_round[v] = r;
+      for (int f : fs) facet_round[f] = r;
+      round.push_back(item);
+    }
+    const std::int64_t n = static_cast<std::int64_t>(round.size());
+#pragma omp parallel for schedule(dynamic, 16)
+    for (std::int64_t k = 0; k < n; ++k) work(round[k]);
+    std::swap(remaining, next);
+  }
+}
+
 int TransportPlan::relax() {
+  std::vector<int> alive;
+  for (int f = 0; f < facetCount(); ++f)
+    if (facet_alive_[f]) alive.push_back(f);
+  std::vector<double> gain(facets_.size(), 0.0);
   int sweeps = 0;
   double c = cost();
   for (; sweeps < params_.max_sweeps; ++sweeps) {
-    double gain = 0;
-    for (int f = 0; f < facetCount(); ++f)
-      if (facet_alive_[f]) gain += improve(facetStencil(f));
-    if (!(gain > params_.tolerance * c)) { ++sweeps; break; }
-    c -= gain;
+    forEachIndependent(
+        alive, [&](int f, std::vector<int>& vs, std::vector<int>& fs) { facetStencilSimplices(f, vs, fs); },
+        [&](int f) { gain[f] = improve(facetStencil(f)); });
+    double total = 0;
+    for (int f : alive) total += gain[f];  // in facet order: the same sum whatever the threads
+    if (!(total > params_.tolerance * c)) { ++sweeps; break; }
+    c -= total;
   }
   return sweeps;
 }
-
 double TransportPlan::relocate(int v) {
   // The position that minimises the cost of the current plan (5.2.4): the cost is quadratic in
   // v, sum m_ij |p_i - a_j v - (rest of b_j)|^2 over the bins of v and of its facets (a_j = 1
@@ -501,22 +514,18 @@ double TransportPlan::relocate(int v) {
   // then extrapolates v far off, a_j being small, and pushed vertices past the cube's faces.)
   Eigen::Vector3d num = Eigen::Vector3d::Zero(), vnum = Eigen::Vector3d::Zero();
   double weight = 0, vweight = 0;
-  for (int i : vertex_points_[v])
-    for (const auto& e : plan_[i])
-      if (e.bin < 0 && e.target == v) { vnum += e.mass * points_[i]; vweight += e.mass; }
+  for (const auto& x : vertex_shares_[v]) { vnum += x.mass * points_[x.point]; vweight += x.mass; }
   for (int f : vertex_facets_[v]) {
     const auto& t = facets_[f];
     const int slot = t[0] == v ? 0 : t[1] == v ? 1 : 2;
-    for (int i : facet_points_[f])
-      for (const auto& e : plan_[i]) {
-        if (e.bin < 0 || e.target != f) continue;
-        const Eigen::Vector3d& w = bins_[f].barycentric[e.bin];
-        Eigen::Vector3d rest = points_[i];
-        for (int c = 0; c < 3; ++c)
-          if (c != slot) rest -= w[c] * vertices_[t[c]];
-        num += e.mass * w[slot] * rest;
-        weight += e.mass * w[slot] * w[slot];
-      }
+    for (const auto& x : facet_shares_[f]) {
+      const Eigen::Vector3d& w = bins_[f].barycentric[x.bin];
+      Eigen::Vector3d rest = points_[x.point];
+      for (int c = 0; c < 3; ++c)
+        if (c != slot) rest -= w[c] * vertices_[t[c]];
+      num += x.mass * w[slot] * rest;
+      weight += x.mass * w[slot] * w[slot];
+    }
   }
   num += vnum;
   weight += vweight;
@@ -527,6 +536,22 @@ double TransportPlan::relocate(int v) {
   vertices_[v] = moved;
   improve(vertexStencil(v));
   return dist;
+}
+
+double TransportPlan::relocateAll() {
+  std::vector<int> alive;
+  for (int v = 0; v < vertexCount(); ++v)
+    if (vertex_alive_[v]) alive.push_back(v);
+  if (alive.empty()) return 0;
+  // A relocation reads v's ring and re-solves v's stencil: rounds of vertices whose stencils
+  // share no simplex run in parallel.
+  std::vector<double> moved(vertices_.size(), 0.0);
+  forEachIndependent(
+      alive, [&](int v, std::vector<int>& vs, std::vector<int>& fs) { vertexStencilSimplices(v, vs, fs); },
+      [&](int v) { moved[v] = relocate(v); });
+  double sum2 = 0;
+  for (int v : alive) sum2 += moved[v] * moved[v];
+  return std::sqrt(sum2 / alive.size());
 }
 
 }  // namespace paps

@@ -210,7 +210,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   plan.assignToNearestVertices();
   plan.relax();
   for (int f = 0; f < plan.facetCount(); ++f)
-    if (plan.facetAlive(f) && plan.pointsOnFacet(f).empty()) plan.removeFacet(f);
+    if (plan.facetAlive(f) && plan.sharesOfFacet(f).empty()) plan.removeFacet(f);
   report.complex_facets = plan.aliveFacetCount();
   report.initial_cost = plan.cost();
 
@@ -221,7 +221,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) by_id[vertex_of_site.at(v->info())] = v;
   for (int id = 0; id < static_cast<int>(by_id.size()); ++id) {
     if (!plan.facetsOf(id).empty()) continue;
-    if (plan.pointsOnVertex(id).empty()) { plan.removeVertex(id); continue; }
+    if (plan.sharesOfVertex(id).empty()) { plan.removeVertex(id); continue; }
     std::vector<Delaunay::Vertex_handle> adj;
     dt.finite_adjacent_vertices(by_id[id], std::back_inserter(adj));
     int best = -1;
@@ -269,9 +269,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   }
   rep.throwIfCancelled();
   rep.finish();
-  for (int sweep = 0; sweep < params.final_relocation_sweeps; ++sweep)
-    for (int v = 0; v < plan.vertexCount(); ++v)
-      if (plan.vertexAlive(v)) plan.relocate(v);
+  for (int sweep = 0; sweep < params.final_relocation_sweeps; ++sweep) plan.relocateAll();
   report.final_cost = plan.cost();
   report.rms_transport = std::sqrt(report.final_cost / plan.totalMass());
 

@@ -22,7 +22,8 @@
 namespace paps {
 
 struct TransportFeatureRecoveryParameters {
-  /// Relocation sweeps over all vertices (in vertex order, each followed by the update of
+  /// Relocation sweeps over all vertices (in rounds of vertices whose stencils share no
+  /// simplex, run in parallel; each relocation is followed by the update of
   /// its stencil's plan), 1 to 1000. Each sweep moves the vertices halfway to their optimum:
   /// on noisy points later sweeps fit the noise (fandisk, 0.2% noise: one sweep brings the
   /// mesh's RMS error from Poisson's 0.84 to 0.69, five sweeps to 1.07, in 1e-3 of the

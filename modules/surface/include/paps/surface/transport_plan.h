@@ -9,6 +9,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -119,11 +120,17 @@ class TransportPlan {
   const Eigen::Vector3d& point(std::size_t i) const { return points_[i]; }
   double pointMass(std::size_t i) const { return masses_[i]; }
   double totalMass() const { return total_mass_; }
-  /// Entries of point i: target = vertex id (bin -1) or facet id (bin >= 0).
-  const std::vector<TransportEntry>& entriesOf(std::size_t i) const { return plan_[i]; }
-  /// Points with mass on a simplex.
-  const std::vector<int>& pointsOnVertex(int v) const { return vertex_points_[v]; }
-  const std::vector<int>& pointsOnFacet(int f) const { return facet_points_[f]; }
+  /// Mass received by a simplex, point by point (bin -1 on a vertex). The plan is stored per
+  /// simplex, so that stencils without a common simplex can be solved at the same time.
+  struct Share {
+    int point;
+    int bin;
+    double mass;
+  };
+  const std::vector<Share>& sharesOfVertex(int v) const { return vertex_shares_[v]; }
+  const std::vector<Share>& sharesOfFacet(int f) const { return facet_shares_[f]; }
+  /// Mass each point sends (its mass, when the plan is complete).
+  std::vector<double> massSent() const;
   double massOnFacet(int f) const;
   double massOnVertex(int v) const;
   /// Total cost sum m_ij |p_i - b_j|^2 (recomputed).
@@ -157,13 +164,23 @@ class TransportPlan {
   /// Sweeps over the facet stencils until the cost stalls (5.1.5). Returns the sweeps done.
   int relax();
 
-  /// Vertex relocation (5.2.4): moves v halfway to the mass-weighted optimal position for the
-  /// current plan, then re-solves its stencil. Returns the distance moved.
+  /// Vertex relocation (5.2.4): moves v halfway to the optimal position for the current plan,
+  /// then re-solves its stencil. Returns the distance moved.
   double relocate(int v);
+  /// relocate() on every alive vertex; returns the RMS move.
+  double relocateAll();
+
+  /// Runs `work(item)` for every item in rounds: a round takes, in item order, the items whose
+  /// stencil (the simplex ids `simplices(item)` fills, vertices then facets) shares no simplex
+  /// with an item taken before in that round, and runs them in parallel. Rounds follow each
+  /// other until every item ran: the result does not depend on the thread count.
+  void forEachIndependent(const std::vector<int>& items,
+                          const std::function<void(int, std::vector<int>&, std::vector<int>&)>& simplices,
+                          const std::function<void(int)>& work);
 
  private:
-  void addEntry(int i, const TransportEntry& e);
-  void clearEntriesOn(int i, const std::vector<int>& vertices, const std::vector<int>& facets);
+  void facetStencilSimplices(int f, std::vector<int>& vertices, std::vector<int>& facets) const;
+  void vertexStencilSimplices(int v, std::vector<int>& vertices, std::vector<int>& facets) const;
 
   TransportParameters params_;
   std::vector<Eigen::Vector3d> points_;
@@ -176,8 +193,7 @@ class TransportPlan {
   std::vector<char> facet_alive_;
   std::vector<FacetBins> bins_;
   std::vector<std::vector<int>> vertex_facets_;
-  std::vector<std::vector<TransportEntry>> plan_;  // per point; target < 0 never
-  std::vector<std::vector<int>> vertex_points_, facet_points_;
+  std::vector<std::vector<Share>> vertex_shares_, facet_shares_;
 };
 
 }  // namespace paps

@@ -5,7 +5,7 @@
 #         cloud_io     paps::loadCloud: our PCD/PLY header checks, then PCL's readers
 #                      (test/core/fuzz_cloud_io.cpp; PCL itself is not instrumented, so
 #                      coverage guides through our checks and a crash anywhere is caught)
-#         stages       every algorithm on small clouds of awkward geometry (copies, lines,
+#         stages       every algorithm (the optimal-transport stages too) on small clouds of awkward geometry (copies, lines,
 #                      planes, tiny and UTM-like scales; test/fuzz_stages.cpp)
 # CHECK=asan (default) builds the libraries with clang and ASan/UBSan; CHECK=malloc builds
 # them with coverage only and runs under glibc's malloc checks (libc_malloc_debug,

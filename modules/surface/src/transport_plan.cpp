@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
 #include <functional>
 #include <limits>
 #include <numeric>
@@ -333,6 +332,13 @@ double TransportPlan::massOnFacet(int f) const {
   double m = 0;
   for (const auto& x : facet_shares_[f]) m += x.mass;
   return m;
+}
+
+double TransportPlan::meanFacetDensity() const {
+  double mass = 0, area = 0;
+  for (int f = 0; f < facetCount(); ++f)
+    if (facet_alive_[f]) { mass += massOnFacet(f); area += facetArea(f); }
+  return area > 0 ? mass / area : 0;
 }
 
 double TransportPlan::massOnVertex(int v) const {

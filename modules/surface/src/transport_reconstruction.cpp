@@ -274,10 +274,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   report.rms_transport = std::sqrt(report.final_cost / plan.totalMass());
 
   // Post-processing (5.2.5): facets of low mass density go.
-  double mass = 0, area = 0;
-  for (int f = 0; f < plan.facetCount(); ++f)
-    if (plan.facetAlive(f)) { mass += plan.massOnFacet(f); area += plan.facetArea(f); }
-  const double mean_density = area > 0 ? mass / area : 0;
+  const double mean_density = plan.meanFacetDensity();
   TriangleMesh out;
   std::vector<int> index(plan.vertexCount(), -1);
   for (int f = 0; f < plan.facetCount(); ++f) {

@@ -44,7 +44,7 @@ struct TransportTarget {
 
 /// Mass sent by one point to one bin of one target.
 struct TransportEntry {
-  int target;  // index into the target list of the problem (local) or simplex id (global)
+  int target;  // index into the target list of the problem
   int bin;
   double mass;
 };
@@ -103,7 +103,6 @@ class TransportPlan {
   int aliveVertexCount() const;
   int aliveFacetCount() const;
   const Eigen::Vector3d& vertex(int v) const { return vertices_[v]; }
-  void setVertex(int v, const Eigen::Vector3d& p) { vertices_[v] = p; }
   const std::array<int, 3>& facet(int f) const { return facets_[f]; }
   const FacetBins& bins(int f) const { return bins_[f]; }
   double facetArea(int f) const;
@@ -132,6 +131,9 @@ class TransportPlan {
   /// Mass each point sends (its mass, when the plan is complete).
   std::vector<double> massSent() const;
   double massOnFacet(int f) const;
+  /// Mass on the alive facets over their area (0 without area): the reference of the
+  /// density filters (5.2.5).
+  double meanFacetDensity() const;
   double massOnVertex(int v) const;
   /// Total cost sum m_ij |p_i - b_j|^2 (recomputed).
   double cost() const;

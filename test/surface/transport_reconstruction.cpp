@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include <omp.h>
 
@@ -112,6 +114,22 @@ TEST(TransportReconstruction, SameMeshForShuffledPoints) {
   ASSERT_EQ(a.triangles.size(), b.triangles.size());
   for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
   for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
+}
+
+TEST(TransportReconstruction, ProgressIsReportedAndCancels) {
+  const paps::Positions points = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 4), 400, 7);
+  std::vector<std::string> stages;
+  auto p = smallRun();
+  p.initial_fraction = 0.1f;
+  paps::transportReconstruct(points, p, nullptr, [&](const std::string& stage, float) {
+    if (stages.empty() || stages.back() != stage) stages.push_back(stage);
+    return true;
+  });
+  ASSERT_EQ(stages.size(), 2u);
+  EXPECT_EQ(stages[0], "transport relaxation");
+  EXPECT_EQ(stages[1], "transport decimation");
+  EXPECT_THROW(paps::transportReconstruct(points, p, nullptr, [](const std::string&, float) { return false; }),
+               paps::Cancelled);
 }
 
 TEST(TransportReconstruction, RejectsBadInput) {

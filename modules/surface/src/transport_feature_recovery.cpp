@@ -46,7 +46,7 @@ TriangleMesh transportRecoverFeatures(const TriangleMesh& mesh, const Positions&
   report.facets = plan.facetCount();
   plan.assignToNearestVertices();
   report.initial_cost = plan.cost();
-  report.relaxation_sweeps = plan.relax();
+  report.relaxation_sweeps = plan.relax(progress);
   report.relaxed_cost = plan.cost();
 
   const std::vector<Eigen::Vector3d> start = [&] {

@@ -494,24 +494,29 @@ void TransportPlan::forEachIndependent(const std::vector<int>& items,
   }
 }
 
-int TransportPlan::relax() {
+int TransportPlan::relax(const ProgressCallback& progress) {
   std::vector<int> alive;
   for (int f = 0; f < facetCount(); ++f)
     if (facet_alive_[f]) alive.push_back(f);
   std::vector<double> gain(facets_.size(), 0.0);
+  ProgressReporter rep(progress, "transport relaxation", static_cast<std::size_t>(std::max(1, params_.max_sweeps)));
   int sweeps = 0;
   double c = cost();
   for (; sweeps < params_.max_sweeps; ++sweeps) {
     forEachIndependent(
         alive, [&](int f, std::vector<int>& vs, std::vector<int>& fs) { facetStencilSimplices(f, vs, fs); },
         [&](int f) { gain[f] = improve(facetStencil(f)); });
+    rep.advance();
+    rep.throwIfCancelled();
     double total = 0;
     for (int f : alive) total += gain[f];  // in facet order: the same sum whatever the threads
     if (!(total > params_.tolerance * c)) { ++sweeps; break; }
     c -= total;
   }
+  rep.finish();
   return sweeps;
 }
+
 double TransportPlan::relocate(int v) {
   // The position that minimises the cost of the current plan (5.2.4): the cost is quadratic in
   // v, sum m_ij |p_i - a_j v - (rest of b_j)|^2 over the bins of v and of its facets (a_j = 1

@@ -208,7 +208,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
 
   // Initial plan (5.2.2): nearest vertex, relaxation, then only the facets with mass remain.
   plan.assignToNearestVertices();
-  plan.relax();
+  plan.relax(progress);
   for (int f = 0; f < plan.facetCount(); ++f)
     if (plan.facetAlive(f) && plan.sharesOfFacet(f).empty()) plan.removeFacet(f);
   report.complex_facets = plan.aliveFacetCount();

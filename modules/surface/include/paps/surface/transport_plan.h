@@ -14,6 +14,8 @@
 
 #include <Eigen/Core>
 
+#include <paps/core/progress.h>
+
 namespace paps {
 
 /// Bins of one facet: barycentric coordinates of the CVT cell centroids (they move with the
@@ -164,7 +166,8 @@ class TransportPlan {
   /// Stencil of vertex v: its facets and all their vertices (and v).
   Stencil vertexStencil(int v) const;
   /// Sweeps over the facet stencils until the cost stalls (5.1.5). Returns the sweeps done.
-  int relax();
+  /// A progress callback hears of each sweep (of at most max_sweeps) and may cancel.
+  int relax(const ProgressCallback& progress = {});
 
   /// Vertex relocation (5.2.4): moves v halfway to the optimal position for the current plan,
   /// then re-solves its stencil. Returns the distance moved.

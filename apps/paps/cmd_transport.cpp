@@ -4,7 +4,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <initializer_list>
 #include <sstream>
+#include <utility>
 
 #include <unistd.h>
 
@@ -99,9 +101,17 @@ void checkMeshOutput(const std::string& path) {
     throw InvalidParameter("OUT", path, "a .ply file (the mesh is written as binary PLY)");
 }
 
-void checkDensityThreshold(const Arguments& a) {
-  const double t = a.number("density-threshold", 0);
-  if (!(t >= 0 && t < 1)) throw InvalidParameter("density-threshold", a.text("density-threshold", ""), "a fraction in [0, 1)");
+// Validates library parameters, naming a bad one by the option the user typed (the library
+// names its fields: target_vertices is --vertices).
+template <typename Params>
+void validateAsOptions(const Params& p, std::initializer_list<std::pair<const char*, const char*>> options) {
+  try {
+    p.validate();
+  } catch (const InvalidParameter& e) {
+    for (const auto& [field, option] : options)
+      if (e.parameter() == field) throw InvalidParameter(option, e.value(), e.expected());
+    throw;
+  }
 }
 
 // Writes the mesh as binary PLY to a temporary file beside `path`, then renames it: the target
@@ -145,13 +155,8 @@ int runReconstruct(int argc, char** argv) {
   p.candidates = a.integer("candidates", p.candidates);
   p.seed = a.count("seed", p.seed);
   p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
-  // Each option checked under its own name (the library's message names its fields).
-  requireInRange("vertices", p.target_vertices, 3, 100000000);
-  if (!(p.initial_fraction > 0 && p.initial_fraction <= 1))
-    throw InvalidParameter("initial-fraction", a.text("initial-fraction", ""), "a fraction in (0, 1]");
-  requireInRange("candidates", p.candidates, 0, 100000);
-  checkDensityThreshold(a);
-  p.validate();
+  validateAsOptions(p, {{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
+                        {"candidates", "candidates"}, {"density_threshold", "density-threshold"}});
   checkMeshOutput(out_path);
   const Positions points = loadPoints(in_path);
   TransportReconstructionReport r;
@@ -178,9 +183,7 @@ int runRecoverFeatures(int argc, char** argv) {
   TransportFeatureRecoveryParameters p;
   p.sweeps = a.integer("sweeps", p.sweeps);
   p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
-  requireInRange("sweeps", p.sweeps, 1, 1000);
-  checkDensityThreshold(a);
-  p.validate();
+  validateAsOptions(p, {{"sweeps", "sweeps"}, {"density_threshold", "density-threshold"}});
   checkMeshOutput(out_path);
   const TriangleMesh smooth = loadTriangleMesh(mesh_path);
   std::printf("read %s: %zu vertices, %zu facets\n", mesh_path.c_str(), smooth.vertices.size(), smooth.triangles.size());

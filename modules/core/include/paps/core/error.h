@@ -19,11 +19,13 @@ class InvalidParameter : public Error {
  public:
   InvalidParameter(const std::string& name, const std::string& value, const std::string& expected)
       : Error("invalid parameter '" + name + "' = " + value + " (expected " + expected + ")"),
-        name_(name) {}
+        name_(name), value_(value), expected_(expected) {}
   const std::string& parameter() const { return name_; }
+  const std::string& value() const { return value_; }
+  const std::string& expected() const { return expected_; }
 
  private:
-  std::string name_;
+  std::string name_, value_, expected_;
 };
 
 /// The input data cannot be processed (empty, all NaN, degenerate, ...).

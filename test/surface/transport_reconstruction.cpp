@@ -152,6 +152,9 @@ TEST(TransportReconstruction, RejectsBadInput) {
   p = smallRun();
   p.density_threshold = -1;
   EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
+  paps::TransportReconstruction<pcl::PointXYZ> stage;  // no input cloud
+  pcl::PolygonMesh mesh;
+  EXPECT_THROW(stage.reconstruct(mesh), paps::InvalidInput);
 }
 
 }  // namespace

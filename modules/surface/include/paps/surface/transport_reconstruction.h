@@ -73,6 +73,16 @@ class TransportReconstruction : public pcl::SurfaceReconstruction<PointT>, publi
   void setTargetVertices(int n) { auto p = params_; p.target_vertices = n; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const TransportReconstructionReport& getReport() const { return report_; }
+  /// As pcl::SurfaceReconstruction::reconstruct, but without an input cloud it throws
+  /// InvalidInput (PCL's prints an error and returns an empty mesh).
+  void reconstruct(pcl::PolygonMesh& output) override {
+    requireInputCloud(this->input_);
+    pcl::SurfaceReconstruction<PointT>::reconstruct(output);
+  }
+  void reconstruct(pcl::PointCloud<PointT>& points, std::vector<pcl::Vertices>& polygons) override {
+    requireInputCloud(this->input_);
+    pcl::SurfaceReconstruction<PointT>::reconstruct(points, polygons);
+  }
 
  protected:
   std::string getClassName() const override { return "TransportReconstruction"; }

@@ -257,11 +257,14 @@ int TransportPlan::binCountFor(double area) const {
 }
 
 int TransportPlan::addFacet(int a, int b, int c) {
+  return addFacet(a, b, c, centroidalBins(vertices_[a], vertices_[b], vertices_[c], binCountFor(triangleArea(vertices_[a], vertices_[b], vertices_[c]))));
+}
+
+int TransportPlan::addFacet(int a, int b, int c, FacetBins bins) {
   const int f = static_cast<int>(facets_.size());
   facets_.push_back({a, b, c});
   facet_alive_.push_back(1);
-  const double area = facetArea(f);
-  bins_.push_back(centroidalBins(vertices_[a], vertices_[b], vertices_[c], binCountFor(area)));
+  bins_.push_back(std::move(bins));
   facet_shares_.emplace_back();
   for (int v : {a, b, c}) vertex_facets_[v].push_back(f);
   return f;
@@ -293,7 +296,7 @@ int TransportPlan::aliveFacetCount() const {
 
 double TransportPlan::facetArea(int f) const {
   const auto& t = facets_[f];
-  return 0.5 * (vertices_[t[1]] - vertices_[t[0]]).cross(vertices_[t[2]] - vertices_[t[0]]).norm();
+  return triangleArea(vertices_[t[0]], vertices_[t[1]], vertices_[t[2]]);
 }
 
 void TransportPlan::assignToNearestVertices() {

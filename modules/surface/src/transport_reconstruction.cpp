@@ -110,8 +110,7 @@ class Decimation {
     c.new_bins.reserve(c.new_facets.size());
     for (const auto& t : c.new_facets) {
       const Eigen::Vector3d &a = plan_.vertex(t[0]), &b = plan_.vertex(t[1]), &d = plan_.vertex(t[2]);
-      const double area = 0.5 * (b - a).cross(d - a).norm();
-      c.new_bins.push_back(centroidalBins(a, b, d, plan_.binCountFor(area)));
+      c.new_bins.push_back(centroidalBins(a, b, d, plan_.binCountFor(triangleArea(a, b, d))));
     }
     for (std::size_t k = 0; k < c.new_facets.size(); ++k) {
       const auto& t = c.new_facets[k];
@@ -128,7 +127,10 @@ class Decimation {
     plan_.release(c.before);
     plan_.removeVertex(c.u);  // and its facets
     std::vector<int> facets = c.kept_facets;
-    for (const auto& t : c.new_facets) facets.push_back(plan_.addFacet(t[0], t[1], t[2]));
+    for (std::size_t k = 0; k < c.new_facets.size(); ++k) {
+      const auto& t = c.new_facets[k];
+      facets.push_back(plan_.addFacet(t[0], t[1], t[2], c.new_bins[k]));
+    }
     plan_.assign(c.before, c.vertices_after, facets, c.solution);
     for (int w : neighbours_[c.u]) {
       neighbours_[w].erase(c.u);
@@ -251,16 +253,17 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       std::sort(candidates.begin(), candidates.end());
       candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
     }
-    std::vector<double> delta(candidates.size(), INFINITY);
+    // The simulations are kept: the chosen one is applied as simulated (its plan and bins).
+    std::vector<Decimation::Collapse> simulated(candidates.size());
     const std::int64_t nc = static_cast<std::int64_t>(candidates.size());
 #pragma omp parallel for schedule(dynamic, 1)
-    for (std::int64_t k = 0; k < nc; ++k) delta[k] = dec.simulate(candidates[k].first, candidates[k].second).delta;
+    for (std::int64_t k = 0; k < nc; ++k) simulated[k] = dec.simulate(candidates[k].first, candidates[k].second);
     report.simulations += static_cast<int>(nc);
     std::size_t best = 0;
-    for (std::size_t k = 1; k < candidates.size(); ++k)
-      if (delta[k] < delta[best]) best = k;  // ties: the first in (u, v) order
-    if (!std::isfinite(delta[best])) break;
-    const auto collapse = dec.simulate(candidates[best].first, candidates[best].second);
+    for (std::size_t k = 1; k < simulated.size(); ++k)
+      if (simulated[k].delta < simulated[best].delta) best = k;  // ties: the first in (u, v) order
+    if (!std::isfinite(simulated[best].delta)) break;
+    const Decimation::Collapse collapse = std::move(simulated[best]);
     dec.apply(collapse);
     ++report.collapses;
     for (int it = 0; it < params.relocation_iterations; ++it) plan.relocate(collapse.v);

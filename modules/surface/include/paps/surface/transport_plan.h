@@ -25,6 +25,10 @@ struct FacetBins {
   std::vector<double> capacity;
 };
 
+inline double triangleArea(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+  return 0.5 * (b - a).cross(c - a).norm();
+}
+
 /// CVT of a triangle into `count` cells (Lloyd iterations on a fine barycentric lattice),
 /// deterministic. count >= 1.
 FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
@@ -96,6 +100,8 @@ class TransportPlan {
   int addVertex(const Eigen::Vector3d& p);
   /// Adds a facet with its bins (CVT sized by its area); returns its id.
   int addFacet(int a, int b, int c);
+  /// Adds a facet with bins already computed for these corners.
+  int addFacet(int a, int b, int c, FacetBins bins);
   void removeFacet(int f);   // the plan must not use it any more
   void removeVertex(int v);  // idem
   bool vertexAlive(int v) const { return vertex_alive_[v]; }

@@ -344,12 +344,6 @@ double TransportPlan::meanFacetDensity() const {
   return area > 0 ? mass / area : 0;
 }
 
-double TransportPlan::massOnVertex(int v) const {
-  double m = 0;
-  for (const auto& x : vertex_shares_[v]) m += x.mass;
-  return m;
-}
-
 namespace {
 Eigen::Vector3d binPosition(const std::vector<Eigen::Vector3d>& vertices, const std::array<int, 3>& f,
                             const FacetBins& bins, int b) {

@@ -125,7 +125,6 @@ class TransportPlan {
   void assignToNearestVertices();
   std::size_t pointCount() const { return points_.size(); }
   const Eigen::Vector3d& point(std::size_t i) const { return points_[i]; }
-  double pointMass(std::size_t i) const { return masses_[i]; }
   double totalMass() const { return total_mass_; }
   /// Mass received by a simplex, point by point (bin -1 on a vertex). The plan is stored per
   /// simplex, so that stencils without a common simplex can be solved at the same time.
@@ -142,7 +141,6 @@ class TransportPlan {
   /// Mass on the alive facets over their area (0 without area): the reference of the
   /// density filters (5.2.5).
   double meanFacetDensity() const;
-  double massOnVertex(int v) const;
   /// Total cost sum m_ij |p_i - b_j|^2 (recomputed).
   double cost() const;
 

@@ -5,7 +5,7 @@ SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
 PKGS=(cmake g++ make pkg-config libpcl-dev libeigen3-dev libflann-dev libboost-dev
       libgtest-dev libzstd-dev liblzma-dev libcgal-dev draco libdraco-dev clang
-      libclang-rt-14-dev coinor-libclp-dev)
+      libclang-rt-14-dev coinor-libclp-dev libopencv-dev libnlopt-dev)
 missing=()
 for p in "${PKGS[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

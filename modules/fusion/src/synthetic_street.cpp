@@ -63,7 +63,20 @@ StreetScene::StreetScene(const StreetOptions& options) : options_(options) {
       b.hi = {x + width, side > 0 ? front + 8 : -front, height};
       b.material = material;
       b.facade = true;
+      const int first = static_cast<int>(boxes_.size());
       boxes_.push_back(b);
+      // Street-facing details: a cornice under every floor line, a sill under every window.
+      const double face = side > 0 ? b.lo.y() : b.hi.y(), out = side > 0 ? -0.15 : 0.15;
+      const double ylo = std::min(face, face + out), yhi = std::max(face, face + out);
+      const int detail = material == kBrick ? kStone : material;
+      for (int floor = 1; 3.0 * floor < height - 0.5; ++floor) {
+        boxes_.push_back({{x, ylo, 3.0 * floor - 0.2}, {x + width, yhi, 3.0 * floor}, detail, false});
+        if (3.0 * floor + 2.4 > height) continue;
+        for (int k = 0; 2.5 * k + 1.95 < width; ++k)
+          boxes_.push_back({{x + 2.5 * k + 0.55, ylo, 3.0 * floor + 0.9}, {x + 2.5 * k + 1.95, yhi, 3.0 * floor + 1.0},
+                            detail, false});
+      }
+      addGroup(first);
       x += width + (rng.uniform() < 0.3 ? rng.uniform(1.0, 2.5) : 0.0);
     }
   }
@@ -71,8 +84,10 @@ StreetScene::StreetScene(const StreetOptions& options) : options_(options) {
   for (double x = -half + 6; x < half; x += 12)
     for (int side : {1, -1}) {
       const double y = side * 5.6;
+      const int first = static_cast<int>(boxes_.size());
       boxes_.push_back({{x - 0.1, y - 0.1, 0}, {x + 0.1, y + 0.1, 5.5}, kPost, false});
       boxes_.push_back({{x - 0.06, std::min(y, y - side * 1.6), 5.3}, {x + 0.06, std::max(y, y - side * 1.6), 5.45}, kPost, false});
+      addGroup(first);
     }
   // Parked cars along both kerbs.
   for (int side : {1, -1})
@@ -80,7 +95,17 @@ StreetScene::StreetScene(const StreetOptions& options) : options_(options) {
       const double y0 = side > 0 ? 3.0 : -4.8;
       const int material = kCarRed + static_cast<int>(rng.below(3));
       boxes_.push_back({{x, y0, 0.25}, {x + 4.2, y0 + 1.8, 1.5}, material, false});
+      addGroup(static_cast<int>(boxes_.size()) - 1);
     }
+}
+
+void StreetScene::addGroup(int first) {
+  Group g{boxes_[first], first, static_cast<int>(boxes_.size()) - first};
+  for (int i = first; i < first + g.count; ++i) {
+    g.bounds.lo = g.bounds.lo.cwiseMin(boxes_[i].lo);
+    g.bounds.hi = g.bounds.hi.cwiseMax(boxes_[i].hi);
+  }
+  groups_.push_back(g);
 }
 
 bool StreetScene::hitBox(const Box& b, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double max_t,
@@ -123,13 +148,18 @@ bool StreetScene::castRay(const Eigen::Vector3d& origin, const Eigen::Vector3d& 
   }
   double t;
   Eigen::Vector3d n;
-  for (std::size_t i = 0; i < boxes_.size(); ++i)
-    if (hitBox(boxes_[i], origin, d, best, t, n) && t < best) {
-      best = t;
-      normal = n;
-      box = static_cast<int>(i);
-      hit = true;
-    }
+  for (const Group& g : groups_) {
+    // Enter the group when its bounds are hit nearer than the best, or contain the origin.
+    const bool inside = (origin.array() >= g.bounds.lo.array()).all() && (origin.array() <= g.bounds.hi.array()).all();
+    if (!inside && !(hitBox(g.bounds, origin, d, best, t, n) && t < best)) continue;
+    for (int i = g.first; i < g.first + g.count; ++i)
+      if (hitBox(boxes_[i], origin, d, best, t, n) && t < best) {
+        best = t;
+        normal = n;
+        box = i;
+        hit = true;
+      }
+  }
   if (with_van) {
     const Box van{{van_x - 3, 1.0, 0.3}, {van_x + 3, 3.0, 2.9}, kVan, false};
     if (hitBox(van, origin, d, best, t, n) && t < best) {

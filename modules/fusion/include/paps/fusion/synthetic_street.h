@@ -2,7 +2,8 @@
 // A synthetic urban street with ground truth for the chapter 4 stages (manuscript 4.0: mobile
 // LiDAR with photos at known approximate poses). Real street scans with registered photos are
 // not available as Debian packages, so tests and benches build this scene: facades of several
-// materials with windows and brick texture, pavements, a road with lane markings, parked cars,
+// materials with windows and brick texture, cornices and window sills (geometry a shading
+// image shows), pavements, a road with lane markings, parked cars,
 // lamp posts, and a sun that casts shadows. It gives
 //  - a mobile LiDAR pass (points, true normals, a laser reflectance per material, the true
 //    albedo and the true shadow label of every point; rooftops unseen, as on real scans);
@@ -31,7 +32,7 @@ struct StreetOptions {
   double scan_angle_step_deg = 0.5;   ///< LiDAR: degrees between returns along a line
   double range_noise = 0.01;          ///< LiDAR: Gaussian range noise, metres
   double reflectance_noise = 0.02;    ///< LiDAR: Gaussian noise on the reflectance (in [0, 1])
-  Eigen::Vector3d sun = Eigen::Vector3d(0.35, 0.6, 0.72);  ///< towards the sun (normalised)
+  Eigen::Vector3d sun = Eigen::Vector3d(0.5, -0.35, 0.8);  ///< towards the sun (normalised)
   double sun_sky_ratio = 2.0;         ///< sun light over sky light on a surface facing the sun
   std::uint64_t seed = 1;             ///< building sizes, materials, cars
 };
@@ -101,11 +102,17 @@ class StreetScene {
     Eigen::Vector3f albedo;
     float reflectance;
   };
+  struct Group {  // a building and its details, or a single box: culled by its bounds first
+    Box bounds;
+    int first, count;
+  };
+  void addGroup(int first);
   bool hitBox(const Box& b, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double max_t,
               double& t, Eigen::Vector3d& n) const;
   StreetOptions options_;
   Eigen::Vector3d sun_;
   std::vector<Box> boxes_;
+  std::vector<Group> groups_;
   std::vector<Material> materials_;
 };
 

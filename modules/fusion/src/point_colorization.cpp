@@ -1,0 +1,184 @@
+#include <paps/fusion/point_colorization.h>
+#include <paps/fusion/impl/point_colorization.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <string>
+
+#include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
+
+namespace paps {
+
+void PointColorizationParameters::validate() const {
+  requireInRange("neighbours", neighbours, 1, 64);
+  requireInRange("smoothness", smoothness, 0.f, 1000.f);
+  if (!(huber_threshold > 0 && huber_threshold <= 2))
+    throw InvalidParameter("huber_threshold", detail::toString(huber_threshold), "a value in (0, 2]");
+  if (!(agreement_distance > 0 && agreement_distance <= 2))
+    throw InvalidParameter("agreement_distance", detail::toString(agreement_distance), "a value in (0, 2]");
+  requireInRange("iterations", iterations, 1, 10000);
+  requireInRange("tolerance", tolerance, 0.f, 1.f);
+  visibility.validate();
+}
+
+ColourCandidates collectColourCandidates(const Positions& points, const std::vector<RegisteredPhoto>& photos,
+                                         const VisibilityParameters& visibility) {
+  for (std::size_t v = 0; v < photos.size(); ++v) photos[v].validate(("photo " + std::to_string(v)).c_str());
+  std::vector<ProjectedPoints> projected;
+  projected.reserve(photos.size());
+  for (const auto& photo : photos) projected.push_back(projectVisiblePoints(points, photo.camera, photo.pose, visibility));
+  ColourCandidates c;
+  c.offsets.assign(points.size() + 1, 0);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    std::int64_t n = 0;
+    if (isFinite(points[i]))
+      for (const auto& p : projected) n += p.visible[i] != 0;
+    c.offsets[i + 1] = c.offsets[i] + n;
+  }
+  c.colour.resize(static_cast<std::size_t>(c.offsets.back()));
+  c.photo.resize(c.colour.size());
+#pragma omp parallel for schedule(static)
+  for (std::int64_t i = 0; i < std::int64_t(points.size()); ++i) {
+    std::int64_t slot = c.offsets[i];
+    if (slot == c.offsets[i + 1]) continue;
+    for (std::size_t v = 0; v < photos.size(); ++v) {
+      if (!projected[v].visible[i]) continue;
+      c.colour[slot] = sampleBilinear(photos[v].image, projected[v].pixel[i]);
+      c.photo[slot] = static_cast<int>(v);
+      ++slot;
+    }
+  }
+  return c;
+}
+
+Eigen::Vector3f medianCandidate(const ColourCandidates& candidates, std::size_t i) {
+  const std::size_t n = candidates.count(i);
+  if (n == 0) return Eigen::Vector3f::Constant(NAN);
+  std::vector<float> values(n);
+  Eigen::Vector3f m;
+  for (int ch = 0; ch < 3; ++ch) {
+    for (std::size_t k = 0; k < n; ++k) values[k] = candidates.colour[candidates.offsets[i] + k][ch];
+    std::sort(values.begin(), values.end());
+    m[ch] = n % 2 ? values[n / 2] : 0.5f * (values[n / 2 - 1] + values[n / 2]);
+  }
+  return m;
+}
+
+std::vector<Eigen::Vector3f> colorizeFromCandidates(const Positions& points, const std::vector<Eigen::Vector3f>& input,
+                                                    const ColourCandidates& candidates,
+                                                    const PointColorizationParameters& params,
+                                                    PointColorizationReport* report_out,
+                                                    const ProgressCallback& progress) {
+  params.validate();
+  if (points.empty()) throw InvalidInput("colorization: the input cloud is empty");
+  if (input.size() != points.size())
+    throw InvalidParameter("input colours", detail::toString(input.size()), "one per point (" +
+                                                                                 detail::toString(points.size()) + ")");
+  if (candidates.offsets.size() != points.size() + 1)
+    throw InvalidParameter("candidates", detail::toString(candidates.offsets.size()), "one list per point");
+  const std::size_t n = points.size();
+  PointColorizationReport report;
+  report.points = n;
+  report.candidates = candidates.colour.size();
+  const std::size_t finite = countFinite(points);
+  if (finite == 0) throw InvalidInput("colorization: no finite point in the cloud (all NaN or Inf)");
+  report.non_finite = n - finite;
+
+  // Data term: median and confidence of each seen point; the graph joins seen points only.
+  std::vector<Eigen::Vector3f> median(n, Eigen::Vector3f::Constant(NAN));
+  std::vector<float> confidence(n, 0.f);
+  Positions seen_points(n, Eigen::Vector3f::Constant(NAN));
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!isFinite(points[i])) continue;
+    const std::size_t c = candidates.count(i);
+    if (c == 0) {
+      ++report.unseen;
+      continue;
+    }
+    median[i] = medianCandidate(candidates, i);
+    std::size_t agree = 0;
+    for (std::size_t k = 0; k < c; ++k)
+      agree += (candidates.colour[candidates.offsets[i] + k] - median[i]).norm() <= params.agreement_distance;
+    confidence[i] = std::max(0.1f, float(agree) / float(c));
+    seen_points[i] = points[i];
+    ++report.coloured;
+  }
+  std::vector<Eigen::Vector3f> colours = input;
+  for (std::size_t i = 0; i < n; ++i)
+    if (confidence[i] > 0) colours[i] = median[i];
+  if (report.coloured == 0 || params.smoothness == 0 || report.coloured < 2) {
+    if (report_out) *report_out = report;
+    return colours;
+  }
+
+  // Symmetrised kNN graph over the seen points, lists sorted (the order of a sum is fixed).
+  std::vector<std::vector<int>> adjacency(n);
+  {
+    const SpatialIndex index(seen_points);
+    const NeighbourGraph knn = NeighbourGraph::byCount(seen_points, index, params.neighbours + 1);
+    for (std::size_t i = 0; i < n; ++i)
+      for (const int* j = knn.begin(i); j != knn.end(i); ++j)
+        if (*j != int(i)) {
+          adjacency[i].push_back(*j);
+          adjacency[*j].push_back(int(i));
+        }
+    for (auto& list : adjacency) {
+      std::sort(list.begin(), list.end());
+      list.erase(std::unique(list.begin(), list.end()), list.end());
+    }
+  }
+
+  ProgressReporter rep(progress, "colorization", static_cast<std::size_t>(params.iterations));
+  std::vector<Eigen::Vector3f> next = colours;
+  const float s = params.smoothness, delta = params.huber_threshold;
+  for (int it = 0; it < params.iterations; ++it) {
+    float change = 0;
+#pragma omp parallel for schedule(static) reduction(max : change)
+    for (std::int64_t i = 0; i < std::int64_t(n); ++i) {
+      if (!(confidence[i] > 0)) continue;
+      Eigen::Vector3f sum = confidence[i] * median[i];
+      float weight = confidence[i];
+      for (const int j : adjacency[i]) {
+        const float d = (colours[i] - colours[j]).norm();
+        const float a = d > delta ? delta / d : 1.f;
+        sum += s * a * colours[j];
+        weight += s * a;
+      }
+      next[i] = sum / weight;
+      change = std::max(change, (next[i] - colours[i]).cwiseAbs().maxCoeff());
+    }
+    colours.swap(next);
+    report.iterations = it + 1;
+    report.last_change = change;
+    rep.advance();
+    rep.throwIfCancelled();
+    if (change <= params.tolerance) break;
+  }
+  rep.finish();
+  if (report_out) *report_out = report;
+  return colours;
+}
+
+std::vector<Eigen::Vector3f> colorizePoints(const Positions& points, const std::vector<Eigen::Vector3f>& input,
+                                            const std::vector<RegisteredPhoto>& photos,
+                                            const PointColorizationParameters& params,
+                                            PointColorizationReport* report, const ProgressCallback& progress) {
+  params.validate();
+  if (points.empty()) throw InvalidInput("colorization: the input cloud is empty");
+  if (photos.empty()) throw InvalidInput("colorization: no photo");
+  if (countFinite(points) == 0) throw InvalidInput("colorization: no finite point in the cloud (all NaN or Inf)");
+  const ColourCandidates candidates = collectColourCandidates(points, photos, params.visibility);
+  PointColorizationReport r;
+  auto out = colorizeFromCandidates(points, input, candidates, params, &r, progress);
+  r.seen_per_photo.assign(photos.size(), 0);
+  for (const int v : candidates.photo) ++r.seen_per_photo[v];
+  if (report) *report = r;
+  return out;
+}
+
+template class PointColorization<pcl::PointXYZRGB>;
+template class PointColorization<pcl::PointXYZRGBNormal>;
+
+}  // namespace paps

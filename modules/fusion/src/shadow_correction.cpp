@@ -121,12 +121,47 @@ std::vector<Eigen::Vector3f> correctShadows(const Positions& points, const Norma
   report.mean_cos_lit = float(lit_means[3]);
   report.mean_luminance_shadow = float(shadow_means[1]);
   report.mean_beta_shadow = float(shadow_means[2]);
-  float ssr = params.sun_sky_ratio;
-  if (estimate) {
+  float ssr = estimate ? NAN : params.sun_sky_ratio;
+  if (estimate && params.local_pair_ratio) {
+    // Median over local pairs (shadow boundary point, lit neighbour of the same orientation).
+    std::vector<std::vector<float>> per_point(n);
+    const float cos_same = std::cos(25.f * float(M_PI) / 180.f);
+    // Pairs across the band, both ends off the boundary line itself, whose colours the photos'
+    // pixels and the colorization blend across the edge.
+    const int pair_neighbours = params.estimation_neighbours > 0 ? params.estimation_neighbours : 64;
+#pragma omp parallel
+    {
+      std::vector<int> nn;
+      std::vector<float> d2;
+#pragma omp for schedule(static)
+      for (std::int64_t ii = 0; ii < std::int64_t(n); ++ii) {
+        const std::size_t i = std::size_t(ii);
+        if (!band[i] || boundary[i] || !in_shadow[i]) continue;
+        const double yi = colour::luminanceOfLightness(lab[i].x());
+        if (!(yi > 1e-3)) continue;
+        index.nearestK(usable[i], pair_neighbours + 1, nn, d2);
+        for (const int j : nn) {
+          if (in_shadow[j] || boundary[j] || cosine[j] < 0.1f || normals[i].normalized().dot(normals[j].normalized()) < cos_same) continue;
+          const double yj = colour::luminanceOfLightness(lab[j].x());
+          per_point[i].push_back(float((yj / yi * beta[i] - beta[j]) / cosine[j]));
+        }
+      }
+    }
+    std::vector<float> all;
+    for (const auto& v : per_point) all.insert(all.end(), v.begin(), v.end());
+    if (all.size() >= 20) {
+      std::nth_element(all.begin(), all.begin() + std::ptrdiff_t(all.size() / 2), all.end());
+      ssr = all[all.size() / 2];
+    } else {
+      ssr = NAN;  // too few local pairs: the class means below
+    }
+    report.local_pairs = all.size();
+  }
+  if (estimate && !(ssr >= 0)) {
     const double denominator = shadow_means[1] * lit_means[3];
     ssr = denominator > 0 ? float((lit_means[1] * shadow_means[2] - shadow_means[1] * lit_means[2]) / denominator) : 0.f;
-    if (!std::isfinite(ssr) || ssr < 0) ssr = 0;  // lit no brighter than shadow: no sun to remove or add
   }
+  if (!std::isfinite(ssr) || ssr < 0) ssr = 0;  // lit no brighter than shadow: no sun to remove or add
   report.sun_sky_ratio = ssr;
   const double a_lit = lit_means[4], b_lit = lit_means[5], a_shadow = shadow_means[3], b_shadow = shadow_means[4];
   auto ratio = [](double num, double den) { return den > 1e-3 && num > 1e-3 ? float(std::clamp(num / den, 0.2, 5.0)) : 1.f; };

@@ -213,6 +213,7 @@ cv::Mat segmentShadowsGraphCut(const cv::Mat& l, const cv::Mat& shadow_lightness
     reverse[r] = e;
   };
   const double k = 1.0 / (2.0 * double(sigma) * sigma);
+  double constant = 0;
   for (int r = 0; r < rows; ++r)
     for (int c = 0; c < cols; ++c) {
       const std::size_t p = std::size_t(r) * cols + c;
@@ -222,8 +223,11 @@ cv::Mat segmentShadowsGraphCut(const cv::Mat& l, const cv::Mat& shadow_lightness
       const double sd = std::max(1e-3f, data_sigma.at<float>(r, c)), kd = 1.0 / (2 * sd * sd);
       const double lit_cost = std::exp(-kd * (lp - ls) * (lp - ls));
       const double shadow_cost = std::exp(-kd * (lp - ll) * (lp - ll));
-      addPair(source, p, shadow_cost, 0);
-      addPair(p, sink, lit_cost, 0);
+      // Only the difference of the two data costs needs an edge; the common part is a
+      // constant of the energy.
+      constant += std::min(lit_cost, shadow_cost);
+      if (shadow_cost > lit_cost) addPair(source, p, shadow_cost - lit_cost, 0);
+      else if (lit_cost > shadow_cost) addPair(p, sink, lit_cost - shadow_cost, 0);
       if (gamma > 0) {
         if (c + 1 < cols) {
           const double d = lp - l.at<float>(r, c + 1), w = gamma * std::exp(-k * d * d);
@@ -236,7 +240,7 @@ cv::Mat segmentShadowsGraphCut(const cv::Mat& l, const cv::Mat& shadow_lightness
       }
     }
   const long flow = boost::boykov_kolmogorov_max_flow(g, source, sink);
-  if (energy) *energy = double(flow) / kScale;
+  if (energy) *energy = constant + double(flow) / kScale;
   auto colour = boost::get(boost::vertex_color, g);
   const auto source_colour = boost::get(colour, source);
   cv::Mat mask(rows, cols, CV_8U);

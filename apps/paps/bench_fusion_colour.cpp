@@ -2,8 +2,10 @@
 // on the synthetic street, against the simple alternatives, with the true colours and shadow
 // labels the synthetic scene provides.
 //  - colorization: RMS error (linear RGB in [0, 1]) to the true colour (exposure * albedo *
-//    irradiance, no noise) for ours, the nearest photo alone, the per-point mean and median of
-//    the candidates; three photos, a van (not in the scan) in front of the middle one;
+//    irradiance, no noise) and to what the photos record without the van and without noise,
+//    for ours (occlusion-weighted median + Huber kNN regularisation), the nearest photo alone,
+//    the per-point mean and median of the candidates; three photos, a van (not in the scan)
+//    in front of the middle one;
 //  - shadow detection: accuracy, IoU and balanced accuracy on the points the photos see for
 //    ours (reflectance-guided), eq. 4.4 as printed, and one Otsu threshold on L*;
 //  - shadow correction (all lit): mean shadow over mean lit luminance of same-albedo points
@@ -129,6 +131,17 @@ int benchColourAndShadows(bool quick) {
       po.van_x = poses[v].translation().x();
       photos.push_back({scene.photo(camera, poses[v], po).image, camera, poses[v]});
     }
+    // What the same photos record without the van and without noise: the colour a method can
+    // at best recover from them (the sub-pixel texture aliased the same way).
+    std::vector<RegisteredPhoto> clean_photos;
+    for (int v = 0; v < 3; ++v) {
+      synthetic::PhotoOptions po;
+      po.noise_sigma = 0;
+      clean_photos.push_back({scene.photo(camera, poses[v], po).image, camera, poses[v]});
+    }
+    const ColourCandidates clean = collectColourCandidates(points, clean_photos);
+    std::vector<Eigen::Vector3f> recoverable(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) recoverable[i] = medianCandidate(clean, i);
     auto t = Clock::now();
     const ColourCandidates candidates = collectColourCandidates(points, photos);
     const double t_candidates = secondsSince(t);
@@ -159,9 +172,20 @@ int benchColourAndShadows(bool quick) {
                                              candidates, {}, &report);
     const double t_ours = secondsSince(t);
     std::vector<std::uint8_t> seen(points.size(), 0), occluded(points.size(), 0);
-    std::size_t n_seen = 0, n_occluded = 0;
+    std::vector<std::uint8_t> seen_all(points.size(), 0), occluded_all(points.size(), 0);
+    std::size_t n_seen = 0, n_occluded = 0, n_seen_all = 0, n_occluded_all = 0;
     for (std::size_t i = 0; i < points.size(); ++i) {
-      if (!uniform[i] || candidates.count(i) == 0) continue;
+      if (candidates.count(i) == 0) continue;
+      seen_all[i] = 1;
+      ++n_seen_all;
+      for (std::size_t k = 0; k < candidates.count(i); ++k) {
+        const auto slot = candidates.offsets[i] + std::int64_t(k);
+        if (candidates.photo[slot] == 1 && (candidates.colour[slot] - recoverable[i]).norm() > 0.15f) {
+          occluded_all[i] = 1;
+          ++n_occluded_all;
+        }
+      }
+      if (!uniform[i]) continue;
       seen[i] = 1;
       ++n_seen;
       for (std::size_t k = 0; k < candidates.count(i); ++k) {
@@ -173,16 +197,22 @@ int benchColourAndShadows(bool quick) {
       }
     }
     std::printf("Colorization (3 photos, van in front of the middle one; candidates %.2f s)\n", t_candidates);
-    std::printf("  %-26s %14s %18s %9s\n", "method", "RMS all seen", "RMS van-occluded", "time s");
-    std::printf("  %-26s %14s %18s %9s\n", "", ("(" + std::to_string(n_seen) + ")").c_str(),
-                ("(" + std::to_string(n_occluded) + ")").c_str(), "");
+    std::printf("  against the true colour, on points of uniform true colour; against what the photos\n"
+                "  record without van and noise (median of those), on every point seen\n");
+    std::printf("  %-26s %10s %12s %10s %12s %8s\n", "method", "true: all", "true: van", "photos: all",
+                "photos: van", "time s");
+    std::printf("  %-26s %10s %12s %10s %12s %8s\n", "", ("(" + std::to_string(n_seen) + ")").c_str(),
+                ("(" + std::to_string(n_occluded) + ")").c_str(), ("(" + std::to_string(n_seen_all) + ")").c_str(),
+                ("(" + std::to_string(n_occluded_all) + ")").c_str(), "");
     auto row = [&](const char* name, const std::vector<Eigen::Vector3f>& c, double time) {
-      std::printf("  %-26s %14.4f %18.4f %9.3f\n", name, rmsError(c, truth, seen), rmsError(c, truth, occluded), time);
+      std::printf("  %-26s %10.4f %12.4f %10.4f %12.4f %8.3f\n", name, rmsError(c, truth, seen),
+                  rmsError(c, truth, occluded), rmsError(c, recoverable, seen_all), rmsError(c, recoverable, occluded_all),
+                  time);
     };
     row("nearest photo only", nearest, t_simple);
     row("per-point mean", mean, t_simple);
     row("per-point median", median, t_median);
-    row("ours (median + Huber kNN)", ours, t_ours);
+    row("ours", ours, t_ours);
     std::printf("  ours: %d iterations, %zu points coloured, %zu unseen\n\n", report.iterations, report.coloured,
                 report.unseen);
   }
@@ -194,6 +224,7 @@ int benchColourAndShadows(bool quick) {
   for (int v = 0; v < views; ++v) {
     synthetic::PhotoOptions po;
     po.seed = 20 + v;
+    po.exposure = 0.5;  // lit pavement stays below 255 (saturation would cap the lit side)
     photos.push_back({scene.photo(camera, poses[v], po).image, camera, poses[v]});
   }
   auto cloud = scan.cloud.makeShared();
@@ -280,7 +311,7 @@ int benchColourAndShadows(bool quick) {
   crow("ours (detected)", detected);
   crow("true labels", truth_labels);
   crow("true labels and SSR", truth_labels, float(options.sun_sky_ratio));
-  std::printf("  (true sun-sky ratio %.2f; photo values saturate at 255, which caps relit bright surfaces)\n",
+  std::printf("  (true sun-sky ratio %.2f; photos at exposure 0.5: only lane markings saturate)\n",
               options.sun_sky_ratio);
   return 0;
 }

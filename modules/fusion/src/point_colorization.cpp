@@ -5,9 +5,12 @@
 #include <array>
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
+
+#include <opencv2/imgproc.hpp>
 
 namespace paps {
 
@@ -18,6 +21,7 @@ void PointColorizationParameters::validate() const {
     throw InvalidParameter("huber_threshold", detail::toString(huber_threshold), "a value in (0, 2]");
   if (!(agreement_distance > 0 && agreement_distance <= 2))
     throw InvalidParameter("agreement_distance", detail::toString(agreement_distance), "a value in (0, 2]");
+  requireInRange("occlusion_map_scale", occlusion_map_scale, 0.f, 1.f);
   requireInRange("iterations", iterations, 1, 10000);
   requireInRange("tolerance", tolerance, 0.f, 1.f);
   visibility.validate();
@@ -39,6 +43,8 @@ ColourCandidates collectColourCandidates(const Positions& points, const std::vec
   }
   c.colour.resize(static_cast<std::size_t>(c.offsets.back()));
   c.photo.resize(c.colour.size());
+  c.pixel.resize(c.colour.size());
+  for (const auto& photo : photos) c.photo_size.push_back(photo.image.size());
 #pragma omp parallel for schedule(static)
   for (std::int64_t i = 0; i < std::int64_t(points.size()); ++i) {
     std::int64_t slot = c.offsets[i];
@@ -47,24 +53,98 @@ ColourCandidates collectColourCandidates(const Positions& points, const std::vec
       if (!projected[v].visible[i]) continue;
       c.colour[slot] = sampleBilinear(photos[v].image, projected[v].pixel[i]);
       c.photo[slot] = static_cast<int>(v);
+      c.pixel[slot] = projected[v].pixel[i];
       ++slot;
     }
   }
   return c;
 }
 
-Eigen::Vector3f medianCandidate(const ColourCandidates& candidates, std::size_t i) {
+Eigen::Vector3f medianCandidate(const ColourCandidates& candidates, std::size_t i, const std::vector<float>* weights) {
   const std::size_t n = candidates.count(i);
   if (n == 0) return Eigen::Vector3f::Constant(NAN);
-  std::vector<float> values(n);
+  const std::int64_t first = candidates.offsets[i];
+  std::vector<std::pair<float, float>> values(n);  // value, weight
   Eigen::Vector3f m;
   for (int ch = 0; ch < 3; ++ch) {
-    for (std::size_t k = 0; k < n; ++k) values[k] = candidates.colour[candidates.offsets[i] + k][ch];
+    double total = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+      const float w = weights ? std::max(0.f, (*weights)[std::size_t(first) + k]) : 1.f;
+      values[k] = {candidates.colour[std::size_t(first) + k][ch], w};
+      total += w;
+    }
     std::sort(values.begin(), values.end());
-    m[ch] = n % 2 ? values[n / 2] : 0.5f * (values[n / 2 - 1] + values[n / 2]);
+    if (!(total > 0)) {  // every weight 0: the plain median
+      for (auto& v : values) v.second = 1;
+      total = double(n);
+    }
+    // The value where the cumulative weight crosses half; the mean of the two neighbours when
+    // it reaches half exactly (the usual median for an even count of equal weights).
+    double cumulative = 0;
+    m[ch] = values.back().first;
+    for (std::size_t k = 0; k < n; ++k) {
+      cumulative += values[k].second;
+      if (std::abs(cumulative - 0.5 * total) <= 1e-9 * total && k + 1 < n) {
+        m[ch] = 0.5f * (values[k].first + values[k + 1].first);
+        break;
+      }
+      if (cumulative > 0.5 * total) {
+        m[ch] = values[k].first;
+        break;
+      }
+    }
   }
   return m;
 }
+
+namespace {
+
+// The weight of every candidate from the occlusion maps (see PointColorizationParameters).
+std::vector<float> occlusionWeights(const ColourCandidates& candidates, std::size_t n,
+                                    const PointColorizationParameters& params) {
+  std::vector<float> weights(candidates.colour.size(), 1.f);
+  const std::size_t views = candidates.photo_size.size();
+  if (params.occlusion_map_scale <= 0 || views < 2 || candidates.pixel.size() != candidates.colour.size())
+    return weights;
+  constexpr int kDown = 4;  // the maps are smooth: a quarter of the resolution
+  std::vector<cv::Mat> sum(views), count(views);
+  for (std::size_t v = 0; v < views; ++v) {
+    const cv::Size size((candidates.photo_size[v].width + kDown - 1) / kDown,
+                        (candidates.photo_size[v].height + kDown - 1) / kDown);
+    sum[v] = cv::Mat::zeros(size, CV_32F);
+    count[v] = cv::Mat::zeros(size, CV_32F);
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    if (candidates.count(i) < 3) continue;
+    const Eigen::Vector3f m = medianCandidate(candidates, i);
+    for (std::int64_t s = candidates.offsets[i]; s < candidates.offsets[i + 1]; ++s) {
+      const int v = candidates.photo[s];
+      const int c = std::clamp(int(candidates.pixel[s].x() / kDown), 0, sum[v].cols - 1);
+      const int r = std::clamp(int(candidates.pixel[s].y() / kDown), 0, sum[v].rows - 1);
+      sum[v].at<float>(r, c) += (candidates.colour[s] - m).norm();
+      count[v].at<float>(r, c) += 1;
+    }
+  }
+  for (std::size_t v = 0; v < views; ++v) {
+    const double sigma = std::max(0.5, double(params.occlusion_map_scale) * candidates.photo_size[v].width / kDown);
+    cv::GaussianBlur(sum[v], sum[v], cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+    cv::GaussianBlur(count[v], count[v], cv::Size(0, 0), sigma, sigma, cv::BORDER_CONSTANT);
+  }
+  const float tau = params.agreement_distance;
+  for (std::size_t s = 0; s < weights.size(); ++s) {
+    const int v = candidates.photo[s];
+    const int c = std::clamp(int(candidates.pixel[s].x() / kDown), 0, sum[v].cols - 1);
+    const int r = std::clamp(int(candidates.pixel[s].y() / kDown), 0, sum[v].rows - 1);
+    const float k = count[v].at<float>(r, c);
+    // Too few measured candidates around: no evidence either way (the weight stays 1).
+    if (!(k > 1e-3f)) continue;
+    const float residual = sum[v].at<float>(r, c) / k;
+    weights[s] = 1.f / (1.f + (residual / tau) * (residual / tau));
+  }
+  return weights;
+}
+
+}  // namespace
 
 std::vector<Eigen::Vector3f> colorizeFromCandidates(const Positions& points, const std::vector<Eigen::Vector3f>& input,
                                                     const ColourCandidates& candidates,
@@ -86,7 +166,8 @@ std::vector<Eigen::Vector3f> colorizeFromCandidates(const Positions& points, con
   if (finite == 0) throw InvalidInput("colorization: no finite point in the cloud (all NaN or Inf)");
   report.non_finite = n - finite;
 
-  // Data term: median and confidence of each seen point; the graph joins seen points only.
+  // Data term: (weighted) median and confidence of each seen point; the graph joins seen points only.
+  const std::vector<float> weights = occlusionWeights(candidates, n, params);
   std::vector<Eigen::Vector3f> median(n, Eigen::Vector3f::Constant(NAN));
   std::vector<float> confidence(n, 0.f);
   Positions seen_points(n, Eigen::Vector3f::Constant(NAN));
@@ -97,11 +178,14 @@ std::vector<Eigen::Vector3f> colorizeFromCandidates(const Positions& points, con
       ++report.unseen;
       continue;
     }
-    median[i] = medianCandidate(candidates, i);
-    std::size_t agree = 0;
-    for (std::size_t k = 0; k < c; ++k)
-      agree += (candidates.colour[candidates.offsets[i] + k] - median[i]).norm() <= params.agreement_distance;
-    confidence[i] = std::max(0.1f, float(agree) / float(c));
+    median[i] = medianCandidate(candidates, i, &weights);
+    double agree = 0, total = 0;
+    for (std::size_t k = 0; k < c; ++k) {
+      const std::size_t slot = std::size_t(candidates.offsets[i]) + k;
+      total += weights[slot];
+      if ((candidates.colour[slot] - median[i]).norm() <= params.agreement_distance) agree += weights[slot];
+    }
+    confidence[i] = std::max(0.1f, total > 0 ? float(agree / total) : 0.f);
     seen_points[i] = points[i];
     ++report.coloured;
   }

@@ -23,18 +23,42 @@ SyntheticImage renderSyntheticImage(const Positions& points, const std::vector<f
   SyntheticImage out;
   out.visible_points = proj.visibleCount();
   const int w = camera.width, h = camera.height;
-  // Drawn pixels: the front-most visible point of each pixel (ties: lowest index).
-  cv::Mat drawn_depth(h, w, CV_32F, cv::Scalar(INFINITY));
-  cv::Mat drawn_value(h, w, CV_32F, cv::Scalar(0));
+  // Front-most depth of each pixel (the points rounded to their pixel).
+  cv::Mat front_depth(h, w, CV_32F, cv::Scalar(INFINITY));
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!proj.visible[i] || !std::isfinite(values[i])) continue;
     const int x = static_cast<int>(std::lround(proj.pixel[i].x())), y = static_cast<int>(std::lround(proj.pixel[i].y()));
-    float& d = drawn_depth.at<float>(y, x);
-    if (proj.depth[i] < d) {
-      d = proj.depth[i];
-      drawn_value.at<float>(y, x) = values[i];
-    }
+    front_depth.at<float>(y, x) = std::min(front_depth.at<float>(y, x), proj.depth[i]);
   }
+  // Drawn pixels: every point splats bilinearly onto its four pixels, where it is in the front
+  // layer, so the image (and the costs of the registration) change continuously with the pose.
+  const float layer = static_cast<float>(1 + parameters.fill_depth_tolerance);
+  cv::Mat weight(h, w, CV_32F, cv::Scalar(0)), value_sum(h, w, CV_32F, cv::Scalar(0)), depth_sum(h, w, CV_32F, cv::Scalar(0));
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!proj.visible[i] || !std::isfinite(values[i])) continue;
+    const float fx = proj.pixel[i].x(), fy = proj.pixel[i].y();
+    const int x0 = static_cast<int>(std::floor(fx)), y0 = static_cast<int>(std::floor(fy));
+    for (int dy = 0; dy <= 1; ++dy)
+      for (int dx = 0; dx <= 1; ++dx) {
+        const int x = x0 + dx, y = y0 + dy;
+        if (x < 0 || y < 0 || x >= w || y >= h) continue;
+        const float f = front_depth.at<float>(y, x);
+        if (std::isfinite(f) && proj.depth[i] > f * layer) continue;
+        const float wgt = (dx ? fx - x0 : 1 - (fx - x0)) * (dy ? fy - y0 : 1 - (fy - y0));
+        weight.at<float>(y, x) += wgt;
+        value_sum.at<float>(y, x) += wgt * values[i];
+        depth_sum.at<float>(y, x) += wgt * proj.depth[i];
+      }
+  }
+  cv::Mat drawn_depth(h, w, CV_32F, cv::Scalar(INFINITY));
+  cv::Mat drawn_value(h, w, CV_32F, cv::Scalar(0));
+  for (int y = 0; y < h; ++y)
+    for (int x = 0; x < w; ++x) {
+      const float wgt = weight.at<float>(y, x);
+      if (wgt < 0.25f) continue;
+      drawn_depth.at<float>(y, x) = depth_sum.at<float>(y, x) / wgt;
+      drawn_value.at<float>(y, x) = value_sum.at<float>(y, x) / wgt;
+    }
   out.intensity = drawn_value.clone();
   out.depth = cv::Mat(h, w, CV_32F, cv::Scalar(0));
   out.mask = cv::Mat(h, w, CV_8U, cv::Scalar(0));

@@ -114,6 +114,54 @@ TEST(ShadowDetection, GraphCutSeparatesADarkAndABrightHalf) {
   EXPECT_THROW(paps::segmentShadowsGraphCut(cv::Mat(), ls, ll, 5.f), paps::InvalidInput);
 }
 
+// The cut is a minimum of eq. 4.4: the energy the max flow reports is that of the labels it
+// returns, and no single pixel flipped lowers it.
+TEST(ShadowDetection, GraphCutReturnsAMinimumOfEquation44) {
+  const int w = 48, h = 36;
+  cv::Mat image(h, w, CV_8UC3);
+  paps::Random rng(9);
+  for (int r = 0; r < h; ++r)
+    for (int c = 0; c < w; ++c) {
+      const double v = ((r / 9 + c / 12) % 2 ? 30 : 150) + 25 * rng.gaussian();
+      const auto b = static_cast<std::uint8_t>(std::clamp(std::lround(v), 0L, 255L));
+      image.at<cv::Vec3b>(r, c) = {b, b, b};
+    }
+  const float ls = paps::colour::lightnessOfLuminance(30 / 255.f), ll = paps::colour::lightnessOfLuminance(150 / 255.f);
+  const float sigma = 0.5f * (ll - ls);
+  double reported = 0;
+  cv::Mat mask = paps::segmentShadowsGraphCut(image, ls, ll, sigma, 1.f, &reported);
+  cv::Mat l(h, w, CV_32F);
+  for (int r = 0; r < h; ++r)
+    for (int c = 0; c < w; ++c)
+      l.at<float>(r, c) = paps::colour::lightnessOfLuminance(image.at<cv::Vec3b>(r, c)[0] / 255.f);
+  const double k = 1 / (2.0 * sigma * sigma);
+  auto energy = [&](const cv::Mat& m) {
+    double e = 0;
+    for (int r = 0; r < h; ++r)
+      for (int c = 0; c < w; ++c) {
+        const double x = l.at<float>(r, c);
+        const bool shadow = m.at<std::uint8_t>(r, c);
+        e += std::exp(-k * (x - (shadow ? ll : ls)) * (x - (shadow ? ll : ls)));
+        if (c + 1 < w && shadow != bool(m.at<std::uint8_t>(r, c + 1)))
+          e += std::exp(-k * (x - l.at<float>(r, c + 1)) * (x - l.at<float>(r, c + 1)));
+        if (r + 1 < h && shadow != bool(m.at<std::uint8_t>(r + 1, c)))
+          e += std::exp(-k * (x - l.at<float>(r + 1, c)) * (x - l.at<float>(r + 1, c)));
+      }
+    return e;
+  };
+  const double best = energy(mask);
+  EXPECT_NEAR(reported, best, 1e-3 * best);
+  const int shadow = cv::countNonZero(mask);
+  EXPECT_GT(shadow, w * h / 4);
+  EXPECT_LT(shadow, 3 * w * h / 4);
+  for (int r = 0; r < h; r += 3)
+    for (int c = 0; c < w; c += 3) {
+      cv::Mat flipped = mask.clone();
+      flipped.at<std::uint8_t>(r, c) ^= 255;
+      EXPECT_GE(energy(flipped), best - 1e-3) << r << " " << c;
+    }
+}
+
 // Measured on this scene (24 m street, 5 photos 320 x 240, colours from PointColorization),
 // over the 25,662 points the photos vote on (15% in shadow):
 //   reflectance-guided: accuracy 0.848, IoU 0.483, balanced accuracy 0.88;

@@ -201,9 +201,10 @@ struct Registration {
     return poseOf(x);
   }
 
-  double costAt(const CameraPose& pose) {
+  double costAt(const CameraPose& pose, int* defined_pixels = nullptr) {
     const ImageComparator comparator(grey, p.fine_metric);
     const SyntheticImage s = render(camera, pose);
+    if (defined_pixels) *defined_pixels = cv::countNonZero(s.mask);
     return comparator.cost(s.intensity, s.mask);
   }
 };
@@ -241,7 +242,12 @@ CameraPose registerImageToPoints(const Positions& points, const std::vector<floa
   const int budget = parameters.max_evaluations *
                      (parameters.coarse_levels * parameters.coarse_max_wide_images + parameters.fine_levels * (parameters.restarts + 1));
   Registration r{points, values, camera, parameters, grey, report, progress, budget};
-  report.initial_cost = r.costAt(initial_pose);
+  int defined = 0;
+  report.initial_cost = r.costAt(initial_pose, &defined);
+  // Below a few percent of the image there is nothing to register against (wrong pose or cloud).
+  if (defined < static_cast<int>(0.02 * camera.width * camera.height))
+    throw InvalidInput("image registration: the cloud covers " + std::to_string(defined) + " of the " +
+                       std::to_string(camera.width * camera.height) + " pixels seen from the initial pose (at least 2% needed)");
   auto t0 = Clock::now();
   CameraPose pose = r.coarse(initial_pose);
   report.coarse_seconds = secondsSince(t0);

@@ -80,6 +80,21 @@ TEST(PointColorization, WeightedMedianOfCandidates) {
   EXPECT_TRUE(paps::medianCandidate(c, 1, &w).isApprox(Eigen::Vector3f(0.9f, 0.2f, 0.6f)));
 }
 
+TEST(PointColorization, ProgressCallbackCancels) {
+  PlaneScene s;
+  const cv::Mat image(s.camera.height, s.camera.width, CV_8UC3, cv::Scalar(30, 120, 200));
+  cv::Mat noisy = image.clone();
+  cv::randu(noisy, cv::Scalar::all(0), cv::Scalar::all(255));
+  paps::PointColorization<pcl::PointXYZRGB> c;
+  c.setInputCloud(s.cloud);
+  c.addView(image, s.camera, s.pose);
+  c.addView(noisy, s.camera, s.pose);
+  int calls = 0;
+  c.setProgressCallback([&](const std::string&, float) { return ++calls < 2; });
+  Cloud out;
+  EXPECT_THROW(c.filter(out), paps::Cancelled);
+}
+
 TEST(PointColorization, BadInputThrows) {
   PlaneScene s;
   const cv::Mat image(s.camera.height, s.camera.width, CV_8UC3, cv::Scalar(1, 2, 3));

@@ -164,6 +164,19 @@ TEST(ShadowCorrection, SameOutputWithOneAndTwoThreads) {
   for (std::size_t i = 0; i < out[0].size(); ++i) ASSERT_EQ(out[0][i].rgba, out[1][i].rgba) << i;
 }
 
+TEST(ShadowCorrection, ProgressCallbackCancels) {
+  const LitStreet& s = LitStreet::get();
+  paps::ShadowCorrection<pcl::PointXYZRGBNormal> c;
+  c.setInputCloud(s.cloud);
+  c.setShadowLabels(s.scan.in_shadow);
+  c.setParameters(s.parameters(paps::RelightTarget::AllLit));
+  int calls = 0;
+  c.setProgressCallback([&](const std::string&, float) { return ++calls < 3; });
+  Cloud out;
+  EXPECT_THROW(c.filter(out), paps::Cancelled);
+  EXPECT_GE(calls, 3);
+}
+
 TEST(ShadowCorrection, BadInputThrows) {
   const LitStreet& s = LitStreet::get();
   paps::ShadowCorrection<pcl::PointXYZRGBNormal> c;

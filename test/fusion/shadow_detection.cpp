@@ -237,6 +237,18 @@ TEST(ShadowDetection, SameOutputWithOneAndTwoThreads) {
   }
 }
 
+TEST(ShadowDetection, ProgressCallbackCancels) {
+  const ShadowStreet& s = ShadowStreet::get();
+  paps::ShadowDetection<pcl::PointXYZRGBNormal> d;
+  d.setInputCloud(s.cloud);
+  d.setReflectance(s.scan.reflectance);
+  for (const auto& p : s.photos) d.addView(p.image, p.camera, p.pose);
+  int calls = 0;
+  d.setProgressCallback([&](const std::string&, float) { return ++calls < 2; });
+  paps::ShadowDetectionResult r;
+  EXPECT_THROW(d.detect(r), paps::Cancelled);
+}
+
 TEST(ShadowDetection, BadInputThrows) {
   const ShadowStreet& s = ShadowStreet::get();
   const auto& photo = s.photos[0];

@@ -90,6 +90,7 @@ std::vector<Eigen::Vector3f> correctShadows(const Positions& points, const Norma
     }
   }
   rep.advance(n);
+  rep.throwIfCancelled();
 
   // Means over the band (or every point), in index order (the same whatever the threads).
   // lit: count, Y, beta, cos, |a|, |b|; shadow: count, Y, beta, |a|, |b|.
@@ -200,6 +201,7 @@ std::vector<Eigen::Vector3f> correctShadows(const Positions& points, const Norma
     corrected[i] = colour::labToRgb(l).cwiseMax(0.f).cwiseMin(1.f);
   }
   rep.advance(n);
+  rep.throwIfCancelled();
 
   // Penumbra: boundary points take the median of their neighbours' corrected colours.
   std::vector<Eigen::Vector3f> out = corrected;

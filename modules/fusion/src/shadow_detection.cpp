@@ -389,6 +389,7 @@ ShadowDetectionResult detectShadows(const Positions& points, const Normals& norm
   pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
   result.pairs_before_histogram = pairs.size();
   rep.advance(n);
+  rep.throwIfCancelled();
 
   // (b) Bimodal L* histogram around each pair.
   std::vector<std::uint8_t> keep(pairs.size(), 0);

@@ -223,8 +223,11 @@ TEST(ShadowDetection, StreetShadowsBeatOtsu) {
 TEST(ShadowDetection, SameOutputWithOneAndTwoThreads) {
   const ShadowStreet& s = ShadowStreet::get();
   paps::ShadowDetectionParameters params;
-  params.graph_cut_scale = 0.5f;
+  params.max_graph_cut_pixels = 160 * 120;  // the photos are cut at half their size
   const auto a = runDetection(s, params, 1), b = runDetection(s, params, 2);
+  ASSERT_TRUE(a.views[0].segmented);
+  EXPECT_FLOAT_EQ(a.views[0].graph_cut_scale, 0.5f);
+  EXPECT_EQ(a.views[0].mask.size(), s.photos[0].image.size());
   EXPECT_EQ(a.in_shadow, b.in_shadow);
   EXPECT_EQ(a.decided, b.decided);
   EXPECT_EQ(a.candidates, b.candidates);
@@ -289,6 +292,7 @@ TEST(ShadowDetection, BadInputThrows) {
   bad([](auto& q) { q.gamma = -1; });
   bad([](auto& q) { q.graph_cut_scale = 0; });
   bad([](auto& q) { q.histogram_bins = 1; });
+  bad([](auto& q) { q.max_graph_cut_pixels = 0; });
 }
 
 }  // namespace

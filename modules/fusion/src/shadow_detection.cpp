@@ -41,6 +41,7 @@ void ShadowDetectionParameters::validate() const {
   requireInRange("min_view_contrast", min_view_contrast, 0.f, 100.f);
   if (!(graph_cut_scale > 0 && graph_cut_scale <= 1))
     throw InvalidParameter("graph_cut_scale", detail::toString(graph_cut_scale), "a value in (0, 1]");
+  requireInRange("max_graph_cut_pixels", max_graph_cut_pixels, 64, 100000000);
   visibility.validate();
 }
 
@@ -480,9 +481,11 @@ ShadowDetectionResult detectShadows(const Positions& points, const Normals& norm
         }
     }
     cv::Mat lc = l;
-    if (params.graph_cut_scale < 1) {
-      const cv::Size size(std::max(1, int(std::lround(l.cols * params.graph_cut_scale))),
-                          std::max(1, int(std::lround(l.rows * params.graph_cut_scale))));
+    const double scale = std::min<double>(params.graph_cut_scale,
+                                          std::sqrt(double(params.max_graph_cut_pixels) / double(l.total())));
+    view.graph_cut_scale = float(std::min(1.0, scale));
+    if (scale < 1) {
+      const cv::Size size(std::max(1, int(std::lround(l.cols * scale))), std::max(1, int(std::lround(l.rows * scale))));
       cv::resize(l, lc, size, 0, 0, cv::INTER_AREA);
       cv::resize(ls, ls, size, 0, 0, cv::INTER_AREA);
       cv::resize(ll, ll, size, 0, 0, cv::INTER_AREA);

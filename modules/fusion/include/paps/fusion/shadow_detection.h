@@ -101,6 +101,10 @@ struct ShadowDetectionParameters {
   /// times fewer nodes); the mask is scaled back to the photo's size. The graph takes about
   /// 650 bytes per pixel of the scaled image (200 MB for 640 x 480).
   float graph_cut_scale = 1.f;
+  /// (c) Largest graph cut image, pixels (64 to 1e8): a larger photo is scaled down further,
+  /// keeping its aspect (the default, 2^19, holds 640 x 480 whole and bounds the graph to about
+  /// 350 MB; a 12-megapixel photo is cut at about 0.2 of its size).
+  int max_graph_cut_pixels = 1 << 19;
   /// Visibility test of each photo.
   VisibilityParameters visibility;
   /// Throws InvalidParameter for a value out of its range.
@@ -114,7 +118,8 @@ struct ShadowView {
   float shadow_lightness = 0;    ///< L_S, L* units
   float lit_lightness = 0;       ///< L_L, L* units
   float sigma = 0;               ///< sigma used, L* units
-  double energy = 0;             ///< minimum of eq. 4.4 (the max-flow value)
+  double energy = 0;             ///< minimum of eq. 4.4 (on the scaled image)
+  float graph_cut_scale = 1;     ///< scale the cut ran at (graph_cut_scale, max_graph_cut_pixels)
   cv::Mat mask;                  ///< CV_8U, the photo's size: 255 shadow, 0 lit; empty when not segmented
 };
 

@@ -99,12 +99,12 @@ struct ShadowDetectionParameters {
   bool reflectance_guided = true;
   /// (c) Scale of the image the graph cut runs on, in (0, 1]: 0.5 halves each side (four
   /// times fewer nodes); the mask is scaled back to the photo's size. The graph takes about
-  /// 650 bytes per pixel of the scaled image (200 MB for 640 x 480).
+  /// 300 bytes per pixel of the scaled image at its peak (90 MB for 640 x 480).
   float graph_cut_scale = 1.f;
   /// (c) Largest graph cut image, pixels (64 to 1e8): a larger photo is scaled down further,
-  /// keeping its aspect (the default, 2^19, holds 640 x 480 whole and bounds the graph to about
-  /// 350 MB; a 12-megapixel photo is cut at about 0.2 of its size).
-  int max_graph_cut_pixels = 1 << 19;
+  /// keeping its aspect (the default, 2^20, holds 1280 x 800 whole and bounds the graph to
+  /// about 300 MB; a 12-megapixel photo is cut at about 0.3 of its size).
+  int max_graph_cut_pixels = 1 << 20;
   /// Visibility test of each photo.
   VisibilityParameters visibility;
   /// Throws InvalidParameter for a value out of its range.

@@ -187,7 +187,7 @@ cv::Mat segmentShadowsGraphCut(const cv::Mat& l, const cv::Mat& shadow_lightness
   requirePositive("sigma", sigma);
   requireInRange("gamma", gamma, 0.f, 100.f);
   // A compressed sparse row graph with 32-bit vertex and edge indices and the flow's maps in
-  // plain arrays: about 200 bytes per pixel (an adjacency_list took 650).
+  // plain arrays: about 300 bytes per pixel at the peak (an adjacency_list took 650).
   using Graph = boost::compressed_sparse_row_graph<boost::directedS, boost::no_property, boost::no_property,
                                                    boost::no_property, std::uint32_t, std::uint32_t>;
   using Edge = boost::graph_traits<Graph>::edge_descriptor;

@@ -19,4 +19,7 @@ int runReconstruct(int argc, char** argv);
 int runRecoverFeatures(int argc, char** argv);
 int runBenchTransport(int argc, char** argv);
 int runTransportWorker(int argc, char** argv);
+int runBenchFusion(int argc, char** argv);
+int runRegister(int argc, char** argv);
+int runMakeStreet(int argc, char** argv);
 }  // namespace paps::cli

@@ -28,6 +28,9 @@ const char* kUsage =
     "  reconstruct IN OUT.ply [opts] surface reconstruction by optimal transport (a mesh of few vertices)\n"
     "  recover-features MESH IN OUT.ply   sharpen a smooth mesh's creases by optimal transport to IN\n"
     "  bench transport [options]     OT feature recovery and reconstruction vs PCL Poisson and GP3\n"
+    "  make-street DIR               write the synthetic street: cloud, photos, true and GPS poses\n"
+    "  register CLOUD LIST OUT_LIST  refine photo poses against a cloud (NMI/DHOG/MIDHOG, BOBYQA)\n"
+    "  bench fusion [options]        image-cloud registration (Table 4.1), colorization, shadows\n"
     "  bench files IN [IN..]         ours vs the peers on your own clouds: time, memory, output\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
@@ -66,6 +69,11 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "recover-features")) return paps::cli::runRecoverFeatures(argc, argv);
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "transport")) return paps::cli::runBenchTransport(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker-ot")) return paps::cli::runTransportWorker(argc, argv);
+#endif
+#ifdef PAPS_HAVE_FUSION
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "fusion")) return paps::cli::runBenchFusion(argc, argv);
+    if (!std::strcmp(argv[1], "register")) return paps::cli::runRegister(argc, argv);
+    if (!std::strcmp(argv[1], "make-street")) return paps::cli::runMakeStreet(argc, argv);
 #endif
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "files")) return paps::cli::runBenchFiles(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);

@@ -6,6 +6,7 @@
 
 #include <unistd.h>
 
+#include <opencv2/core/utils/logger.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
@@ -142,6 +143,8 @@ int runMakeStreet(int argc, char** argv) {
 }
 
 int runRegister(int argc, char** argv) {
+  // OpenCV's own warnings (a damaged image...) would add lines to our one-line errors.
+  cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
   const Arguments a = Arguments::parse(argc, argv, 2, {"help", "quiet", "coarse-only"});
   if (a.has("help")) { std::fputs(kRegisterUsage, stdout); return 0; }
   a.allowOnly({"values", "metric", "alpha", "coarse-only", "truth", "quiet"});
@@ -220,6 +223,10 @@ int runRegister(int argc, char** argv) {
   if (!truth.empty())
     std::printf("register: mean error %.2f -> %.2f px over %zu photos\n", sum_before / entries.size(),
                 sum_after / entries.size(), entries.size());
+  // Image paths are relative to their list's folder: re-express them for OUT_LIST's.
+  const std::filesystem::path in_folder = std::filesystem::absolute(a.positional[1]).parent_path();
+  const std::filesystem::path out_folder = std::filesystem::absolute(a.positional[2]).parent_path();
+  for (auto& e : out) e.image = std::filesystem::relative(in_folder / e.image, out_folder).lexically_normal().string();
   savePhotoListAtomic(a.positional[2], out);
   std::printf("wrote %s\n", a.positional[2].c_str());
   return 0;

@@ -127,6 +127,8 @@ std::vector<RegisteredPhoto> loadPhotos(const std::string& list_path, const std:
   for (const auto& e : entries) {
     const std::string file = (folder / e.image).string();
     RegisteredPhoto p;
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(file, ec)) throw IoError("cannot read image '" + file + "': no such file");
     p.image = cv::imread(file, cv::IMREAD_COLOR);
     if (p.image.empty()) throw IoError("cannot read image '" + file + "'");
     if (p.image.cols != e.camera.width || p.image.rows != e.camera.height)

@@ -5,6 +5,7 @@
 #         cloud_io     paps::loadCloud: our PCD/PLY header checks, then PCL's readers
 #                      (test/core/fuzz_cloud_io.cpp; PCL itself is not instrumented, so
 #                      coverage guides through our checks and a crash anywhere is caught)
+#         photo_list   paps::parsePhotoList, the photo lists of paps register (test/fusion/fuzz_photo_list.cpp)
 #         stages       every algorithm (the optimal-transport stages too) on small clouds of awkward geometry (copies, lines,
 #                      planes, tiny and UTM-like scales; test/fuzz_stages.cpp)
 # CHECK=asan (default) builds the libraries with clang and ASan/UBSan; CHECK=malloc builds
@@ -16,7 +17,7 @@
 # regression-<hash>) so that the target's corpus test replays it in CI. New corpus entries
 # are not copied back (keep the committed corpus tiny).
 set -euo pipefail
-TARGET=${1:?usage: scripts/fuzz.sh compression|cloud_io|stages [SECONDS] [BUILD_DIR]}
+TARGET=${1:?usage: scripts/fuzz.sh compression|cloud_io|photo_list|stages [SECONDS] [BUILD_DIR]}
 SECONDS_TO_RUN=${2:-120}
 CHECK=${CHECK:-asan}
 case "$CHECK" in
@@ -30,8 +31,9 @@ ROOT=$(cd "$(dirname "$0")/.." && pwd)
 case "$TARGET" in
   compression) BIN=test/compression/fuzz_compression_decoder; CORPUS_SRC="$ROOT/test/compression/corpus"; MAX_LEN=65536 ;;
   cloud_io) BIN=test/core/fuzz_cloud_io; CORPUS_SRC="$ROOT/test/core/cloud_io_corpus"; MAX_LEN=8192 ;;
+  photo_list) BIN=test/fusion/fuzz_photo_list; CORPUS_SRC="$ROOT/test/fusion/photo_list_corpus"; MAX_LEN=4096 ;;
   stages) BIN=test/fuzz_stages; CORPUS_SRC="$ROOT/test/stages_corpus"; MAX_LEN=1202 ;;
-  *) echo "unknown fuzz target '$TARGET' (compression, cloud_io or stages)" >&2; exit 2 ;;
+  *) echo "unknown fuzz target '$TARGET' (compression, cloud_io, photo_list or stages)" >&2; exit 2 ;;
 esac
 # The readers' targets need the core (and the codec) only; the stage target every module.
 MODULES=(-DPAPS_MODULE_FILTERS=OFF -DPAPS_MODULE_SURFACE=OFF -DPAPS_MODULE_FEATURES=OFF)

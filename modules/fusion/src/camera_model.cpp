@@ -55,6 +55,9 @@ bool CameraIntrinsics::project(const Eigen::Vector3d& p, Eigen::Vector2d& pixel)
   if (!(p.z() > 1e-9)) return false;
   const double x = p.x() / p.z(), y = p.y() / p.z();
   const double r2 = x * x + y * y;
+  // The polynomial folds back beyond some radius (k1 < 0 alone: at r^2 = 1 / (3 |k1|)): points
+  // far off the axis would land inside the image. Keep the increasing branch, within 80 deg.
+  if (r2 > 32.0 || !(1 + r2 * (3 * k1 + r2 * (5 * k2 + r2 * 7 * k3)) > 0)) return false;
   const double radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3));
   const double xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x);
   const double yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y;

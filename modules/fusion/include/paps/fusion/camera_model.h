@@ -27,7 +27,9 @@ struct CameraIntrinsics {
   /// the coarse registration, 4.4.1): the principal point moves, the focal lengths stay.
   CameraIntrinsics widened(int margin) const;
 
-  /// Distorted pixel of a point in camera coordinates; false when z <= 1e-9 (behind the camera).
+  /// Distorted pixel of a point in camera coordinates; false when z <= 1e-9 (behind the
+  /// camera), more than 80 degrees off the axis, or where the distortion polynomial has folded
+  /// back (its radius no longer grows: such points would land inside the image by mistake).
   bool project(const Eigen::Vector3d& point_in_camera, Eigen::Vector2d& pixel) const;
   /// Unit direction, in camera coordinates, of the ray through a (distorted) pixel.
   Eigen::Vector3d ray(const Eigen::Vector2d& pixel) const;

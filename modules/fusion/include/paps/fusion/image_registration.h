@@ -19,6 +19,7 @@
 
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
+#include <paps/core/thread_count.h>
 #include <paps/fusion/camera_model.h>
 #include <paps/fusion/image_similarity.h>
 #include <paps/fusion/synthetic_image.h>
@@ -64,7 +65,7 @@ CameraPose registerImageToPoints(const Positions& points, const std::vector<floa
 /// PCL-style front end: the cloud is the input; grey values come from setPointValues() (for
 /// instance the laser reflectance) or, by default, from the normals (shading).
 template <typename PointT>
-class ImageToCloudRegistration : public pcl::PCLBase<PointT> {
+class ImageToCloudRegistration : public pcl::PCLBase<PointT>, public ThreadCountOption {
  public:
   using pcl::PCLBase<PointT>::input_;
 

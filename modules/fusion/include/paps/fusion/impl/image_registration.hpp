@@ -12,6 +12,7 @@ CameraPose ImageToCloudRegistration<PointT>::align() {
                        std::to_string(input_->size()) + " points");
   const std::vector<float> values = values_.empty() ? shadingValues(*input_) : values_;
   report_ = {};
+  const ScopedThreadCount threads(this->threads_);
   return registerImageToPoints(positionsOf(*input_), values, photo_, camera_, initial_pose_, parameters_, &report_,
                                progress_);
 }

@@ -3,7 +3,8 @@
 # denoises the real laser scan table_scene_lms400.pcd with similarity denoising, and
 # runs the quick denoising bench, which writes before/after pictures to demo_out/, and the
 # quick Local Probing Fields bench (a plate under wires; pictures of a wire seen end-on), and
-# the quick optimal-transport bench (feature recovery after PCL Poisson, a cube reconstructed).
+# the quick optimal-transport bench (feature recovery after PCL Poisson, a cube reconstructed),
+# and registers photos of the synthetic street to its LiDAR cloud (paps register).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
@@ -14,4 +15,8 @@ mkdir -p demo_out
 ./build/apps/paps/paps bench denoise --quick --samples "$SAMPLES" --out demo_out
 ./build/apps/paps/paps bench lpf --quick --shapes plate-wires --out demo_out
 ./build/apps/paps/paps bench transport --quick --out demo_out
+# Chapter 4: photos of a street with GPS-like pose errors, registered to the LiDAR cloud.
+./build/apps/paps/paps make-street demo_out/street --photos 4
+./build/apps/paps/paps register demo_out/street/street.pcd demo_out/street/photos_gps.txt \
+  demo_out/street/photos_registered.txt --truth demo_out/street/photos_true.txt --quiet
 echo "demo: pictures and table in $(pwd)/demo_out"

@@ -22,4 +22,6 @@ int runTransportWorker(int argc, char** argv);
 int runBenchFusion(int argc, char** argv);
 int runRegister(int argc, char** argv);
 int runMakeStreet(int argc, char** argv);
+int runColorize(int argc, char** argv);
+int runShadows(int argc, char** argv);
 }  // namespace paps::cli

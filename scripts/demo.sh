@@ -4,7 +4,8 @@
 # runs the quick denoising bench, which writes before/after pictures to demo_out/, and the
 # quick Local Probing Fields bench (a plate under wires; pictures of a wire seen end-on), and
 # the quick optimal-transport bench (feature recovery after PCL Poisson, a cube reconstructed),
-# and registers photos of the synthetic street to its LiDAR cloud (paps register).
+# and registers photos of the synthetic street to its LiDAR cloud (paps register), colours the
+# cloud from them and relights its shadows (paps colorize, paps shadows).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/install_deps.sh
@@ -19,4 +20,9 @@ mkdir -p demo_out
 ./build/apps/paps/paps make-street demo_out/street --photos 4
 ./build/apps/paps/paps register demo_out/street/street.pcd demo_out/street/photos_gps.txt \
   demo_out/street/photos_registered.txt --truth demo_out/street/photos_true.txt --quiet
+# ... then coloured from the registered photos, its shadows detected and relit (the scene's sun).
+./build/apps/paps/paps colorize demo_out/street/street.pcd demo_out/street/photos_registered.txt \
+  demo_out/street/coloured.pcd --quiet
+./build/apps/paps/paps shadows demo_out/street/coloured.pcd demo_out/street/photos_registered.txt \
+  demo_out/street/relit.pcd --sun 0.5,-0.35,0.8 --quiet
 echo "demo: pictures and table in $(pwd)/demo_out"

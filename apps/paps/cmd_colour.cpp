@@ -1,6 +1,7 @@
 // paps colorize CLOUD LIST OUT: colours a cloud from registered photos (PointColorization).
 // paps shadows CLOUD LIST OUT --sun X,Y,Z: detects (ShadowDetection) and relights
 // (ShadowCorrection) the shadows of a coloured cloud with laser reflectance.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -39,8 +40,8 @@ const char* kColorizeUsage =
     "  LIST                  photo list with registered poses (paps register's output,\n"
     "                        docs/fusion.md)\n"
     "  OUT                   .pcd or .ply: CLOUD with every field kept and 'rgb' set (replaced\n"
-    "                        when present); points no photo sees keep CLOUD's rgb, else black.\n"
-    "                        Written atomically\n"
+    "                        when present, 'rgba' when CLOUD has that); points no photo sees\n"
+    "                        keep CLOUD's colour, else black. Written atomically\n"
     "  --neighbours K        neighbours in the smoothness graph, 1 to 64 (default 8)\n"
     "  --smoothness S        weight of the smoothness term, 0 (per-point median) to 1000\n"
     "                        (default 0.25)\n"
@@ -58,8 +59,8 @@ const char* kShadowsUsage =
     "  Detects the cast shadows of a coloured cloud (manuscript 4.5.2: pairs across a shadow\n"
     "  boundary, same laser reflectance but different lightness; a graph cut in every photo\n"
     "  voted back to the points) and relights it (4.5.3, sun-sky ratio estimated).\n"
-    "  CLOUD                 .pcd or .ply with x y z, rgb (e.g. from paps colorize), normal_x/y/z\n"
-    "                        and 'intensity' (laser reflectance in [0, 1])\n"
+    "  CLOUD                 .pcd or .ply with x y z, rgb or rgba (e.g. from paps colorize),\n"
+    "                        normal_x/y/z and 'intensity' (laser reflectance in [0, 1])\n"
     "  LIST                  photo list with registered poses (docs/fusion.md)\n"
     "  OUT                   .pcd or .ply: CLOUD with every field kept, rgb relit (unless\n"
     "                        --relight none) and a uint8 field 'shadow' (1 shadow, 0 lit or\n"
@@ -89,24 +90,49 @@ void quietFromBlob(const pcl::PCLPointCloud2& blob, pcl::PointCloud<PointT>& clo
   pcl::console::setVerbosityLevel(level);
 }
 
-// A blob of one float32 field 'rgb' (PCL's packed colour) with the points' colours.
+// The colour field of a blob: 'rgb', else 'rgba' (PCL's .ply reader names it so when the file
+// has alpha), else "" (none).
+std::string colourField(const pcl::PCLPointCloud2& blob) {
+  if (hasField(blob, "rgb")) return "rgb";
+  if (hasField(blob, "rgba")) return "rgba";
+  return "";
+}
+
+// The packed 0xAARRGGBB colours of the 4-byte field `name` of every point.
+std::vector<std::uint32_t> packedColours(const pcl::PCLPointCloud2& blob, const std::string& name) {
+  const auto f = std::find_if(blob.fields.begin(), blob.fields.end(), [&](const pcl::PCLPointField& x) { return x.name == name; });
+  if (f == blob.fields.end() || pcl::getFieldSize(f->datatype) != 4)
+    throw InvalidInput("the '" + name + "' field is not a packed 4-byte colour");
+  const std::size_t n = std::size_t(blob.width) * blob.height;
+  std::vector<std::uint32_t> v(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t at = (i / blob.width) * blob.row_step + (i % blob.width) * blob.point_step + f->offset;
+    if (at + 4 > blob.data.size()) throw InvalidInput("the cloud's data is shorter than its header says");
+    std::memcpy(&v[i], &blob.data[at], 4);
+  }
+  return v;
+}
+
+// A blob of one packed colour field `name` ('rgb': float32 as PCL writes it; 'rgba': uint32,
+// alpha 255) with the points' colours.
 template <typename PointT>
-pcl::PCLPointCloud2 rgbBlob(const pcl::PointCloud<PointT>& c) {
+pcl::PCLPointCloud2 colourBlob(const pcl::PointCloud<PointT>& c, const std::string& name) {
   pcl::PCLPointCloud2 b;
   b.height = 1;
   b.width = static_cast<std::uint32_t>(c.size());
   pcl::PCLPointField f;
-  f.name = "rgb";
+  f.name = name;
   f.offset = 0;
-  f.datatype = pcl::PCLPointField::FLOAT32;
+  f.datatype = name == "rgba" ? pcl::PCLPointField::UINT32 : pcl::PCLPointField::FLOAT32;
   f.count = 1;
   b.fields.push_back(f);
   b.point_step = 4;
   b.row_step = 4 * b.width;
   b.is_dense = false;
   b.data.resize(b.row_step);
+  const std::uint32_t alpha = name == "rgba" ? 0xff000000u : 0u;
   for (std::size_t i = 0; i < c.size(); ++i) {
-    const std::uint32_t v = (std::uint32_t(c[i].r) << 16) | (std::uint32_t(c[i].g) << 8) | std::uint32_t(c[i].b);
+    const std::uint32_t v = alpha | (std::uint32_t(c[i].r) << 16) | (std::uint32_t(c[i].g) << 8) | std::uint32_t(c[i].b);
     std::memcpy(&b.data[4 * i], &v, 4);
   }
   return b;
@@ -198,14 +224,18 @@ int runColorize(int argc, char** argv) {
   const pcl::PCLPointCloud2 blob = loadCloud(a.positional[0]);
   const Positions points = positionsOf(blob);
   printRead(a.positional[0], points);
+  const std::string field = colourField(blob);
+  const std::vector<std::uint32_t> input =
+      field.empty() ? std::vector<std::uint32_t>(points.size(), 0u) : packedColours(blob, field);
   auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZRGB>>();
-  if (hasField(blob, "rgb")) {
-    quietFromBlob(blob, *cloud);
-  } else {
-    cloud->resize(points.size());
-    for (auto& q : *cloud) q.r = q.g = q.b = 0;
+  cloud->resize(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    auto& q = (*cloud)[i];
+    q.getVector3fMap() = points[i];
+    q.r = static_cast<std::uint8_t>(input[i] >> 16);
+    q.g = static_cast<std::uint8_t>(input[i] >> 8);
+    q.b = static_cast<std::uint8_t>(input[i]);
   }
-  for (std::size_t i = 0; i < points.size(); ++i) (*cloud)[i].getVector3fMap() = points[i];
   cloud->width = static_cast<std::uint32_t>(cloud->size());
   cloud->height = 1;
   cloud->is_dense = false;
@@ -217,12 +247,12 @@ int runColorize(int argc, char** argv) {
   const PointColorizationReport& r = colorize.getReport();
   std::printf("colorize: %zu points coloured, %zu unseen (%s), %zu non-finite; %zu candidates from %zu photos, "
               "%d iterations (last change %.2g)\n",
-              r.coloured, r.unseen, hasField(blob, "rgb") ? "input rgb kept" : "black", r.non_finite, r.candidates,
+              r.coloured, r.unseen, field.empty() ? "black" : ("input " + field + " kept").c_str(), r.non_finite, r.candidates,
               photos.size(), r.iterations, r.last_change);
   std::printf("colorize: points seen per photo:");
   for (const auto s : r.seen_per_photo) std::printf(" %zu", s);
   std::printf("\n");
-  saveCloudAtomic(a.positional[2], appendFields(blob, rgbBlob(out)));
+  saveCloudAtomic(a.positional[2], appendFields(blob, colourBlob(out, field.empty() ? "rgb" : field)));
   std::printf("wrote %s\n", a.positional[2].c_str());
   return 0;
 }
@@ -266,18 +296,17 @@ int runShadows(int argc, char** argv) {
   const auto photos = readPhotos(a.positional[1]);
   const std::string& in = a.positional[0];
   const pcl::PCLPointCloud2 blob = loadCloud(in);
-  if (!hasField(blob, "rgb"))
-    throw InvalidInput("'" + in + "' has no 'rgb' field (colour it first: paps colorize)");
+  const std::string field = colourField(blob);
+  if (field.empty()) throw InvalidInput("'" + in + "' has no 'rgb' field (colour it first: paps colorize)");
   if (!hasField(blob, "normal_x") || !hasField(blob, "normal_y") || !hasField(blob, "normal_z"))
     throw InvalidInput("'" + in + "' has no normals (normal_x/y/z; e.g. paps curvature computes them)");
   if (!hasField(blob, "intensity"))
     throw InvalidInput("'" + in + "' has no 'intensity' field (the laser reflectance)");
   const Positions points = positionsOf(blob);
   printRead(in, points);
-  pcl::PointCloud<pcl::PointXYZRGB> rgb;
+  const std::vector<std::uint32_t> rgb = packedColours(blob, field);
   pcl::PointCloud<pcl::Normal> normals;
   pcl::PointCloud<pcl::Intensity> intensity;
-  quietFromBlob(blob, rgb);
   quietFromBlob(blob, normals);
   quietFromBlob(blob, intensity);
   std::vector<float> reflectance(points.size());
@@ -295,9 +324,9 @@ int runShadows(int argc, char** argv) {
   for (std::size_t i = 0; i < points.size(); ++i) {
     auto& q = (*cloud)[i];
     q.getVector3fMap() = points[i];
-    q.r = rgb[i].r;
-    q.g = rgb[i].g;
-    q.b = rgb[i].b;
+    q.r = static_cast<std::uint8_t>(rgb[i] >> 16);
+    q.g = static_cast<std::uint8_t>(rgb[i] >> 8);
+    q.b = static_cast<std::uint8_t>(rgb[i]);
     q.a = 255;
     q.normal_x = normals[i].normal_x;
     q.normal_y = normals[i].normal_y;
@@ -340,7 +369,7 @@ int runShadows(int argc, char** argv) {
                 : r.local_pairs ? ("estimated from " + std::to_string(r.local_pairs) + " local pairs").c_str()
                                 : "estimated from the class means",
                 r.filtered);
-    result = appendFields(result, rgbBlob(relit));
+    result = appendFields(result, colourBlob(relit, field));
   }
   saveCloudAtomic(a.positional[2], result);
   std::printf("wrote %s\n", a.positional[2].c_str());

@@ -12,7 +12,6 @@
 
 #include <opencv2/core/utils/logger.hpp>
 #include <pcl/common/io.h>
-#include <pcl/console/print.h>
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
 
@@ -80,16 +79,6 @@ const char* kShadowsUsage =
     "  --graph-cut-scale F   image scale of the graph cuts, in (0, 1] (default 1)\n"
     "  --quiet               no progress bar\n";
 
-// Reads a blob into a point type whose fields it may lack in part, without PCL's warnings on
-// stderr (the callers check the fields they need first).
-template <typename PointT>
-void quietFromBlob(const pcl::PCLPointCloud2& blob, pcl::PointCloud<PointT>& cloud) {
-  const auto level = pcl::console::getVerbosityLevel();
-  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
-  pcl::fromPCLPointCloud2(blob, cloud);
-  pcl::console::setVerbosityLevel(level);
-}
-
 // The colour field of a blob: 'rgb', else 'rgba' (PCL's .ply reader names it so when the file
 // has alpha), else "" (none).
 std::string colourField(const pcl::PCLPointCloud2& blob) {
@@ -109,6 +98,34 @@ std::vector<std::uint32_t> packedColours(const pcl::PCLPointCloud2& blob, const 
     const std::size_t at = (i / blob.width) * blob.row_step + (i % blob.width) * blob.point_step + f->offset;
     if (at + 4 > blob.data.size()) throw InvalidInput("the cloud's data is shorter than its header says");
     std::memcpy(&v[i], &blob.data[at], 4);
+  }
+  return v;
+}
+
+// The values of the numeric field `name` (count 1, any PCL type) of every point, as floats
+// (a uint16 intensity or float64 normals are read too, not silently left at zero).
+std::vector<float> numericField(const pcl::PCLPointCloud2& blob, const std::string& name) {
+  const auto f = std::find_if(blob.fields.begin(), blob.fields.end(), [&](const pcl::PCLPointField& x) { return x.name == name; });
+  if (f == blob.fields.end()) throw InvalidInput("the cloud has no '" + name + "' field");
+  const std::size_t n = std::size_t(blob.width) * blob.height;
+  const std::size_t size = pcl::getFieldSize(f->datatype);
+  if (size == 0) throw InvalidInput("the '" + name + "' field has an unknown type");
+  std::vector<float> v(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const std::size_t at = (i / blob.width) * blob.row_step + (i % blob.width) * blob.point_step + f->offset;
+    if (at + size > blob.data.size()) throw InvalidInput("the cloud's data is shorter than its header says");
+    const std::uint8_t* d = &blob.data[at];
+    switch (f->datatype) {
+      case pcl::PCLPointField::INT8: { std::int8_t x; std::memcpy(&x, d, 1); v[i] = x; break; }
+      case pcl::PCLPointField::UINT8: { std::uint8_t x; std::memcpy(&x, d, 1); v[i] = x; break; }
+      case pcl::PCLPointField::INT16: { std::int16_t x; std::memcpy(&x, d, 2); v[i] = x; break; }
+      case pcl::PCLPointField::UINT16: { std::uint16_t x; std::memcpy(&x, d, 2); v[i] = x; break; }
+      case pcl::PCLPointField::INT32: { std::int32_t x; std::memcpy(&x, d, 4); v[i] = static_cast<float>(x); break; }
+      case pcl::PCLPointField::UINT32: { std::uint32_t x; std::memcpy(&x, d, 4); v[i] = static_cast<float>(x); break; }
+      case pcl::PCLPointField::FLOAT32: { float x; std::memcpy(&x, d, 4); v[i] = x; break; }
+      case pcl::PCLPointField::FLOAT64: { double x; std::memcpy(&x, d, 8); v[i] = static_cast<float>(x); break; }
+      default: throw InvalidInput("the '" + name + "' field has an unsupported type");
+    }
   }
   return v;
 }
@@ -305,17 +322,12 @@ int runShadows(int argc, char** argv) {
   const Positions points = positionsOf(blob);
   printRead(in, points);
   const std::vector<std::uint32_t> rgb = packedColours(blob, field);
-  pcl::PointCloud<pcl::Normal> normals;
-  pcl::PointCloud<pcl::Intensity> intensity;
-  quietFromBlob(blob, normals);
-  quietFromBlob(blob, intensity);
-  std::vector<float> reflectance(points.size());
+  const std::vector<float> nx = numericField(blob, "normal_x"), ny = numericField(blob, "normal_y"),
+                           nz = numericField(blob, "normal_z");
+  const std::vector<float> reflectance = numericField(blob, "intensity");
   std::size_t outside = 0;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const float v = intensity[i].intensity;
+  for (const float v : reflectance)
     if (std::isfinite(v) && (v < 0 || v > 1)) ++outside;
-    reflectance[i] = v;
-  }
   if (outside)
     throw InvalidInput("'" + in + "': " + std::to_string(outside) +
                        " intensity values outside [0, 1] (the laser reflectance is expected, scaled to [0, 1])");
@@ -328,9 +340,9 @@ int runShadows(int argc, char** argv) {
     q.g = static_cast<std::uint8_t>(rgb[i] >> 8);
     q.b = static_cast<std::uint8_t>(rgb[i]);
     q.a = 255;
-    q.normal_x = normals[i].normal_x;
-    q.normal_y = normals[i].normal_y;
-    q.normal_z = normals[i].normal_z;
+    q.normal_x = nx[i];
+    q.normal_y = ny[i];
+    q.normal_z = nz[i];
     q.curvature = 0;
   }
   cloud->width = static_cast<std::uint32_t>(cloud->size());

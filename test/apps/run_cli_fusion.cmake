@@ -218,7 +218,8 @@ elseif(CASE STREQUAL "colorize_shadows_errors")
   set(tail "WIDTH 2\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS 2\nDATA ascii\n")
   file(WRITE ${dir}/rgb.pcd "${head}FIELDS x y z rgb\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\n${tail}0 0 0 255\n1 1 1 255\n")
   file(WRITE ${dir}/rgb_normals.pcd "${head}FIELDS x y z rgb normal_x normal_y normal_z\nSIZE 4 4 4 4 4 4 4\nTYPE F F F U F F F\nCOUNT 1 1 1 1 1 1 1\n${tail}0 0 0 255 0 0 1\n1 1 1 255 0 0 1\n")
-  file(WRITE ${dir}/bright.pcd "${head}FIELDS x y z rgb normal_x normal_y normal_z intensity\nSIZE 4 4 4 4 4 4 4 4\nTYPE F F F U F F F F\nCOUNT 1 1 1 1 1 1 1 1\n${tail}0 0 0 255 0 0 1 0.5\n1 1 1 255 0 0 1 200\n")
+  # A uint16 intensity (raw scanner counts), not the reflectance in [0, 1]: read, and refused.
+  file(WRITE ${dir}/bright.pcd "${head}FIELDS x y z rgb normal_x normal_y normal_z intensity\nSIZE 4 4 4 4 4 4 4 2\nTYPE F F F U F F F U\nCOUNT 1 1 1 1 1 1 1 1\n${tail}0 0 0 255 0 0 1 0\n1 1 1 255 0 0 1 200\n")
   # An 'rgba' colour field (PCL's .ply reader's name with alpha) stays one: no second 'rgb'.
   file(WRITE ${dir}/rgba.pcd "${head}FIELDS x y z rgba\nSIZE 4 4 4 4\nTYPE F F F U\nCOUNT 1 1 1 1\n${tail}0 0 0 4278255360\n1 1 1 4294901760\n")
   run_paps(colorize ${dir}/rgba.pcd ${list} ${dir}/rgba_out.pcd)

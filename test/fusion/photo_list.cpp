@@ -60,6 +60,7 @@ TEST(PhotoList, BadLinesNameTheLineAndTheProblem) {
   fails("\n" + good.substr(0, 20) + "\n", "t line 2: 6 fields");
   fails("p.png 64 48 50 nan 31.5 23.5 0 0 0 0 0  1 0 0 1  0 1 0 2  0 0 1 3\n", "'nan' is not a finite number");
   fails("p.png 64 48 50 50x 31.5 23.5 0 0 0 0 0  1 0 0 1  0 1 0 2  0 0 1 3\n", "'50x'");
+  fails("p.png -2222222222224 48 50 50 31.5 23.5 0 0 0 0 0  1 0 0 1  0 1 0 2  0 0 1 3\n", "whole numbers");  // fuzzer
   fails("p.png 64.5 48 50 50 31.5 23.5 0 0 0 0 0  1 0 0 1  0 1 0 2  0 0 1 3\n", "whole numbers");
   fails("p.png 4 48 50 50 31.5 23.5 0 0 0 0 0  1 0 0 1  0 1 0 2  0 0 1 3\n", "camera width");
   fails("p.png 64 48 -50 50 31.5 23.5 0 0 0 0 0  1 0 0 1  0 1 0 2  0 0 1 3\n", "camera fx");

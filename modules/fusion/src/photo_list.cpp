@@ -44,8 +44,9 @@ std::vector<PhotoListEntry> parsePhotoList(const std::string& text, const std::s
     }
     PhotoListEntry e;
     e.image = tokens[0];
-    if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || v[0] > 1e6 || v[1] > 1e6)
-      throw InvalidInput(at + "width and height must be whole numbers");
+    // Checked before the casts: a value outside int's range makes the cast undefined (found by the fuzzer).
+    if (v[0] != std::floor(v[0]) || v[1] != std::floor(v[1]) || !(v[0] >= 0 && v[0] <= 1e6) || !(v[1] >= 0 && v[1] <= 1e6))
+      throw InvalidInput(at + "width and height must be whole numbers from 0 to 1000000");
     e.camera.width = static_cast<int>(v[0]);
     e.camera.height = static_cast<int>(v[1]);
     e.camera.fx = v[2];

@@ -79,13 +79,6 @@ double shadowOverLit(const std::vector<Eigen::Vector3f>& colours, const syntheti
   return count[0] > 0 && count[1] > 0 ? (sum[1] / count[1]) / (sum[0] / count[0]) : NAN;
 }
 
-std::vector<Eigen::Vector3f> coloursOf(const pcl::PointCloud<pcl::PointXYZRGBNormal>& cloud) {
-  std::vector<Eigen::Vector3f> c;
-  c.reserve(cloud.size());
-  for (const auto& p : cloud) c.emplace_back(colour::fromByte(p.r), colour::fromByte(p.g), colour::fromByte(p.b));
-  return c;
-}
-
 }  // namespace
 
 int benchColourAndShadows(bool quick) {
@@ -235,7 +228,7 @@ int benchColourAndShadows(bool quick) {
     for (const auto& p : photos) colorize.addView(p.image, p.camera, p.pose);
     colorize.filter(*coloured);
   }
-  const std::vector<Eigen::Vector3f> colours = coloursOf(*coloured);
+  const std::vector<Eigen::Vector3f> colours = colour::coloursOf(*coloured);
   ShadowDetectionResult ours, plain;
   auto detect = [&](bool guided, ShadowDetectionResult& r) {
     ShadowDetection<pcl::PointXYZRGBNormal> d;
@@ -317,7 +310,7 @@ int benchColourAndShadows(bool quick) {
     const auto t0 = Clock::now();
     c.filter(out);
     const double time = secondsSince(t0);
-    const auto relit = coloursOf(out);
+    const auto relit = colour::coloursOf(out);
     std::printf("  %-24s %9.3f %9.3f %9.3f %9.3f %11.3f %11.3f\n", name, c.getReport().sun_sky_ratio, time,
                 shadowOverLit(relit, scan, voted, up), shadowOverLit(relit, scan, voted, facade),
                 shadowOverLit(relit, scan, inner, up), shadowOverLit(relit, scan, inner, facade));

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <memory>
 
 #include <nlopt.h>
 #include <pcl/point_types.h>
@@ -201,11 +202,13 @@ struct Registration {
     return poseOf(x);
   }
 
+  // The fine metric at full scale (the photo's HOG computed once, on first use).
+  std::unique_ptr<ImageComparator> full_scale;
   double costAt(const CameraPose& pose, int* defined_pixels = nullptr) {
-    const ImageComparator comparator(grey, p.fine_metric);
+    if (!full_scale) full_scale = std::make_unique<ImageComparator>(grey, p.fine_metric);
     const SyntheticImage s = render(camera, pose);
     if (defined_pixels) *defined_pixels = cv::countNonZero(s.mask);
-    return comparator.cost(s.intensity, s.mask);
+    return full_scale->cost(s.intensity, s.mask);
   }
 };
 
@@ -241,7 +244,7 @@ CameraPose registerImageToPoints(const Positions& points, const std::vector<floa
   }
   const int budget = parameters.max_evaluations *
                      (parameters.coarse_levels * parameters.coarse_max_wide_images + parameters.fine_levels * (parameters.restarts + 1));
-  Registration r{points, values, camera, parameters, grey, report, progress, budget};
+  Registration r{points, values, camera, parameters, grey, report, progress, budget, nullptr};
   int defined = 0;
   report.initial_cost = r.costAt(initial_pose, &defined);
   // Below a few percent of the image there is nothing to register against (wrong pose or cloud).

@@ -63,7 +63,6 @@ SyntheticImage renderSyntheticImage(const Positions& points, const std::vector<f
   out.depth = cv::Mat(h, w, CV_32F, cv::Scalar(0));
   out.mask = cv::Mat(h, w, CV_8U, cv::Scalar(0));
   const int r = parameters.fill_radius;
-  const float tolerance = static_cast<float>(1 + parameters.fill_depth_tolerance);
 #pragma omp parallel for schedule(static)
   for (int y = 0; y < h; ++y)
     for (int x = 0; x < w; ++x) {
@@ -90,7 +89,7 @@ SyntheticImage renderSyntheticImage(const Positions& points, const std::vector<f
           const int xx = x + dx, yy = y + dy;
           if (xx < 0 || yy < 0 || xx >= w || yy >= h || dx * dx + dy * dy > r * r) continue;
           const float d = drawn_depth.at<float>(yy, xx);
-          if (!(d <= front * tolerance)) continue;
+          if (!(d <= front * layer)) continue;
           quadrants |= 1u << ((dx > 0 || (dx == 0 && dy > 0) ? 1 : 0) + (dy > 0 || (dy == 0 && dx < 0) ? 2 : 0));
           const double wgt = 1.0 / std::sqrt(double(dx * dx + dy * dy));
           sum += wgt * drawn_value.at<float>(yy, xx);

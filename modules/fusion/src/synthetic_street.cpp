@@ -21,7 +21,19 @@ double positiveFmod(double a, double m) {
   return r < 0 ? r + m : r;
 }
 
+// Windows: shop fronts on the ground floor, a window every 2.5 m on the floors above; `s`
+// metres along the facade, `z` the height.
+bool isWindow(double s, double z) {
+  return z < 3 ? (z > 0.5 && z < 2.5 && positiveFmod(s, 5.0) > 0.8 && positiveFmod(s, 5.0) < 4.2)
+               : (positiveFmod(z, 3.0) > 1.0 && positiveFmod(z, 3.0) < 2.4 && positiveFmod(s, 2.5) > 0.65 &&
+                  positiveFmod(s, 2.5) < 1.85);
+}
+
 }  // namespace
+
+double StreetScene::alongFacade(const Box& b, const Eigen::Vector3d& p, const Eigen::Vector3d& n) {
+  return std::abs(n.y()) > 0.5 ? p.x() - b.lo.x() : p.y() - b.lo.y();
+}
 
 StreetScene::StreetScene(const StreetOptions& options) : options_(options) {
   requireInRange("street length", options.length, 10.0, 1000.0);
@@ -186,13 +198,8 @@ Eigen::Vector3f StreetScene::albedo(const Eigen::Vector3d& p, const Eigen::Vecto
   const Box& b = boxes_[box];
   Eigen::Vector3f a = materials_[b.material].albedo;
   if (!b.facade || std::abs(n.z()) > 0.5) return a;
-  const double s = std::abs(n.y()) > 0.5 ? p.x() - b.lo.x() : p.y() - b.lo.y();
-  const double z = p.z();
-  // Windows: shop fronts on the ground floor, a window every 2.5 m on the floors above.
-  const bool window = z < 3 ? (z > 0.5 && z < 2.5 && positiveFmod(s, 5.0) > 0.8 && positiveFmod(s, 5.0) < 4.2)
-                            : (positiveFmod(z, 3.0) > 1.0 && positiveFmod(z, 3.0) < 2.4 &&
-                               positiveFmod(s, 2.5) > 0.65 && positiveFmod(s, 2.5) < 1.85);
-  if (window) return materials_[kGlass].albedo;
+  const double s = alongFacade(b, p, n), z = p.z();
+  if (isWindow(s, z)) return materials_[kGlass].albedo;
   if (b.material == kBrick) {
     const int course = static_cast<int>(std::floor(z / 0.075));
     if (positiveFmod(z, 0.075) < 0.012 || positiveFmod(s + (course % 2) * 0.11, 0.22) < 0.012)
@@ -210,8 +217,7 @@ float StreetScene::reflectance(const Eigen::Vector3d& p, const Eigen::Vector3d& 
   }
   if (box >= static_cast<int>(boxes_.size())) return materials_[kVan].reflectance;
   const Box& b = boxes_[box];
-  if (b.facade && std::abs(n.z()) < 0.5 && albedo(p, n, box) == materials_[kGlass].albedo)
-    return materials_[kGlass].reflectance;
+  if (b.facade && std::abs(n.z()) <= 0.5 && isWindow(alongFacade(b, p, n), p.z())) return materials_[kGlass].reflectance;
   return materials_[b.material].reflectance;
 }
 

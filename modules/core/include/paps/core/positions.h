@@ -165,6 +165,16 @@ Positions positionsAt(const pcl::PointCloud<PointT>& input, const pcl::Indices& 
   return out;
 }
 
+/// Positions of every point of `input`, those not at `indices` (checked) set to NaN: a stage
+/// that keeps the cloud's size and order and skips the points outside its indices.
+template <typename PointT>
+Positions positionsWithin(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices) {
+  checkIndices(indices, input.size());
+  Positions out(input.size(), Eigen::Vector3f::Constant(NAN));
+  for (const auto i : indices) out[static_cast<std::size_t>(i)] = input[static_cast<std::size_t>(i)].getVector3fMap();
+  return out;
+}
+
 /// The shape every point-moving pcl::Filter shares: copy the input (all fields, organisation),
 /// let `move(positions, movable)` return new positions for the points in `indices`, write
 /// them back and keep is_dense honest. Input empty -> InvalidInput (thrown by the caller's

@@ -8,6 +8,8 @@
 #include <cstdint>
 
 #include <Eigen/Core>
+#include <pcl/point_cloud.h>
+#include <vector>
 
 namespace paps {
 namespace colour {
@@ -64,6 +66,25 @@ inline Eigen::Vector3f labToRgb(const Eigen::Vector3f& lab) {
   const float z = detail::kWhiteZ * detail::labFInverse(fz);
   return {3.2404542f * x - 1.5371385f * y - 0.4985314f * z, -0.9692660f * x + 1.8760108f * y + 0.0415560f * z,
           0.0556434f * x - 0.2040259f * y + 1.0572252f * z};
+}
+
+/// The rgb of every point as linear RGB in [0, 1] (PointT with r, g, b).
+template <typename PointT>
+std::vector<Eigen::Vector3f> coloursOf(const pcl::PointCloud<PointT>& cloud) {
+  std::vector<Eigen::Vector3f> c;
+  c.reserve(cloud.size());
+  for (const auto& p : cloud) c.emplace_back(fromByte(p.r), fromByte(p.g), fromByte(p.b));
+  return c;
+}
+
+/// Writes one linear RGB colour per point into r, g, b (rounded, clamped to 8 bits).
+template <typename PointT>
+void setColours(const std::vector<Eigen::Vector3f>& colours, pcl::PointCloud<PointT>& cloud) {
+  for (std::size_t i = 0; i < cloud.size() && i < colours.size(); ++i) {
+    cloud[i].r = toByte(colours[i].x());
+    cloud[i].g = toByte(colours[i].y());
+    cloud[i].b = toByte(colours[i].z());
+  }
 }
 
 }  // namespace colour

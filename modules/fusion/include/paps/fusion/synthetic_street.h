@@ -107,6 +107,8 @@ class StreetScene {
     int first, count;
   };
   void addGroup(int first);
+  /// Metres along a facade's vertical face from the box's corner.
+  static double alongFacade(const Box& b, const Eigen::Vector3d& p, const Eigen::Vector3d& n);
   bool hitBox(const Box& b, const Eigen::Vector3d& o, const Eigen::Vector3d& d, double max_t,
               double& t, Eigen::Vector3d& n) const;
   StreetOptions options_;

@@ -25,15 +25,10 @@ void ShadowDetection<PointT>::detect(ShadowDetectionResult& result) {
   if (!this->initCompute()) throw InvalidInput("ShadowDetection: the input cloud or its indices are not usable");
   const ScopedThreadCount threads(this->threads_);
   const auto& input = *this->input_;
-  checkIndices(*this->indices_, input.size());
-  Positions points(input.size(), Eigen::Vector3f::Constant(NAN));
-  for (const auto i : *this->indices_) points[i] = input[i].getVector3fMap();
+  const Positions points = positionsWithin(input, *this->indices_);
   Normals normals(input.size());
-  std::vector<Eigen::Vector3f> colours(input.size());
-  for (std::size_t i = 0; i < input.size(); ++i) {
-    normals[i] = input[i].getNormalVector3fMap();
-    colours[i] = Eigen::Vector3f(colour::fromByte(input[i].r), colour::fromByte(input[i].g), colour::fromByte(input[i].b));
-  }
+  for (std::size_t i = 0; i < input.size(); ++i) normals[i] = input[i].getNormalVector3fMap();
+  const std::vector<Eigen::Vector3f> colours = colour::coloursOf(input);
   result = detectShadows(points, normals, colours, reflectance_, photos_, params_, progress_);
   this->deinitCompute();
 }

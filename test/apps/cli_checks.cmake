@@ -1,4 +1,4 @@
-# Helpers shared by the CLI test scripts (run_cli.cmake, run_cli_transport.cmake).
+# Helpers shared by the CLI test scripts (run_cli.cmake, run_cli_transport.cmake, run_cli_fusion.cmake).
 
 # Runs paps with the arguments; sets rc, out and err in the caller and logs the run.
 function(run_paps)
@@ -29,5 +29,15 @@ function(expect_error_line mention)
   string(FIND "${line}" "${mention}" at)
   if(at EQUAL -1)
     message(FATAL_ERROR "the error line does not mention '${mention}': ${line}")
+  endif()
+endfunction()
+
+# A failed run in the case folder `dir`: expect_error_line, and nothing written (no out*
+# output, no temporary file) beside the inputs.
+function(expect_error mention)
+  expect_error_line("${mention}")
+  file(GLOB left LIST_DIRECTORIES false ${dir}/out* ${dir}/.out* ${dir}/*.tmp*)
+  if(left)
+    message(FATAL_ERROR "a failed run left files behind: ${left}")
   endif()
 endfunction()

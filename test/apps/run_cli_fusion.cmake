@@ -23,14 +23,6 @@ function(expect_ok what)
   endif()
 endfunction()
 
-# A failed run: one "paps: error:" line mentioning `mention`, and no out* file left.
-function(expect_error mention)
-  expect_error_line("${mention}")
-  file(GLOB left LIST_DIRECTORIES false ${dir}/out* ${dir}/.out* ${dir}/*.tmp*)
-  if(left)
-    message(FATAL_ERROR "a failed run left files behind: ${left}")
-  endif()
-endfunction()
 
 # The FIELDS of a .pcd file's header, space-separated, into `var`.
 function(paps_pcd_fields path var)

@@ -130,15 +130,6 @@ function(expect_mesh path what)
   set(vertices_line "${vertex}" PARENT_SCOPE)
 endfunction()
 
-# A failed run: non-zero exit, one line on stderr starting with "paps: error:" that mentions
-# `mention`, and nothing written (no output, no temporary) beside the inputs.
-function(expect_error mention)
-  expect_error_line("${mention}")
-  file(GLOB left LIST_DIRECTORIES false ${dir}/out* ${dir}/.out*)
-  if(left)
-    message(FATAL_ERROR "a failed run left files behind: ${left}")
-  endif()
-endfunction()
 
 if(CASE STREQUAL "reconstruct_cube")
   # 6 x 7 x 7 = 294 points on a cube, from .pcd and from .xyz: the same mesh, with faces.

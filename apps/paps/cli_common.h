@@ -37,6 +37,10 @@ struct Arguments {
 /// "a,b,,c" -> {"a", "b", "c"}.
 std::vector<std::string> splitList(const std::string& s);
 
+/// Option `name` as "X,Y,Z" (a direction: finite, not all zero); `fallback` when absent.
+/// Throws InvalidParameter naming the option otherwise.
+Eigen::Vector3f parseDirection(const Arguments& a, const char* name, const Eigen::Vector3f& fallback);
+
 /// One number through a printf format ("%.2f%%"), for table cells and labels.
 std::string fmt(const char* format, double value);
 

@@ -185,27 +185,6 @@ void validateAs(const std::map<std::string, std::string>& option_of, F&& validat
   }
 }
 
-// "X,Y,Z" -> a finite non-zero vector; InvalidParameter naming the option otherwise.
-Eigen::Vector3f parseDirection(const Arguments& a, const char* name, const Eigen::Vector3f& fallback) {
-  if (!a.has(name)) return fallback;
-  const std::string text = a.text(name, "");
-  const std::vector<std::string> parts = splitList(text);
-  Eigen::Vector3f v = Eigen::Vector3f::Zero();
-  bool ok = parts.size() == 3;
-  for (int k = 0; ok && k < 3; ++k) {
-    try {
-      std::size_t used = 0;
-      v[k] = std::stof(parts[k], &used);
-      ok = used == parts[k].size() && std::isfinite(v[k]);
-    } catch (const std::exception&) {
-      ok = false;
-    }
-  }
-  if (!ok || v.norm() == 0 || !std::isfinite(v.norm()))
-    throw InvalidParameter(name, text.empty() ? "''" : text, "three numbers X,Y,Z, not all zero");
-  return v;
-}
-
 std::vector<RegisteredPhoto> readPhotos(const std::string& list) {
   const auto entries = loadPhotoList(list);
   if (entries.empty()) throw InvalidInput("photo list '" + list + "' holds no photo");

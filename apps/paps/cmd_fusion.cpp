@@ -1,5 +1,6 @@
 // paps make-street DIR: the synthetic street (cloud, photos, true and GPS-like poses) as files.
 // paps register CLOUD LIST OUT_LIST: image to cloud registration of every photo of a list.
+// paps rgbd-photo FRAME DIR: the photo, camera and pose of an organized RGB-D cloud as files.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -14,7 +15,10 @@
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/core/random.h>
+#include <paps/core/local_frame.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/fusion/image_registration.h>
+#include <paps/fusion/organized_cloud_camera.h>
 #include <paps/fusion/photo_list.h>
 #include <paps/fusion/synthetic_street.h>
 
@@ -50,9 +54,28 @@ const char* kRegisterUsage =
     "  --values V            intensity (default when the cloud has it) or shading (|<n, light>|)\n"
     "  --metric M            midhog (default), nmi or dhog, both steps\n"
     "  --alpha A             weight of DHOG in MIDHOG (default 10)\n"
+    "  --light X,Y,Z         light direction of the shading, cloud frame (default 0.5,-0.3,0.8)\n"
+    "  --band M              translation searched by the fine step, metres per axis (default 0.5,\n"
+    "                        for a street; about 0.1 for a room)\n"
     "  --coarse-only         skip the 6-DoF fine step\n"
     "  --truth LIST          true poses: print the reprojection error before and after\n"
     "  --quiet               no progress bar\n";
+
+const char* kRgbdPhotoUsage =
+    "usage: paps rgbd-photo FRAME DIR [options]\n"
+    "  Recovers the pinhole camera and the pose of an organized RGB-D cloud (Kinect, RealSense,\n"
+    "  rectified stereo: point (u, v) of the grid was seen at pixel (u, v)) and writes into DIR\n"
+    "  (created if missing), atomically:\n"
+    "  photo.png             the colours of the grid (NaN points keep theirs)\n"
+    "  photo.txt             its photo list: the fitted camera and the true pose\n"
+    "  cloud.pcd             the finite points: x y z, normals (12 nearest, oriented towards the\n"
+    "                        camera), rgb\n"
+    "  photo_start.txt       with --perturb: the same photo from a seeded wrong pose, to try\n"
+    "                        paps register ... --truth DIR/photo.txt on real data\n"
+    "  --perturb DEG,M       yaw and pitch in +-DEG, roll in +-DEG/2, translation in +-M metres\n"
+    "  --seed S              seed of the perturbation (default 1)\n"
+    "  --sample-step N       fit on every N-th row and column (default 3)\n"
+    "  --max-rms PX          refuse a fit worse than this (default 0.5)\n";
 
 // Writes an image atomically: a temporary file with the same extension, then a rename.
 void writeImageAtomic(const std::string& path, const cv::Mat& image) {
@@ -147,7 +170,7 @@ int runRegister(int argc, char** argv) {
   cv::utils::logging::setLogLevel(cv::utils::logging::LOG_LEVEL_ERROR);
   const Arguments a = Arguments::parse(argc, argv, 2, {"help", "quiet", "coarse-only"});
   if (a.has("help")) { std::fputs(kRegisterUsage, stdout); return 0; }
-  a.allowOnly({"values", "metric", "alpha", "coarse-only", "truth", "quiet"});
+  a.allowOnly({"values", "metric", "alpha", "light", "band", "coarse-only", "truth", "quiet"});
   if (a.positional.size() != 3) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "CLOUD LIST OUT_LIST");
   a.requireOutputApart();
   if (a.has("truth") && a.text("truth", "") == a.positional[2])
@@ -161,6 +184,9 @@ int runRegister(int argc, char** argv) {
   p.coarse_metric.alpha = a.number("alpha", p.coarse_metric.alpha);
   p.fine_metric = p.coarse_metric;
   p.fine = !a.has("coarse-only");
+  p.fine_max_translation = a.number("band", p.fine_max_translation);
+  const Eigen::Vector3f light = parseDirection(a, "light", Eigen::Vector3f(0.5f, -0.3f, 0.8f)).normalized();
+  if (a.has("band")) requireInRange("band", p.fine_max_translation, 1e-6, 1e6);
   try {
     p.validate();
   } catch (const InvalidParameter& e) {
@@ -193,8 +219,8 @@ int runRegister(int argc, char** argv) {
     if (!hasField(blob, "normal_x")) throw InvalidInput("--values shading: the cloud has no normals (normal_x/y/z)");
     pcl::PointCloud<pcl::PointNormal> c;
     pcl::fromPCLPointCloud2(blob, c);
-    values = shadingValues(c);
-    std::printf("register: grey values from the normals (shading)\n");
+    values = shadingValues(c, light);
+    std::printf("register: grey values from the normals (shading, light %.3g,%.3g,%.3g)\n", light.x(), light.y(), light.z());
   } else {
     throw InvalidParameter("values", values_kind, "intensity or shading");
   }
@@ -229,6 +255,95 @@ int runRegister(int argc, char** argv) {
   for (auto& e : out) e.image = std::filesystem::relative(in_folder / e.image, out_folder).lexically_normal().string();
   savePhotoListAtomic(a.positional[2], out);
   std::printf("wrote %s\n", a.positional[2].c_str());
+  return 0;
+}
+
+int runRgbdPhoto(int argc, char** argv) {
+  const Arguments a = Arguments::parse(argc, argv, 2, {"help"});
+  if (a.has("help")) { std::fputs(kRgbdPhotoUsage, stdout); return 0; }
+  a.allowOnly({"perturb", "seed", "sample-step", "max-rms"});
+  if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "FRAME DIR");
+  OrganizedCameraOptions o;
+  o.sample_step = a.integer("sample-step", o.sample_step);
+  o.max_rms_pixels = a.number("max-rms", o.max_rms_pixels);
+  requireInRange("sample-step", o.sample_step, 1, 64);  // the options' own names in messages
+  requireInRange("max-rms", o.max_rms_pixels, 1e-9, 1e6);
+  o.validate();
+  double perturb_deg = 0, perturb_m = 0;
+  if (a.has("perturb")) {
+    const std::vector<std::string> parts = splitList(a.text("perturb", ""));
+    bool ok = parts.size() == 2;
+    try {
+      if (ok) perturb_deg = std::stod(parts[0]), perturb_m = std::stod(parts[1]);
+    } catch (const std::exception&) {
+      ok = false;
+    }
+    if (!ok || !(perturb_deg >= 0 && perturb_deg <= 45) || !(perturb_m >= 0 && perturb_m <= 1e3))
+      throw InvalidParameter("perturb", a.text("perturb", ""), "DEG,M with DEG in [0, 45] and M in [0, 1000]");
+  }
+  const std::size_t seed = a.count("seed", 1);
+  // Inputs read and checked before anything is written.
+  const pcl::PCLPointCloud2 blob = loadCloud(a.positional[0]);
+  if (!hasField(blob, "rgb") && !hasField(blob, "rgba"))
+    throw InvalidInput("'" + a.positional[0] + "' has no rgb or rgba field: an RGB-D frame carries the colours of its photo");
+  pcl::PointCloud<pcl::PointXYZRGBA> frame;
+  pcl::fromPCLPointCloud2(blob, frame);
+  const OrganizedCloudCamera real = cameraOfOrganizedCloud(frame, o);
+  std::printf("read %s: %ux%u grid; camera fx %.3f fy %.3f cx %.3f cy %.3f, fit %.4f px RMS (max %.4f) on %zu points\n",
+              a.positional[0].c_str(), frame.width, frame.height, real.fit.camera.fx, real.fit.camera.fy,
+              real.fit.camera.cx, real.fit.camera.cy, real.fit.rms_pixels, real.fit.max_pixels, real.fit.points);
+  Positions finite;
+  std::vector<std::uint32_t> rgb;
+  for (const auto& q : frame)
+    if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) {
+      finite.emplace_back(q.x, q.y, q.z);
+      rgb.push_back(q.rgba & 0xffffffu);
+    }
+  const NeighbourGraph graph = NeighbourGraph::byCount(finite, SpatialIndex(finite), 12);
+  std::vector<float> variation;  // written as 'curvature', as pcl::NormalEstimation does
+  Normals normals = estimateNormals(finite, graph, &variation);
+  const Eigen::Vector3f eye = real.fit.pose.translation().cast<float>();
+  for (std::size_t i = 0; i < finite.size(); ++i)  // a single view: towards the camera
+    if (normals[i].allFinite() && normals[i].dot(eye - finite[i]) < 0) normals[i] = -normals[i];
+
+  const std::string dir = a.positional[1];
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (!std::filesystem::is_directory(dir, ec)) throw IoError("cannot create folder '" + dir + "'");
+  pcl::PointCloud<pcl::PointXYZRGB> out;
+  out.resize(finite.size());
+  for (std::size_t i = 0; i < finite.size(); ++i) {
+    out[i].getVector3fMap() = finite[i];
+    out[i].rgba = rgb[i] | 0xff000000u;
+  }
+  pcl::PCLPointCloud2 cloud_blob;
+  pcl::toPCLPointCloud2(out, cloud_blob);
+  setNormals(cloud_blob, normals, &variation);
+  saveCloudAtomic(dir + "/cloud.pcd", cloud_blob);
+  writeImageAtomic(dir + "/photo.png", real.photo.image);
+  PhotoListEntry e;
+  e.image = "photo.png";
+  e.camera = real.photo.camera;
+  e.pose = real.photo.pose;
+  savePhotoListAtomic(dir + "/photo.txt", {e});
+  std::printf("wrote %s/cloud.pcd (%zu points, normals, rgb), %s/photo.png, %s/photo.txt\n", dir.c_str(),
+              finite.size(), dir.c_str(), dir.c_str());
+  if (a.has("perturb")) {
+    Random rng(seed * 7 + 5);
+    PoseDelta d;
+    d.yaw = rng.uniform(-perturb_deg, perturb_deg) * M_PI / 180;
+    d.pitch = rng.uniform(-perturb_deg, perturb_deg) * M_PI / 180;
+    d.roll = rng.uniform(-perturb_deg / 2, perturb_deg / 2) * M_PI / 180;
+    d.translation = Eigen::Vector3d(rng.uniform(-perturb_m, perturb_m), rng.uniform(-perturb_m, perturb_m),
+                                    rng.uniform(-perturb_m, perturb_m));
+    PhotoListEntry wrong = e;
+    wrong.pose = applyPoseDelta(e.pose, d);
+    savePhotoListAtomic(dir + "/photo_start.txt", {wrong});
+    std::vector<Eigen::Vector3d> probe;
+    for (std::size_t i = 0; i < finite.size(); i += 13) probe.push_back(finite[i].cast<double>());
+    std::printf("wrote %s/photo_start.txt (%.2f px from the true pose)\n", dir.c_str(),
+                meanReprojectionError(e.camera, e.pose, wrong.pose, probe));
+  }
   return 0;
 }
 

@@ -21,6 +21,7 @@ int runBenchTransport(int argc, char** argv);
 int runTransportWorker(int argc, char** argv);
 int runBenchFusion(int argc, char** argv);
 int runRegister(int argc, char** argv);
+int runRgbdPhoto(int argc, char** argv);
 int runMakeStreet(int argc, char** argv);
 int runColorize(int argc, char** argv);
 int runShadows(int argc, char** argv);

@@ -30,6 +30,7 @@ const char* kUsage =
     "  bench transport [options]     OT feature recovery and reconstruction vs PCL Poisson and GP3\n"
     "  make-street DIR               write the synthetic street: cloud, photos, true and GPS poses\n"
     "  register CLOUD LIST OUT_LIST  refine photo poses against a cloud (NMI/DHOG/MIDHOG, BOBYQA)\n"
+    "  rgbd-photo FRAME DIR          photo, camera and pose of an organized RGB-D cloud (Kinect, stereo)\n"
     "  colorize CLOUD LIST OUT       colour a cloud from registered photos (consensus, occlusion maps)\n"
     "  shadows CLOUD LIST OUT --sun X,Y,Z   detect and relight the shadows of a coloured cloud\n"
     "  bench fusion [options]        image-cloud registration (Table 4.1), colorization, shadows\n"
@@ -75,6 +76,7 @@ int main(int argc, char** argv) {
 #ifdef PAPS_HAVE_FUSION
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "fusion")) return paps::cli::runBenchFusion(argc, argv);
     if (!std::strcmp(argv[1], "register")) return paps::cli::runRegister(argc, argv);
+    if (!std::strcmp(argv[1], "rgbd-photo")) return paps::cli::runRgbdPhoto(argc, argv);
     if (!std::strcmp(argv[1], "make-street")) return paps::cli::runMakeStreet(argc, argv);
     if (!std::strcmp(argv[1], "colorize")) return paps::cli::runColorize(argc, argv);
     if (!std::strcmp(argv[1], "shadows")) return paps::cli::runShadows(argc, argv);

@@ -23,10 +23,11 @@
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video/tracking.hpp>
 
-#include <pcl/features/normal_3d_omp.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
+#include <paps/core/local_frame.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
 #include <paps/fusion/image_registration.h>
 #include <paps/fusion/organized_cloud_camera.h>
@@ -281,20 +282,21 @@ int benchRegistrationRgbd(bool quick, const std::string& path) {
   RegisteredPhoto half;
   half.camera = real.photo.camera.scaled(0.5);
   cv::resize(real.photo.image, half.image, cv::Size(half.camera.width, half.camera.height), 0, 0, cv::INTER_AREA);
-  pcl::PointCloud<pcl::PointXYZ>::Ptr xyz(new pcl::PointCloud<pcl::PointXYZ>);
+  // The cloud as `paps rgbd-photo` writes it: the finite points, normals of the 30 nearest.
+  pcl::PointCloud<pcl::PointNormal> cloud;
   std::vector<Eigen::Vector3f> colours;
+  Positions points;
   for (const auto& p : frame)
     if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)) {
-      xyz->push_back(pcl::PointXYZ(p.x, p.y, p.z));
+      points.emplace_back(p.x, p.y, p.z);
       colours.emplace_back(p.r / 255.f, p.g / 255.f, p.b / 255.f);
     }
-  pcl::NormalEstimationOMP<pcl::PointXYZ, pcl::PointNormal> normals;
-  normals.setInputCloud(xyz);
-  normals.setKSearch(50);
-  pcl::PointCloud<pcl::PointNormal> cloud;
-  normals.compute(cloud);
-  for (std::size_t i = 0; i < cloud.size(); ++i) cloud[i].getVector3fMap() = (*xyz)[i].getVector3fMap();
-  const Positions points = positionsOf(cloud);
+  const Normals normals = estimateNormals(points, NeighbourGraph::byCount(points, SpatialIndex(points), 30));
+  cloud.resize(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    cloud[i].getVector3fMap() = points[i];
+    cloud[i].getNormalVector3fMap() = normals[i];
+  }
   // Shading needs a light; an indoor frame is lit from above: the camera's up (-y), tilted
   // towards the camera. The fixed default light of shadingValues() is shown beside it.
   const Eigen::Vector3f up_light = (real.photo.pose.linear() * Eigen::Vector3d(0, -1, -0.3)).normalized().cast<float>();

@@ -68,12 +68,13 @@ const char* kRgbdPhotoUsage =
     "  (created if missing), atomically:\n"
     "  photo.png             the colours of the grid (NaN points keep theirs)\n"
     "  photo.txt             its photo list: the fitted camera and the true pose\n"
-    "  cloud.pcd             the finite points: x y z, normals (12 nearest, oriented towards the\n"
-    "                        camera), rgb\n"
+    "  cloud.pcd             the finite points: x y z, normals (oriented towards the camera), rgb\n"
     "  photo_start.txt       with --perturb: the same photo from a seeded wrong pose, to try\n"
     "                        paps register ... --truth DIR/photo.txt on real data\n"
     "  --perturb DEG,M       yaw and pitch in +-DEG, roll in +-DEG/2, translation in +-M metres\n"
     "  --seed S              seed of the perturbation (default 1)\n"
+    "  --neighbours K        nearest points per normal, 3 to 1000 (default 30: RGB-D depth is\n"
+    "                        quantised)\n"
     "  --sample-step N       fit on every N-th row and column (default 3)\n"
     "  --max-rms PX          refuse a fit worse than this (default 0.5)\n";
 
@@ -261,7 +262,7 @@ int runRegister(int argc, char** argv) {
 int runRgbdPhoto(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"help"});
   if (a.has("help")) { std::fputs(kRgbdPhotoUsage, stdout); return 0; }
-  a.allowOnly({"perturb", "seed", "sample-step", "max-rms"});
+  a.allowOnly({"perturb", "seed", "neighbours", "sample-step", "max-rms"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "FRAME DIR");
   OrganizedCameraOptions o;
   o.sample_step = a.integer("sample-step", o.sample_step);
@@ -282,6 +283,8 @@ int runRgbdPhoto(int argc, char** argv) {
       throw InvalidParameter("perturb", a.text("perturb", ""), "DEG,M with DEG in [0, 45] and M in [0, 1000]");
   }
   const std::size_t seed = a.count("seed", 1);
+  const int neighbours = a.integer("neighbours", 30);
+  requireInRange("neighbours", neighbours, 3, 1000);
   // Inputs read and checked before anything is written.
   const pcl::PCLPointCloud2 blob = loadCloud(a.positional[0]);
   if (!hasField(blob, "rgb") && !hasField(blob, "rgba"))
@@ -299,7 +302,7 @@ int runRgbdPhoto(int argc, char** argv) {
       finite.emplace_back(q.x, q.y, q.z);
       rgb.push_back(q.rgba & 0xffffffu);
     }
-  const NeighbourGraph graph = NeighbourGraph::byCount(finite, SpatialIndex(finite), 12);
+  const NeighbourGraph graph = NeighbourGraph::byCount(finite, SpatialIndex(finite), neighbours);
   std::vector<float> variation;  // written as 'curvature', as pcl::NormalEstimation does
   Normals normals = estimateNormals(finite, graph, &variation);
   const Eigen::Vector3f eye = real.fit.pose.translation().cast<float>();

@@ -85,6 +85,30 @@ TEST(ImageSimilarity, MidhogIsZeroForIdenticalImagesAndSymmetric) {
   EXPECT_NEAR(ca.cost(b, full), nmi_cost + 10 * dhog, 1e-9);
 }
 
+// A synthetic image that covers only the part of the photo it matches best must not look
+// better than one that covers all of the photo and matches it slightly worse everywhere: with
+// DHOG over the windows both cover, it does (the bias seen on a real Kinect frame).
+TEST(ImageSimilarity, DhogOverThePhotosWindowsDoesNotRewardCoveringLess) {
+  const cv::Mat photo = pattern();
+  const cv::Mat full(photo.size(), CV_8U, cv::Scalar(255));
+  const cv::Mat near_miss = shifted(photo, 1);        // everywhere, 1 px off
+  cv::Mat partial_mask = full.clone();                 // exact, but only over the left third
+  cv::rectangle(partial_mask, cv::Rect(55, 0, 105, 120), cv::Scalar(0), cv::FILLED);
+  cv::Mat partial = photo.clone();
+  partial.setTo(0, partial_mask == 0);
+  paps::ImageMetricParameters p;
+  p.metric = paps::ImageMetric::DHOG;
+  EXPECT_EQ(p.dhog_windows, paps::HogWindows::ValidInFirst);  // the default
+  const paps::ImageComparator photo_windows(photo, p);
+  EXPECT_NEAR(photo_windows.cost(photo, full), 0.0, 1e-12);
+  EXPECT_LT(photo_windows.cost(near_miss, full), photo_windows.cost(partial, partial_mask));
+  p.dhog_windows = paps::HogWindows::ValidInBoth;
+  const paps::ImageComparator shared_windows(photo, p);
+  EXPECT_GT(shared_windows.cost(near_miss, full), shared_windows.cost(partial, partial_mask));
+  // Both agree where the synthetic image covers everything.
+  EXPECT_NEAR(shared_windows.cost(near_miss, full), photo_windows.cost(near_miss, full), 1e-12);
+}
+
 TEST(ImageSimilarity, HolesAddNoEdges) {
   // A flat synthetic image with holes has no gradient: its histograms stay near zero.
   cv::Mat flat(120, 160, CV_32F, cv::Scalar(0.5)), mask(120, 160, CV_8U, cv::Scalar(255));

@@ -112,8 +112,7 @@ HogField computeHogField(const cv::Mat& image, const cv::Mat& mask_in, const Hog
       const int x = half + c * p.stride, y = half + r * p.stride;
       const std::size_t k = static_cast<std::size_t>(r) * f.cols + c;
       f.weight[k] = static_cast<float>(std::exp(-(std::pow(x - 0.5 * (w - 1), 2) + std::pow(y - 0.5 * (h - 1), 2)) / (2 * s * s)));
-      if (defined.at<float>(y, x) < p.min_coverage * area) continue;
-      f.valid[k] = 1;
+      f.valid[k] = defined.at<float>(y, x) >= p.min_coverage * area;
       float* hist = &f.histograms[k * p.bins];
       double norm2 = 0;
       for (int b = 0; b < p.bins; ++b) {
@@ -126,12 +125,12 @@ HogField computeHogField(const cv::Mat& image, const cv::Mat& mask_in, const Hog
   return f;
 }
 
-double distanceBetweenHogFields(const HogField& a, const HogField& b) {
+double distanceBetweenHogFields(const HogField& a, const HogField& b, HogWindows windows) {
   if (a.rows != b.rows || a.cols != b.cols || a.bins != b.bins)
     throw InvalidInput("DHOG: HOG fields of different geometry");
   double sum = 0, weight = 0;
   for (std::size_t k = 0; k < a.valid.size(); ++k) {
-    if (!a.valid[k] || !b.valid[k]) continue;
+    if (!a.valid[k] || (windows == HogWindows::ValidInBoth && !b.valid[k])) continue;
     double d = 0;
     for (int i = 0; i < a.bins; ++i) {
       const double e = a.histograms[k * a.bins + i] - b.histograms[k * a.bins + i];
@@ -206,7 +205,7 @@ double ImageComparator::cost(const cv::Mat& synthetic, const cv::Mat& mask) cons
     std::size_t valid = 0;
     for (auto v : s.valid) valid += v;
     if (valid < s.valid.size() / 10) return kWorstCost;
-    dhog = distanceBetweenHogFields(hog_, s);
+    dhog = distanceBetweenHogFields(hog_, s, parameters_.dhog_windows);
     if (!std::isfinite(dhog)) return kWorstCost;
   }
   switch (parameters_.metric) {

@@ -268,7 +268,7 @@ Eigen::Vector2i colourDepthShift(const pcl::PointCloud<pcl::PointXYZRGBA>& frame
 
 // Real data: an organized RGB-D frame is a photo whose pose in its own cloud is known exactly
 // (cameraOfOrganizedCloud), so registration can be scored on a real photo and a real cloud.
-int benchRegistrationRgbd(bool quick, const std::string& path) {
+int benchRegistrationRgbd(bool quick, const std::string& path, const std::string& out_dir) {
   pcl::PointCloud<pcl::PointXYZRGBA> frame;
   if (pcl::io::loadPCDFile(path, frame) != 0) {
     std::fprintf(stderr, "bench fusion: cannot read %s (run scripts/fetch_samples.sh, or --rgbd none)\n", path.c_str());
@@ -331,6 +331,15 @@ int benchRegistrationRgbd(bool quick, const std::string& path) {
     d.translation = Eigen::Vector3d(rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03));
     start.push_back(applyPoseDelta(real.photo.pose, d));
   }
+  if (!out_dir.empty()) {  // the photo beside the synthetic image the metrics compare it with
+    const SyntheticImage at_truth = renderSyntheticImage(points, shading_up, half.camera, real.photo.pose);
+    cv::Mat grey, synthetic, both;
+    cv::cvtColor(half.image, grey, cv::COLOR_BGR2GRAY);
+    at_truth.intensity.convertTo(synthetic, CV_8U, 255);
+    cv::hconcat(grey, synthetic, both);
+    const std::string file = out_dir + "/kinect_photo_and_shading.png";
+    if (cv::imwrite(file, both)) std::printf("wrote %s (the photo; the cloud's shading, light from above, at the true pose)\n", file.c_str());
+  }
   std::printf("%-24s %-12s %8s %8s %8s %8s %10s %8s %10s\n", "method", "modality", "mean px", "std px", "median",
               "success", "remaining", "time s", "colour RMS");
   Row truth_row{"true pose", "-", std::vector<double>(starts, 0.0), 0};
@@ -372,6 +381,7 @@ int benchRegistrationRgbd(bool quick, const std::string& path) {
         row.errors.push_back(meanReprojectionError(native, real.photo.pose, pose, probe));
         row.colour_rms.push_back(colourError(points, colours, real.photo, pose, scored));
         below_truth += report.final_cost < truth_cost;
+
       }
       printRow(row, success_px);
       if (below_truth)
@@ -405,7 +415,7 @@ int runBenchFusion(int argc, char** argv) {
   if (rgbd_path == "none") rgbd = false;
   int rc = 0;
   if (registration) rc |= benchRegistration(quick, out_dir);
-  if (rgbd) rc |= benchRegistrationRgbd(quick, rgbd_path);
+  if (rgbd) rc |= benchRegistrationRgbd(quick, rgbd_path, out_dir);
   if (colour) rc |= benchColourAndShadows(quick);
   return rc;
 }

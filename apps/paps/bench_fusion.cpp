@@ -8,7 +8,10 @@
 // pipeline with NMI alone (the metric of Taylor and Nieto's registration [TN13]) and with DHOG
 // alone, and OpenCV's ECC (findTransformECC, Euclidean image warp, the usual 2D alignment),
 // each on shading (normals) and on laser reflectance.
+// Then the same methods on real data: an organized RGB-D frame (PCL's Kinect tutorial frame by
+// default, fetched by scripts/fetch_samples.sh), whose photo's true pose the grid gives.
 #include <algorithm>
+#include <filesystem>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -396,7 +399,7 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
 }  // namespace
 
 int runBenchFusion(int argc, char** argv) {
-  bool quick = false, registration = true, colour = true, rgbd = true;
+  bool quick = false, registration = true, colour = true, rgbd = true, rgbd_given = false;
   std::string out_dir, rgbd_path = samplesDir() + "/milk_cartoon_all_small_clorox.pcd";
   std::setvbuf(stdout, nullptr, _IOLBF, 0);  // rows appear as they are measured
   for (int i = 3; i < argc; ++i) {
@@ -405,7 +408,7 @@ int runBenchFusion(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--registration-only")) colour = rgbd = false;
     else if (!std::strcmp(argv[i], "--colour-only")) registration = rgbd = false;
     else if (!std::strcmp(argv[i], "--rgbd-only")) registration = colour = false;
-    else if (!std::strcmp(argv[i], "--rgbd") && i + 1 < argc) rgbd_path = argv[++i];
+    else if (!std::strcmp(argv[i], "--rgbd") && i + 1 < argc) rgbd_path = argv[++i], rgbd_given = true;
     else {
       std::fprintf(stderr, "paps bench fusion: unknown option '%s' (options: --quick, --out DIR, --registration-only, "
                    "--colour-only, --rgbd-only, --rgbd PCD|none)\n", argv[i]);
@@ -413,6 +416,10 @@ int runBenchFusion(int argc, char** argv) {
     }
   }
   if (rgbd_path == "none") rgbd = false;
+  if (rgbd && !rgbd_given && !std::filesystem::exists(rgbd_path)) {
+    std::printf("(real RGB-D part skipped: no %s; scripts/fetch_samples.sh fetches it)\n", rgbd_path.c_str());
+    rgbd = false;
+  }
   int rc = 0;
   if (registration) rc |= benchRegistration(quick, out_dir);
   if (rgbd) rc |= benchRegistrationRgbd(quick, rgbd_path, out_dir);

@@ -33,7 +33,7 @@ const char* kUsage =
     "  rgbd-photo FRAME DIR          photo, camera and pose of an organized RGB-D cloud (Kinect, stereo)\n"
     "  colorize CLOUD LIST OUT       colour a cloud from registered photos (consensus, occlusion maps)\n"
     "  shadows CLOUD LIST OUT --sun X,Y,Z   detect and relight the shadows of a coloured cloud\n"
-    "  bench fusion [options]        image-cloud registration (Table 4.1), colorization, shadows\n"
+    "  bench fusion [options]        image-cloud registration (Table 4.1; street and a real Kinect frame), colorization, shadows\n"
     "  bench files IN [IN..]         ours vs the peers on your own clouds: time, memory, output\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";

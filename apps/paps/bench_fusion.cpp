@@ -84,6 +84,10 @@ CameraPose eccRegistration(const Positions& points, const std::vector<float>& va
   return pose;
 }
 
+std::string pipelineName(ImageMetric metric) {
+  return std::string("coarse+fine ") + imageMetricName(metric) + (metric == ImageMetric::MIDHOG ? " (ours)" : "");
+}
+
 struct Row {
   std::string method, modality;
   std::vector<double> errors;
@@ -189,8 +193,7 @@ int benchRegistration(bool quick, const std::string& out_dir) {
     }
     printRow(ecc, success_px);
     for (ImageMetric metric : {ImageMetric::NMI, ImageMetric::DHOG, ImageMetric::MIDHOG}) {
-      Row row{std::string("coarse+fine ") + imageMetricName(metric) + (metric == ImageMetric::MIDHOG ? " (ours)" : ""),
-              name, {}, 0};
+      Row row{pipelineName(metric), name, {}, 0};
       ImageRegistrationParameters p;
       p.coarse_metric.metric = p.fine_metric.metric = metric;
       for (int i = 0; i < photos; ++i) {
@@ -367,8 +370,7 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
     }
     printRow(ecc, success_px);
     for (ImageMetric metric : {ImageMetric::NMI, ImageMetric::DHOG, ImageMetric::MIDHOG}) {
-      Row row{std::string("coarse+fine ") + imageMetricName(metric) + (metric == ImageMetric::MIDHOG ? " (ours)" : ""),
-              name, {}, 0};
+      Row row{pipelineName(metric), name, {}, 0};
       ImageRegistrationParameters p;
       p.coarse_metric.metric = p.fine_metric.metric = metric;
       p.fine_max_translation = 0.1;

@@ -187,6 +187,41 @@ TEST(OrganizedCloudCamera, BadInputGetsClearErrors) {
   EXPECT_THROW(paps::fitPinholeCamera(points, pixels, 160, 120), paps::InvalidInput);
 }
 
+// Random garbage on a grid (huge and tiny coordinates, repeated points, NaN and Inf, lines,
+// random pixels): every call either returns a finite camera that passed its own checks or
+// throws paps::Error; nothing crashes or returns NaN.
+TEST(OrganizedCloudCamera, GarbageGivesACameraOrAClearError) {
+  paps::Random random(11);
+  int refused = 0, fitted = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    pcl::PointCloud<pcl::PointXYZRGB> cloud(8 + int(random.below(24)), 8 + int(random.below(24)));
+    const int kind = int(random.below(6));
+    const double scale = std::pow(10.0, random.uniform(-30, 30));
+    for (auto& p : cloud) {
+      Eigen::Vector3f v(float(random.uniform(-1, 1) * scale), float(random.uniform(-1, 1) * scale),
+                        float(random.uniform(0.1, 1) * scale));
+      if (kind == 1) v = Eigen::Vector3f(1, 2, 3);                              // one point repeated
+      if (kind == 2) v = Eigen::Vector3f(1, 1, 1) * float(random.uniform(0, 5));  // a line
+      if (kind == 3 && random.below(3) == 0) v.x() = std::numeric_limits<float>::infinity();
+      if (kind == 4 && random.below(2) == 0) v.y() = std::numeric_limits<float>::quiet_NaN();
+      if (kind == 5) v *= 3.0e38f / float(std::max(scale, 1.0));                  // near FLT_MAX
+      p.getVector3fMap() = v;
+    }
+    try {
+      const auto r = paps::cameraOfOrganizedCloud(cloud);
+      ++fitted;
+      EXPECT_TRUE(std::isfinite(r.fit.camera.fx) && r.fit.camera.fx > 0) << trial;
+      EXPECT_TRUE(std::isfinite(r.fit.camera.fy) && r.fit.camera.fy > 0) << trial;
+      EXPECT_TRUE(r.fit.pose.matrix().allFinite()) << trial;
+      EXPECT_LE(r.fit.rms_pixels, 0.5) << trial;
+    } catch (const paps::Error&) {
+      ++refused;
+    }
+  }
+  EXPECT_EQ(refused + fitted, 300);
+  EXPECT_GT(refused, 250);  // random points on a grid are not a pinhole image
+}
+
 // PCL's tutorial Kinect frame (python3-pcl, fetched by scripts/fetch_samples.sh); skipped if
 // absent. Its grid is the image of a 525 px pinhole at the centre of a 640 x 480 image.
 TEST(OrganizedCloudCamera, RealKinectFrame) {

@@ -283,6 +283,13 @@ int runRgbdPhoto(int argc, char** argv) {
       throw InvalidParameter("perturb", a.text("perturb", ""), "DEG,M with DEG in [0, 45] and M in [0, 1000]");
   }
   const std::size_t seed = a.count("seed", 1);
+  {  // the frame must not be one of the files written into DIR
+    std::error_code ec;
+    for (const char* name : {"cloud.pcd", "photo.png", "photo.txt", "photo_start.txt"})
+      if (std::filesystem::equivalent(a.positional[0], std::filesystem::path(a.positional[1]) / name, ec))
+        throw InvalidParameter("DIR", a.positional[1], std::string("a folder that does not hold the input as ") + name +
+                                                           " (inputs are never overwritten)");
+  }
   const int neighbours = a.integer("neighbours", 30);
   requireInRange("neighbours", neighbours, 3, 1000);
   // Inputs read and checked before anything is written.

@@ -29,8 +29,6 @@
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
-#include <paps/core/local_frame.h>
-#include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
 #include <paps/fusion/image_registration.h>
 #include <paps/fusion/organized_cloud_camera.h>
@@ -38,6 +36,7 @@
 
 #include "cli_common.h"
 #include "commands.h"
+#include "rgbd_points.h"
 
 namespace paps::cli {
 
@@ -263,12 +262,13 @@ Eigen::Vector2i colourDepthShift(const pcl::PointCloud<pcl::PointXYZRGBA>& frame
     return sum / double(std::max<std::size_t>(1, depth_edges.size()));
   };
   Eigen::Vector2i best(0, 0);
+  double best_score = score(0, 0);
   for (int dy = -reach; dy <= reach; ++dy)
     for (int dx = -reach; dx <= reach; ++dx)
-      if (score(dx, dy) < score(best.x(), best.y())) best = Eigen::Vector2i(dx, dy);
+      if (const double s = score(dx, dy); s < best_score) best_score = s, best = Eigen::Vector2i(dx, dy);
   std::printf("colour-depth agreement: %zu depth-edge pixels; mean distance to the photo's edges %.3f px as recorded, "
               "%.3f px at the best shift (%d, %d) px in +-%d\n",
-              depth_edges.size(), score(0, 0), score(best.x(), best.y()), best.x(), best.y(), reach);
+              depth_edges.size(), score(0, 0), best_score, best.x(), best.y(), reach);
   return best;
 }
 
@@ -289,19 +289,15 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
   half.camera = real.photo.camera.scaled(0.5);
   cv::resize(real.photo.image, half.image, cv::Size(half.camera.width, half.camera.height), 0, 0, cv::INTER_AREA);
   // The cloud as `paps rgbd-photo` writes it: the finite points, normals of the 30 nearest.
+  const RgbdPoints rgbd = rgbdPoints(frame, 30, real.photo.pose.translation().cast<float>());
+  const Positions& points = rgbd.points;
   pcl::PointCloud<pcl::PointNormal> cloud;
-  std::vector<Eigen::Vector3f> colours;
-  Positions points;
-  for (const auto& p : frame)
-    if (std::isfinite(p.x) && std::isfinite(p.y) && std::isfinite(p.z)) {
-      points.emplace_back(p.x, p.y, p.z);
-      colours.emplace_back(p.r / 255.f, p.g / 255.f, p.b / 255.f);
-    }
-  const Normals normals = estimateNormals(points, NeighbourGraph::byCount(points, SpatialIndex(points), 30));
   cloud.resize(points.size());
+  std::vector<Eigen::Vector3f> colours(points.size());
   for (std::size_t i = 0; i < points.size(); ++i) {
     cloud[i].getVector3fMap() = points[i];
-    cloud[i].getNormalVector3fMap() = normals[i];
+    cloud[i].getNormalVector3fMap() = rgbd.normals[i];
+    colours[i] = Eigen::Vector3f((rgbd.rgb[i] >> 16) & 0xff, (rgbd.rgb[i] >> 8) & 0xff, rgbd.rgb[i] & 0xff) / 255.f;
   }
   // Shading needs a light; an indoor frame is lit from above: the camera's up (-y), tilted
   // towards the camera. The fixed default light of shadingValues() is shown beside it.
@@ -369,15 +365,14 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
       ecc.colour_rms.push_back(colourError(points, colours, real.photo, pose, scored));
     }
     printRow(ecc, success_px);
+    const SyntheticImage at_truth = renderSyntheticImage(points, values, half.camera, real.photo.pose);
     for (ImageMetric metric : {ImageMetric::NMI, ImageMetric::DHOG, ImageMetric::MIDHOG}) {
       Row row{pipelineName(metric), name, {}, 0};
       ImageRegistrationParameters p;
       p.coarse_metric.metric = p.fine_metric.metric = metric;
       p.fine_max_translation = 0.1;
       int below_truth = 0;
-      const ImageComparator comparator(half.image, p.fine_metric);
-      const SyntheticImage at_truth = renderSyntheticImage(points, values, half.camera, real.photo.pose);
-      const double truth_cost = comparator.cost(at_truth.intensity, at_truth.mask);
+      const double truth_cost = ImageComparator(half.image, p.fine_metric).cost(at_truth.intensity, at_truth.mask);
       for (int i = 0; i < starts; ++i) {
         const auto t0 = Clock::now();
         ImageRegistrationReport report;
@@ -386,7 +381,6 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
         row.errors.push_back(meanReprojectionError(native, real.photo.pose, pose, probe));
         row.colour_rms.push_back(colourError(points, colours, real.photo, pose, scored));
         below_truth += report.final_cost < truth_cost;
-
       }
       printRow(row, success_px);
       if (below_truth)

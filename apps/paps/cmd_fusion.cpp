@@ -24,6 +24,7 @@
 
 #include "cli_common.h"
 #include "commands.h"
+#include "rgbd_points.h"
 
 namespace paps::cli {
 
@@ -259,6 +260,19 @@ int runRegister(int argc, char** argv) {
   return 0;
 }
 
+RgbdPoints rgbdPoints(const pcl::PointCloud<pcl::PointXYZRGBA>& frame, int neighbours, const Eigen::Vector3f& eye) {
+  RgbdPoints r;
+  for (const auto& q : frame)
+    if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) {
+      r.points.emplace_back(q.x, q.y, q.z);
+      r.rgb.push_back(q.rgba & 0xffffffu);
+    }
+  r.normals = estimateNormals(r.points, NeighbourGraph::byCount(r.points, SpatialIndex(r.points), neighbours), &r.variation);
+  for (std::size_t i = 0; i < r.points.size(); ++i)  // a single view: towards the camera
+    if (r.normals[i].allFinite() && r.normals[i].dot(eye - r.points[i]) < 0) r.normals[i] = -r.normals[i];
+  return r;
+}
+
 int runRgbdPhoto(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"help"});
   if (a.has("help")) { std::fputs(kRgbdPhotoUsage, stdout); return 0; }
@@ -302,33 +316,21 @@ int runRgbdPhoto(int argc, char** argv) {
   std::printf("read %s: %ux%u grid; camera fx %.3f fy %.3f cx %.3f cy %.3f, fit %.4f px RMS (max %.4f) on %zu points\n",
               a.positional[0].c_str(), frame.width, frame.height, real.fit.camera.fx, real.fit.camera.fy,
               real.fit.camera.cx, real.fit.camera.cy, real.fit.rms_pixels, real.fit.max_pixels, real.fit.points);
-  Positions finite;
-  std::vector<std::uint32_t> rgb;
-  for (const auto& q : frame)
-    if (std::isfinite(q.x) && std::isfinite(q.y) && std::isfinite(q.z)) {
-      finite.emplace_back(q.x, q.y, q.z);
-      rgb.push_back(q.rgba & 0xffffffu);
-    }
-  const NeighbourGraph graph = NeighbourGraph::byCount(finite, SpatialIndex(finite), neighbours);
-  std::vector<float> variation;  // written as 'curvature', as pcl::NormalEstimation does
-  Normals normals = estimateNormals(finite, graph, &variation);
-  const Eigen::Vector3f eye = real.fit.pose.translation().cast<float>();
-  for (std::size_t i = 0; i < finite.size(); ++i)  // a single view: towards the camera
-    if (normals[i].allFinite() && normals[i].dot(eye - finite[i]) < 0) normals[i] = -normals[i];
+  const RgbdPoints finite = rgbdPoints(frame, neighbours, real.fit.pose.translation().cast<float>());
 
   const std::string dir = a.positional[1];
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
   if (!std::filesystem::is_directory(dir, ec)) throw IoError("cannot create folder '" + dir + "'");
   pcl::PointCloud<pcl::PointXYZRGB> out;
-  out.resize(finite.size());
-  for (std::size_t i = 0; i < finite.size(); ++i) {
-    out[i].getVector3fMap() = finite[i];
-    out[i].rgba = rgb[i] | 0xff000000u;
+  out.resize(finite.points.size());
+  for (std::size_t i = 0; i < finite.points.size(); ++i) {
+    out[i].getVector3fMap() = finite.points[i];
+    out[i].rgba = finite.rgb[i] | 0xff000000u;
   }
   pcl::PCLPointCloud2 cloud_blob;
   pcl::toPCLPointCloud2(out, cloud_blob);
-  setNormals(cloud_blob, normals, &variation);
+  setNormals(cloud_blob, finite.normals, &finite.variation);
   saveCloudAtomic(dir + "/cloud.pcd", cloud_blob);
   writeImageAtomic(dir + "/photo.png", real.photo.image);
   PhotoListEntry e;
@@ -337,7 +339,7 @@ int runRgbdPhoto(int argc, char** argv) {
   e.pose = real.photo.pose;
   savePhotoListAtomic(dir + "/photo.txt", {e});
   std::printf("wrote %s/cloud.pcd (%zu points, normals, rgb), %s/photo.png, %s/photo.txt\n", dir.c_str(),
-              finite.size(), dir.c_str(), dir.c_str());
+              finite.points.size(), dir.c_str(), dir.c_str());
   if (a.has("perturb")) {
     Random rng(seed * 7 + 5);
     PoseDelta d;
@@ -350,7 +352,7 @@ int runRgbdPhoto(int argc, char** argv) {
     wrong.pose = applyPoseDelta(e.pose, d);
     savePhotoListAtomic(dir + "/photo_start.txt", {wrong});
     std::vector<Eigen::Vector3d> probe;
-    for (std::size_t i = 0; i < finite.size(); i += 13) probe.push_back(finite[i].cast<double>());
+    for (std::size_t i = 0; i < finite.points.size(); i += 13) probe.push_back(finite.points[i].cast<double>());
     std::printf("wrote %s/photo_start.txt (%.2f px from the true pose)\n", dir.c_str(),
                 meanReprojectionError(e.camera, e.pose, wrong.pose, probe));
   }

@@ -111,7 +111,11 @@ PinholeFit fitPinholeCamera(const std::vector<Eigen::Vector3d>& points, const st
   fit.camera.fy = k(1, 1);
   fit.camera.cx = k(0, 2);
   fit.camera.cy = k(1, 2);  // the skew k(0, 1) is dropped: the residual below shows its cost
-  fit.camera.validate();
+  try {
+    fit.camera.validate();
+  } catch (const InvalidParameter& e) {  // a degenerate fit is the data's fault, not a parameter's
+    throw InvalidInput(std::string("pinhole fit: the fitted camera is not valid (") + e.what() + ")");
+  }
   fit.pose.setIdentity();
   fit.pose.linear() = r.transpose();
   fit.pose.translation() = -r.transpose() * t;

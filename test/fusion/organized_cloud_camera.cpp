@@ -189,7 +189,7 @@ TEST(OrganizedCloudCamera, BadInputGetsClearErrors) {
 
 // Random garbage on a grid (huge and tiny coordinates, repeated points, NaN and Inf, lines,
 // random pixels): every call either returns a finite camera that passed its own checks or
-// throws paps::Error; nothing crashes or returns NaN.
+// throws paps::InvalidInput; nothing crashes or returns NaN.
 TEST(OrganizedCloudCamera, GarbageGivesACameraOrAClearError) {
   paps::Random random(11);
   int refused = 0, fitted = 0;
@@ -214,7 +214,7 @@ TEST(OrganizedCloudCamera, GarbageGivesACameraOrAClearError) {
       EXPECT_TRUE(std::isfinite(r.fit.camera.fy) && r.fit.camera.fy > 0) << trial;
       EXPECT_TRUE(r.fit.pose.matrix().allFinite()) << trial;
       EXPECT_LE(r.fit.rms_pixels, 0.5) << trial;
-    } catch (const paps::Error&) {
+    } catch (const paps::InvalidInput&) {  // the data's fault, said as such
       ++refused;
     }
   }

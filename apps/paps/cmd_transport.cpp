@@ -35,12 +35,18 @@ const char* kReconstructUsage =
     "                           complex, possibly non-manifold, with creases and borders kept\n"
     "  --vertices N             decimation stops at N vertices (default 50, at least 3)\n"
     "  --initial-fraction F     share of the points in the initial Delaunay triangulation,\n"
-    "                           in (0, 1] (default 0.1)\n"
+    "                           in (0, 1] (default 0.2)\n"
     "  --candidates K           half-edge collapses simulated per step, drawn at random\n"
     "                           (default 40; 0: every half-edge, slow)\n"
     "  --seed S                 seed of the random draws (default 1); same seed, same mesh\n"
     "  --density-threshold T    facets whose mass density is below T x the mean are dropped,\n"
     "                           in [0, 1) (default 0.1)\n"
+    "  --deletion-threshold D   after the decimation, a facet goes when passing its mass to\n"
+    "                           its neighbours costs at most D x its mass x the median facet's\n"
+    "                           mean squared transport distance (default 0.2; 0: keep all)\n"
+    "  --bins-per-area B        facet bins per unit area, the points scaled into a box of side\n"
+    "                           0.5 (default 800; the manuscript's 200 is faster, less sharp)\n"
+    "  --max-bins M             at most M bins a facet, 1 to 256 (default 64)\n"
     "  --quiet, --timings       no progress bar / wall time of each stage\n"
     "Costly: meant for thousands to tens of thousands of points and tens to hundreds of vertices.\n";
 
@@ -144,7 +150,8 @@ void saveMeshAtomic(const std::string& path, const TriangleMesh& mesh) {
 int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
-  a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "quiet", "timings"});
+  a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
+               "bins-per-area", "max-bins", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireOutputApart();
   const std::string in_path = a.positional[0], out_path = a.positional[1];
@@ -155,16 +162,21 @@ int runReconstruct(int argc, char** argv) {
   p.candidates = a.integer("candidates", p.candidates);
   p.seed = a.count("seed", p.seed);
   p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
+  p.deletion_threshold = static_cast<float>(a.number("deletion-threshold", p.deletion_threshold));
+  p.transport.bins_per_area = a.number("bins-per-area", p.transport.bins_per_area);
+  p.transport.max_bins_per_facet = a.integer("max-bins", p.transport.max_bins_per_facet);
   validateAsOptions(p, {{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
-                        {"candidates", "candidates"}, {"density_threshold", "density-threshold"}});
+                        {"candidates", "candidates"}, {"density_threshold", "density-threshold"},
+                        {"deletion_threshold", "deletion-threshold"}, {"bins_per_area", "bins-per-area"},
+                        {"max_bins_per_facet", "max-bins"}});
   checkMeshOutput(out_path);
   const Positions points = loadPoints(in_path);
   TransportReconstructionReport r;
   const TriangleMesh mesh = transportReconstruct(points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
   std::printf("reconstruct: Delaunay of %d points (%d facets), %d facets with mass; %d collapses (%d simulated)\n",
               r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations);
-  std::printf("reconstruct: transport cost %.4g -> %.4g, RMS transport distance %g m\n", r.initial_cost, r.final_cost,
-              r.rms_transport);
+  std::printf("reconstruct: %d facets deleted; transport cost %.4g -> %.4g, RMS transport distance %g m\n",
+              r.deleted_facets, r.initial_cost, r.final_cost, r.rms_transport);
   if (mesh.triangles.empty())
     throw InvalidInput("the reconstruction kept no facet (try a lower --density-threshold or more --vertices)");
   saveMeshAtomic(out_path, mesh);

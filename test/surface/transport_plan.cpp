@@ -136,6 +136,49 @@ TEST(TransportPlan, RelaxationLowersCostAndKeepsMass) {
   for (int f = 0; f < plan.facetCount(); ++f) EXPECT_NEAR(plan.massOnFacet(f), facets / 8, 0.2 * facets / 8) << f;
 }
 
+// The 3 x 3 grid of vertices and 8 facets over the unit square of RelaxationLowersCostAndKeepsMass;
+// returns the facet ids.
+std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
+  std::vector<int> facets;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) id[i][j] = plan.addVertex(Vector3d(0.5 * i, 0.5 * j, 0));
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2; ++j) {
+      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j], id[i + 1][j + 1]));
+      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j + 1], id[i][j + 1]));
+    }
+  return facets;
+}
+
+TEST(TransportPlan, FacetDeletionTakesADoubledFacetOnly) {
+  // The square alone: every facet carries its part of the surface, none goes.
+  {
+    TransportPlan plan(squareSamples(2000, 5), {}, {});
+    int id[3][3];
+    squareGrid(plan, id);
+    plan.assignToNearestVertices();
+    plan.relax();
+    EXPECT_EQ(plan.deleteRedundantFacets(0.2), 0);
+    EXPECT_EQ(plan.aliveFacetCount(), 8);
+  }
+  // The same square with a second copy of one facet: the copies share its mass, and one of
+  // them can take all of it at no cost.
+  TransportPlan plan(squareSamples(2000, 5), {}, {});
+  int id[3][3];
+  const std::vector<int> square = squareGrid(plan, id);
+  const int twin = plan.addFacet(id[0][0], id[1][0], id[1][1]);
+  plan.assignToNearestVertices();
+  plan.relax();
+  ASSERT_GT(plan.massOnFacet(twin) * plan.massOnFacet(square[0]), 0);  // both copies are fed
+  const double before = plan.cost();
+  EXPECT_EQ(plan.deleteRedundantFacets(0.2), 1);
+  EXPECT_NE(plan.facetAlive(twin), plan.facetAlive(square[0]));  // one of the two copies stays
+  for (std::size_t k = 1; k < square.size(); ++k) EXPECT_TRUE(plan.facetAlive(square[k])) << k;
+  EXPECT_LT(plan.cost(), 1.02 * before);
+  const std::vector<double> sent = plan.massSent();
+  for (std::size_t i = 0; i < plan.pointCount(); ++i) ASSERT_NEAR(sent[i], 1.0, 1e-9) << i;
+}
+
 // Distance of the relocated corner to the true one, and cost before/after, for a bin density.
 struct CornerRun { double start, end, cost_before, cost_after, z; };
 CornerRun relocateCorner(double bins_per_area, int max_bins) {

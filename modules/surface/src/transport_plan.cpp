@@ -562,4 +562,54 @@ double TransportPlan::relocateAll() {
   return std::sqrt(sum2 / alive.size());
 }
 
+// Facet deletion: in order of increasing mass density, a facet goes when re-solving its
+// stencil without it raises the cost by at most threshold x its mass x the median facet's mean
+// squared transport distance. A deletion hands mass to the neighbours (a facet fed by outliers
+// may pass it to another such facet), so passes repeat, in the new density order, until one
+// deletes nothing (at most 10). Sequential, in a fixed order: deterministic.
+int TransportPlan::deleteRedundantFacets(double threshold) {
+  std::vector<double> mean_d2;
+  for (int f = 0; f < facetCount(); ++f) {
+    const double m = facetAlive(f) ? massOnFacet(f) : 0.0;
+    if (m > 0) mean_d2.push_back(gather({}, {f}).cost / m);
+  }
+  if (mean_d2.empty()) return 0;
+  std::nth_element(mean_d2.begin(), mean_d2.begin() + mean_d2.size() / 2, mean_d2.end());
+  const double unit = mean_d2[mean_d2.size() / 2];
+  int deleted = 0;
+  for (int pass = 0; pass < 10; ++pass) {
+    std::vector<std::pair<double, int>> order;
+    for (int f = 0; f < facetCount(); ++f) {
+      const double m = facetAlive(f) ? massOnFacet(f) : 0.0, a = facetArea(f);
+      if (m > 0) order.emplace_back(a > 0 ? m / a : INFINITY, f);  // without mass: the density filter's
+    }
+    std::sort(order.begin(), order.end());
+    int deleted_now = 0;
+    for (const auto& [density, f] : order) {
+      const Stencil s = facetStencil(f);
+      const double m = massOnFacet(f);
+      std::vector<int> facets;
+      for (int g : s.facets)
+        if (g != f) facets.push_back(g);
+      std::vector<TransportTarget> targets;
+      for (int v : s.vertices) targets.push_back({{vertex(v), vertex(v), vertex(v)}, nullptr});
+      for (int g : facets) {
+        const auto& t = facet(g);
+        targets.push_back({{vertex(t[0]), vertex(t[1]), vertex(t[2])}, &bins(g)});
+      }
+      std::vector<Eigen::Vector3d> pts(s.points.size());
+      for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = point(s.points[k]);
+      const LocalTransport sol = solveLocalTransport(pts, s.mass, targets, params_.bins_per_point);
+      if (!sol.solved || sol.cost - s.cost > threshold * m * unit) continue;
+      release(s);
+      removeFacet(f);
+      assign(s, s.vertices, facets, sol);
+      ++deleted_now;
+    }
+    deleted += deleted_now;
+    if (deleted_now == 0) break;
+  }
+  return deleted;
+}
+
 }  // namespace paps

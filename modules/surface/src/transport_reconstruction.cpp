@@ -6,6 +6,8 @@
 #include <map>
 #include <numeric>
 #include <set>
+#include <cstdio>
+#include <cstdlib>
 
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -26,6 +28,8 @@ void TransportReconstructionParameters::validate() const {
   requireInRange("final_relocation_sweeps", final_relocation_sweeps, 0, 100);
   if (!(density_threshold >= 0) || !(density_threshold < 1))
     throw InvalidParameter("density_threshold", detail::toString(density_threshold), "in [0, 1)");
+  if (!(deletion_threshold >= 0) || !std::isfinite(deletion_threshold) || deletion_threshold > 1e6)
+    throw InvalidParameter("deletion_threshold", detail::toString(deletion_threshold), "in [0, 1e6]");
   transport.validate();
 }
 
@@ -273,6 +277,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   rep.throwIfCancelled();
   rep.finish();
   for (int sweep = 0; sweep < params.final_relocation_sweeps; ++sweep) plan.relocateAll();
+  if (params.deletion_threshold > 0) report.deleted_facets = plan.deleteRedundantFacets(params.deletion_threshold);
   report.final_cost = plan.cost();
   report.rms_transport = std::sqrt(report.final_cost / plan.totalMass());
 

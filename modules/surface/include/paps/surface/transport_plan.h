@@ -178,6 +178,13 @@ class TransportPlan {
   double relocate(int v);
   /// relocate() on every alive vertex; returns the RMS move.
   double relocateAll();
+  /// Facet deletion (not in the manuscript): visiting the facets with mass by increasing mass
+  /// density, deletes a facet when re-solving its stencil without it raises the cost by at
+  /// most threshold x its mass x the median facet's mean squared transport distance (its mass
+  /// then goes to the simplices around it). A facet doubling another passes its mass on
+  /// cheaply; a facet of the surface does not. Passes repeat until one deletes nothing (at
+  /// most 10). Returns the number deleted.
+  int deleteRedundantFacets(double threshold);
 
   /// Runs `work(item)` for every item in rounds: a round takes, in item order, the items whose
   /// stencil (the simplex ids `simplices(item)` fills, vertices then facets) shares no simplex

@@ -336,9 +336,9 @@ int runBenchTransport(int argc, char** argv) {
       std::vector<Row> rows;
       const int seeds = quick ? 1 : 3;
       for (int seed = 1; seed <= seeds; ++seed)
-        rows.push_back(outliers > 0 ? Row{fmt("ours (OT, density 0.5), seed %d", seed), "ot-reconstruction",
+        rows.push_back(outliers > 0 ? Row{fmt("ours (OT, density 0.5), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", 30}, {"density", 0.5}, {"seed", seed}}}
-                                    : Row{fmt("ours (OT reconstruction), seed %d", seed), "ot-reconstruction",
+                                    : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", 30}, {"seed", seed}}});
       rows.push_back({"PCL Poisson", "poisson", {{"depth", 5}}});
       rows.push_back({"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}}});

@@ -47,8 +47,9 @@ const char* kUsage =
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
     "    (its time: the recovery alone, and Poisson + recovery)\n"
-    "(b) reconstruction of a cube (3000 points, noise 0 and 0.5%, and 10% outliers; --quick: 800 points, noise 0):\n"
-    "    ours (30 vertices; seeds 1, 2, 3 and their mean; --quick: seed 1) vs\n"
+    "(b) reconstruction of a cube (3000 points, noise 0 and 0.5%, and 10% outliers; --quick: 800 points, noise 0)\n"
+    "    and of a fandisk block (3000 points, 60 vertices, no noise; not in --quick):\n"
+    "    ours (30 vertices on the cube; seeds 1, 2, 3 and their mean; --quick: seed 1) vs\n"
     "    PCL Poisson (depth 5), that Poisson mesh decimated by VTK's quadric\n"
     "    decimation (pcl::MeshQuadricDecimationVTK) to seed 1's vertex count (reduction factor\n"
     "    1 - ours/Poisson vertices; its time: Poisson + decimation), and PCL's greedy projection\n"
@@ -290,27 +291,35 @@ int runBenchTransport(int argc, char** argv) {
     }
   }
 
-  // (b) Reconstruction.
-  {
+  // (b) Reconstruction: the cube (planar faces, sharp edges), then the fandisk block (curved
+  // faces and creases; not in --quick).
+  struct Shape {
+    std::string name, part;
+    TriangleMesh gt;
+    int vertices;
+    // (noise, outliers): a share of the points replaced by points uniform in the box enlarged
+    // by 10% (the manuscript's Fig. 5.5 uses 20%).
+    std::vector<std::pair<double, double>> cases;
+  };
+  std::vector<Shape> shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30,
+                                quick ? std::vector<std::pair<double, double>>{{0, 0}}
+                                      : std::vector<std::pair<double, double>>{{0, 0}, {0.005, 0}, {0, 0.1}}}};
+  if (!quick) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, {{0, 0}}});
+  for (const Shape& shape : shapes) {
     const std::size_t n = quick ? 800 : 3000;
-    const TriangleMesh gt = synthetic::cube(0.5f, 4);
+    const TriangleMesh& gt = shape.gt;
     const Positions clean = synthetic::sampleMesh(gt, n, 7);
     const double diagonal = gt.boundingBoxDiagonal();
     const PointToMeshDistance gt_distance(gt);
     const Positions gt_samples = synthetic::sampleMesh(gt, 50000, 4);
-    std::printf("\nbench transport (b): reconstruction of cube(0.5, 4), %zu points; ours with 30 vertices, PCL Poisson "
+    std::printf("\nbench transport (b): reconstruction of %s, %zu points; ours with %d vertices, PCL Poisson "
                 "depth 5, the same Poisson mesh\nquadric-decimated (VTK through PCL) to ours' vertex count (time: Poisson + decimation), PCL "
                 "GreedyProjectionTriangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours);\n"
                 "errors in 1e-3 of the bounding-box diagonal (%.3f m)\n",
-                n, diagonal);
+                shape.name.c_str(), n, shape.vertices, diagonal);
     std::printf("%-6s %-34s %7s %7s %9s %9s %9s %9s %8s %8s\n", "noise", "method", "verts", "facets", "m>gt.rms",
                 "m>gt.max", "gt>m.rms", "gt>m.max", "time(s)", "peak MB");
-    // (noise, outliers): a share of the points replaced by points uniform in the box enlarged by
-    // 10% (the manuscript's Fig. 5.5 uses 20%).
-    const std::vector<std::pair<double, double>> cases =
-        quick ? std::vector<std::pair<double, double>>{{0, 0}}
-              : std::vector<std::pair<double, double>>{{0, 0}, {0.005, 0}, {0, 0.1}};
-    for (const auto& [noise, outliers] : cases) {
+    for (const auto& [noise, outliers] : shape.cases) {
       Positions points = clean;
       if (noise > 0) synthetic::addGaussianNoise(points, static_cast<float>(noise), 8);
       if (outliers > 0) synthetic::addOutliers(points, static_cast<float>(outliers), 9);
@@ -337,9 +346,9 @@ int runBenchTransport(int argc, char** argv) {
       const int seeds = quick ? 1 : 3;
       for (int seed = 1; seed <= seeds; ++seed)
         rows.push_back(outliers > 0 ? Row{fmt("ours (OT, density 0.5), seed %.0f", seed), "ot-reconstruction",
-                                          {{"vertices", 30}, {"density", 0.5}, {"seed", seed}}}
+                                          {{"vertices", shape.vertices}, {"density", 0.5}, {"seed", seed}}}
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
-                                          {{"vertices", 30}, {"seed", seed}}});
+                                          {{"vertices", shape.vertices}, {"seed", seed}}});
       rows.push_back({"PCL Poisson", "poisson", {{"depth", 5}}});
       rows.push_back({"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}}});
       rows.push_back({"PCL GreedyProjectionTriangulation", "gp3", {{"radius", 3 * spacing}, {"mu", 2.5}, {"neighbours", 100}}});
@@ -359,7 +368,7 @@ int runBenchTransport(int argc, char** argv) {
         if (r.method == "ot-reconstruction" && w.ok && ours_vertices == 0) ours_vertices = m.vertices.size();
         if (!w.ok) {
           std::printf("%-6s %-34s failed: %s\n", noise_s.c_str(), r.name.c_str(), w.message.c_str());
-          csvRow(outliers > 0 ? "reconstruction-outliers" : "reconstruction", noise, r.name, w, m, w.seconds, MeshScore());
+          csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, MeshScore());
           continue;
         }
         const MeshScore s = score(m, gt_distance, gt_samples, diagonal);
@@ -380,7 +389,7 @@ int runBenchTransport(int argc, char** argv) {
                     cell("%.2f", s.to_gt_max).c_str(), cell("%.3f", s.from_gt_rms).c_str(),
                     cell("%.2f", s.from_gt_max).c_str(), w.seconds, w.peak_mb);
         if (r.method == "poisson-decimated" && !w.chosen.empty()) std::printf("%-6s   %s\n", "", w.chosen.c_str());
-        csvRow(outliers > 0 ? "reconstruction-outliers" : "reconstruction", noise, r.name, w, m, w.seconds, s);
+        csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, s);
       }
     }
   }

@@ -110,17 +110,23 @@ TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
   for (const auto& es : near.entries) EXPECT_LE(es.size(), 8u);
 }
 
-TEST(TransportPlan, RelaxationLowersCostAndKeepsMass) {
-  TransportPlan plan(squareSamples(2000, 5), {}, {});
-  // A 3 x 3 grid of vertices, 8 facets over the unit square.
-  int id[3][3];
+// A 3 x 3 grid of vertices and 8 facets over the unit square; returns the facet ids.
+std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
+  std::vector<int> facets;
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) id[i][j] = plan.addVertex(Vector3d(0.5 * i, 0.5 * j, 0));
   for (int i = 0; i < 2; ++i)
     for (int j = 0; j < 2; ++j) {
-      plan.addFacet(id[i][j], id[i + 1][j], id[i + 1][j + 1]);
-      plan.addFacet(id[i][j], id[i + 1][j + 1], id[i][j + 1]);
+      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j], id[i + 1][j + 1]));
+      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j + 1], id[i][j + 1]));
     }
+  return facets;
+}
+
+TEST(TransportPlan, RelaxationLowersCostAndKeepsMass) {
+  TransportPlan plan(squareSamples(2000, 5), {}, {});
+  int id[3][3];
+  squareGrid(plan, id);
   plan.assignToNearestVertices();
   const double nearest = plan.cost();
   const int sweeps = plan.relax();
@@ -134,20 +140,6 @@ TEST(TransportPlan, RelaxationLowersCostAndKeepsMass) {
   EXPECT_GT(facets, 0.9 * 2000);
   // Every facet is covered evenly by the points: similar masses.
   for (int f = 0; f < plan.facetCount(); ++f) EXPECT_NEAR(plan.massOnFacet(f), facets / 8, 0.2 * facets / 8) << f;
-}
-
-// The 3 x 3 grid of vertices and 8 facets over the unit square of RelaxationLowersCostAndKeepsMass;
-// returns the facet ids.
-std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
-  std::vector<int> facets;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) id[i][j] = plan.addVertex(Vector3d(0.5 * i, 0.5 * j, 0));
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) {
-      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j], id[i + 1][j + 1]));
-      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j + 1], id[i][j + 1]));
-    }
-  return facets;
 }
 
 TEST(TransportPlan, FacetDeletionTakesADoubledFacetOnly) {

@@ -422,11 +422,15 @@ void TransportPlan::apply(const Stencil& s, const LocalTransport& solution) {
   assign(s, s.vertices, s.facets, solution);
 }
 
-double TransportPlan::improve(const Stencil& s) {
-  if (s.points.empty()) return 0;
+LocalTransport TransportPlan::solve(const Stencil& s, const Stencil& targets) const {
   std::vector<Eigen::Vector3d> pts(s.points.size());
   for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = points_[s.points[k]];
-  const LocalTransport sol = solveLocalTransport(pts, s.mass, targetsOf(s), params_.bins_per_point);
+  return solveLocalTransport(pts, s.mass, targetsOf(targets), params_.bins_per_point);
+}
+
+double TransportPlan::improve(const Stencil& s) {
+  if (s.points.empty()) return 0;
+  const LocalTransport sol = solve(s, s);
   if (!sol.solved || !(sol.cost < s.cost)) return 0;
   apply(s, sol);
   return s.cost - sol.cost;
@@ -587,23 +591,13 @@ int TransportPlan::deleteRedundantFacets(double threshold) {
     int deleted_now = 0;
     for (const auto& [density, f] : order) {
       const Stencil s = facetStencil(f);
-      const double m = massOnFacet(f);
-      std::vector<int> facets;
-      for (int g : s.facets)
-        if (g != f) facets.push_back(g);
-      std::vector<TransportTarget> targets;
-      for (int v : s.vertices) targets.push_back({{vertex(v), vertex(v), vertex(v)}, nullptr});
-      for (int g : facets) {
-        const auto& t = facet(g);
-        targets.push_back({{vertex(t[0]), vertex(t[1]), vertex(t[2])}, &bins(g)});
-      }
-      std::vector<Eigen::Vector3d> pts(s.points.size());
-      for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = point(s.points[k]);
-      const LocalTransport sol = solveLocalTransport(pts, s.mass, targets, params_.bins_per_point);
-      if (!sol.solved || sol.cost - s.cost > threshold * m * unit) continue;
+      Stencil without = s;  // the same simplices but f
+      without.facets.erase(std::find(without.facets.begin(), without.facets.end(), f));
+      const LocalTransport sol = solve(s, without);
+      if (!sol.solved || sol.cost - s.cost > threshold * massOnFacet(f) * unit) continue;
       release(s);
       removeFacet(f);
-      assign(s, s.vertices, facets, sol);
+      assign(s, without.vertices, without.facets, sol);
       ++deleted_now;
     }
     deleted += deleted_now;

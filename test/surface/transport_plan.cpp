@@ -1,6 +1,8 @@
 // Tests of paps/surface/transport_plan.h: the CVT bins of a triangle, the local linear
 // program on cases with known optima, the relaxation's monotone cost and mass conservation,
 // and the vertex relocation pulling a displaced corner back.
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <numeric>
@@ -46,6 +48,47 @@ TEST(CentroidalBins, CapacitiesSumToOneAndCentroidIsKept) {
       EXPECT_LT(*std::max_element(bins.capacity.begin(), bins.capacity.end()),
                 3 * *std::min_element(bins.capacity.begin(), bins.capacity.end()));
   }
+}
+
+TEST(CentroidalBins, AreAFixedPointOfLloyd) {
+  // The bins are the centroids of the Voronoi cells of the equal-area lattice that the CVT
+  // runs on (sub-triangle centres of an n x n subdivision): assigning every lattice sample to
+  // its nearest centre, by brute force, gives back each bin's capacity and centroid. Catches a
+  // sample kept in a cell whose centre is not its nearest (the accelerated search's bounds).
+  const std::vector<std::array<Vector3d, 3>> triangles{
+      {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0)},
+      {Vector3d(0, 0, 0), Vector3d(2, 0, 0), Vector3d(0.3, 1, 0.5)},
+      {Vector3d(0, 0, 0), Vector3d(3, 0, 0), Vector3d(2.9, 0.2, 0)}};  // obtuse and thin
+  for (const auto& t : triangles)
+    for (int count : {16, 40, 64}) {
+      const paps::FacetBins bins = paps::centroidalBins(t[0], t[1], t[2], count);
+      const int n = std::max(8, static_cast<int>(std::ceil(std::sqrt(24.0 * count))));
+      std::vector<Vector3d> lattice;
+      for (int i = 0; i < n; ++i)
+        for (int j = 0; i + j < n; ++j) {
+          lattice.emplace_back((i + 1.0 / 3) / n, (j + 1.0 / 3) / n, 0);
+          if (i + j + 1 < n) lattice.emplace_back((i + 2.0 / 3) / n, (j + 2.0 / 3) / n, 0);
+        }
+      const int cells = static_cast<int>(bins.capacity.size());
+      std::vector<Vector3d> sum(cells, Vector3d::Zero());
+      std::vector<int> size(cells, 0);
+      auto at = [&](const Vector3d& w) { return w[0] * t[0] + w[1] * t[1] + w[2] * t[2]; };
+      for (auto& w : lattice) {
+        w[2] = 1 - w[0] - w[1];
+        int best = 0;
+        for (int k = 1; k < cells; ++k)
+          if ((at(w) - at(bins.barycentric[k])).squaredNorm() < (at(w) - at(bins.barycentric[best])).squaredNorm())
+            best = k;
+        sum[best] += w;
+        ++size[best];
+      }
+      for (int k = 0; k < cells; ++k) {
+        SCOPED_TRACE(testing::Message() << "count " << count << " cell " << k);
+        EXPECT_NEAR(bins.capacity[k], static_cast<double>(size[k]) / lattice.size(), 1e-12);
+        ASSERT_GT(size[k], 0);
+        EXPECT_LT((sum[k] / size[k] - bins.barycentric[k]).norm(), 1e-12);
+      }
+    }
 }
 
 TEST(LocalTransport, PointsOnVerticesCostNothing) {

@@ -1,6 +1,6 @@
 // Tests of paps/surface/transport_reconstruction.h: a sampled cube is reconstructed with the
 // vertex budget asked, close to the cube and covering it, closer than with the manuscript's
-// coarser quadrature; outliers do not take the mesh with them; the same mesh with one or two threads and through the pcl stage; bad input.
+// coarser quadrature; outliers do not take the mesh with them; the same mesh with one or two threads, through the pcl stage, and with or without reused simulations; bad input.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -112,6 +112,29 @@ TEST(TransportReconstruction, SameMeshWithOneOrTwoThreadsAndThroughThePclStage) 
   ASSERT_EQ(back.vertices.size(), one.vertices.size());
   for (std::size_t v = 0; v < one.vertices.size(); ++v) ASSERT_EQ(back.vertices[v], one.vertices[v]);
   EXPECT_EQ(stage.getReport().output_facets, static_cast<int>(one.triangles.size()));
+}
+
+TEST(TransportReconstruction, ReusedSimulationsGiveTheSameMesh) {
+  // A simulation is reused only while nothing in its stencil changed: the mesh must be the one
+  // every draw re-simulated gives, bit for bit, with fewer programs solved.
+  const paps::Positions points = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 4), 400, 8);
+  auto p = smallRun();
+  p.candidates = 40;  // more draws of the same half-edges: more reuse to check
+  p.initial_fraction = 0.1f;
+  p.target_vertices = 30;
+  p.transport = paps::TransportParameters();  // the manuscript's quadrature: faster, same property
+  paps::TransportReconstructionReport with, without;
+  const TriangleMesh a = paps::transportReconstruct(points, p, &with);
+  p.reuse_simulations = false;
+  const TriangleMesh b = paps::transportReconstruct(points, p, &without);
+  EXPECT_GT(with.reused_simulations, 0);
+  EXPECT_EQ(without.reused_simulations, 0);
+  EXPECT_EQ(with.simulations + with.reused_simulations, without.simulations);
+  EXPECT_EQ(with.final_cost, without.final_cost);
+  ASSERT_EQ(a.vertices.size(), b.vertices.size());
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
+  for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
 }
 
 TEST(TransportReconstruction, SameMeshForShuffledPoints) {

@@ -126,6 +126,7 @@ class Decimation {
   }
 
   void apply(const Collapse& c) {
+    touch(c.before.vertices, c.before.facets);
     plan_.release(c.before);
     plan_.removeVertex(c.u);  // and its facets
     std::vector<int> facets = c.kept_facets;
@@ -141,7 +142,34 @@ class Decimation {
     neighbours_[c.u].clear();
   }
 
+  // A simulation stays exact while no simplex of its stencil changed (position, facets, plan):
+  // it depends on nothing else. The decimation marks what each step changes, and keeps the
+  // simulations of unchanged stencils for the next steps' draws (same result, fewer programs).
+  void touch(const std::vector<int>& vertices, const std::vector<int>& facets) {
+    ++step_;
+    if (vertex_step_.size() < static_cast<std::size_t>(plan_.vertexCount())) vertex_step_.resize(plan_.vertexCount(), 0);
+    if (facet_step_.size() < static_cast<std::size_t>(plan_.facetCount())) facet_step_.resize(plan_.facetCount(), 0);
+    for (int v : vertices) vertex_step_[v] = step_;
+    for (int f : facets) facet_step_[f] = step_;
+  }
+  /// Marks what relocating v changes: v, its facets and their corners (its stencil's plan).
+  void touchAround(int v) {
+    std::vector<int> vs{v};
+    for (int f : plan_.facetsOf(v)) vs.insert(vs.end(), plan_.facet(f).begin(), plan_.facet(f).end());
+    touch(vs, plan_.facetsOf(v));
+  }
+  std::uint64_t step() const { return step_; }
+  bool unchangedSince(const TransportPlan::Stencil& s, std::uint64_t since) const {
+    for (int v : s.vertices)
+      if (static_cast<std::size_t>(v) < vertex_step_.size() && vertex_step_[v] > since) return false;
+    for (int f : s.facets)
+      if (static_cast<std::size_t>(f) < facet_step_.size() && facet_step_[f] > since) return false;
+    return true;
+  }
+
  private:
+  std::uint64_t step_ = 0;
+  std::vector<std::uint64_t> vertex_step_, facet_step_;
   TransportPlan& plan_;
   std::vector<std::set<int>> neighbours_;
 };
@@ -239,6 +267,11 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   }
 
   // Decimation (5.2.3) with relocation (5.2.4).
+  struct Cached {
+    Decimation::Collapse collapse;
+    std::uint64_t step;  // the decimation's step when simulated
+  };
+  std::map<std::pair<int, int>, Cached> cache;
   const int start = plan.aliveVertexCount();
   ProgressReporter rep(progress, "transport decimation", static_cast<std::size_t>(std::max(1, start - params.target_vertices)));
   while (plan.aliveVertexCount() > params.target_vertices) {
@@ -256,11 +289,24 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
     }
     // The simulations are kept: the chosen one is applied as simulated (its plan and bins).
+    // Those of unchanged stencils come from the cache; the others are run in parallel.
     std::vector<Decimation::Collapse> simulated(candidates.size());
-    const std::int64_t nc = static_cast<std::int64_t>(candidates.size());
+    std::vector<std::int64_t> missing;
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+      const auto hit = cache.find(candidates[k]);
+      if (params.reuse_simulations && hit != cache.end() && dec.unchangedSince(hit->second.collapse.before, hit->second.step)) {
+        simulated[k] = hit->second.collapse;
+        ++report.reused_simulations;
+      } else
+        missing.push_back(static_cast<std::int64_t>(k));
+    }
+    const std::int64_t nm = static_cast<std::int64_t>(missing.size());
 #pragma omp parallel for schedule(dynamic, 1)
-    for (std::int64_t k = 0; k < nc; ++k) simulated[k] = dec.simulate(candidates[k].first, candidates[k].second);
-    report.simulations += static_cast<int>(nc);
+    for (std::int64_t j = 0; j < nm; ++j)
+      simulated[missing[j]] = dec.simulate(candidates[missing[j]].first, candidates[missing[j]].second);
+    report.simulations += static_cast<int>(nm);
+    if (params.reuse_simulations)
+      for (std::int64_t k : missing) cache[candidates[k]] = {simulated[k], dec.step()};
     std::size_t best = 0;
     for (std::size_t k = 1; k < simulated.size(); ++k)
       if (simulated[k].delta < simulated[best].delta) best = k;  // ties: the first in (u, v) order
@@ -269,6 +315,12 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     dec.apply(collapse);
     ++report.collapses;
     for (int it = 0; it < params.relocation_iterations; ++it) plan.relocate(collapse.v);
+    if (params.relocation_iterations > 0) dec.touchAround(collapse.v);
+    // Drop what this step made stale (bounds the cache by the live half-edges).
+    for (auto it = cache.begin(); it != cache.end();)
+      it = dec.unchangedSince(it->second.collapse.before, it->second.step) && plan.vertexAlive(it->first.first)
+               ? std::next(it)
+               : cache.erase(it);
     rep.advance();
     if (rep.cancelled()) break;
   }

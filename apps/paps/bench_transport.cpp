@@ -43,12 +43,16 @@ const char* kUsage =
     "usage: paps bench transport [options]\n"
     "  --out DIR   where the table (CSV) and the scratch files go (default bench_out)\n"
     "  --quick     fewer points, Poisson depth 5, one noise level per part (a smoke run)\n"
+    "  --samples DIR  sample data from scripts/fetch_samples.sh (default $PAPS_SAMPLES or\n"
+    "              ~/.cache/paps/samples); its rs1_normals.ply is the real-scan shape of (b)\n"
     "(a) feature recovery on a fandisk block: PCL Poisson (normals by PCL's NormalEstimationOMP,\n"
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
     "    (its time: the recovery alone, and Poisson + recovery)\n"
     "(b) reconstruction of a cube (3000 points, noise 0 and 0.5%, and 10% outliers; --quick: 800 points, noise 0)\n"
-    "    and of a fandisk block (3000 points, 60 vertices, no noise; not in --quick):\n"
+    "    and of a fandisk block (3000 points, 60 vertices, no noise; not in --quick) and of the\n"
+    "    real range-scan mesh rs1_normals.ply (3000 points, 100 vertices, no noise; PCL's\n"
+    "    normals turned towards the scanner at the origin; not in --quick):\n"
     "    ours (30 vertices on the cube; seeds 1, 2, 3 and their mean; --quick: seed 1) vs\n"
     "    PCL Poisson (depth 5), that Poisson mesh decimated by VTK's quadric\n"
     "    decimation (pcl::MeshQuadricDecimationVTK) to seed 1's vertex count (reduction factor\n"
@@ -76,8 +80,8 @@ TriangleMesh readMeshRaw(const std::string& path) {
 
 // Normals for PCL's mesh builders, as a user would make them: NormalEstimationOMP on the k
 // nearest neighbours, each flipped to point away from the centroid (the shapes are convex
-// enough for that).
-pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const Positions& points, int k) {
+// enough for that), or towards the origin for a range scan taken from there.
+pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const Positions& points, int k, bool towards_origin = false) {
   auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   Eigen::Vector3f centroid = Eigen::Vector3f::Zero();
   for (const auto& p : points) {
@@ -92,8 +96,10 @@ pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const Positions& points, int 
   ne.compute(normals);
   auto out = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
   pcl::concatenateFields(*cloud, normals, *out);
-  for (auto& p : *out)
-    if ((p.getVector3fMap() - centroid).dot(p.getNormalVector3fMap()) < 0) p.getNormalVector3fMap() *= -1.f;
+  for (auto& p : *out) {
+    const Eigen::Vector3f outward = towards_origin ? Eigen::Vector3f(-p.getVector3fMap()) : Eigen::Vector3f(p.getVector3fMap() - centroid);
+    if (outward.dot(p.getNormalVector3fMap()) < 0) p.getNormalVector3fMap() *= -1.f;
+  }
   return out;
 }
 
@@ -143,7 +149,7 @@ int runTransportWorker(int argc, char** argv) {
     auto elapsed = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
     TriangleMesh mesh;
     if (method == "poisson" || method == "poisson-decimated" || method == "gp3") {
-      const auto cloud = withNormals(input, 20);
+      const auto cloud = withNormals(input, 20, params.get("viewpoint", 0) > 0);
       pcl::PolygonMesh pm;
       if (method == "poisson" || method == "poisson-decimated") {
         pcl::Poisson<pcl::PointNormal> poisson;
@@ -230,7 +236,7 @@ int runTransportWorker(int argc, char** argv) {
 int runBenchTransport(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "quick"});
+  a.allowOnly({"out", "quick", "samples"});
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
   const bool quick = a.has("quick");
   const std::string out_dir = a.text("out", "bench_out");
@@ -297,14 +303,22 @@ int runBenchTransport(int argc, char** argv) {
     std::string name, part;
     TriangleMesh gt;
     int vertices;
+    bool viewpoint = false;  // normals for Poisson and GP3 towards the origin (a range scan)
     // (noise, outliers): a share of the points replaced by points uniform in the box enlarged
     // by 10% (the manuscript's Fig. 5.5 uses 20%).
     std::vector<std::pair<double, double>> cases;
   };
-  std::vector<Shape> shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30,
+  std::vector<Shape> shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30, false,
                                 quick ? std::vector<std::pair<double, double>>{{0, 0}}
                                       : std::vector<std::pair<double, double>>{{0, 0}, {0.005, 0}, {0, 0.1}}}};
-  if (!quick) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, {{0, 0}}});
+  if (!quick) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, false, {{0, 0}}});
+  // A real shape: the range-scan mesh of opencv-doc (an open, cluttered scene with borders,
+  // which the transport keeps and Poisson closes).
+  const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
+  if (!quick && std::filesystem::exists(rs1))
+    shapes.push_back({"rs1_normals.ply (real range scan)", "reconstruction-rs1", loadTriangleMesh(rs1), 100, true, {{0, 0}}});
+  else if (!quick)
+    std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): the real-scan rows are skipped\n", rs1.c_str());
   for (const Shape& shape : shapes) {
     const std::size_t n = quick ? 800 : 3000;
     const TriangleMesh& gt = shape.gt;
@@ -349,9 +363,11 @@ int runBenchTransport(int argc, char** argv) {
                                           {{"vertices", shape.vertices}, {"density", 0.5}, {"seed", seed}}}
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", shape.vertices}, {"seed", seed}}});
-      rows.push_back({"PCL Poisson", "poisson", {{"depth", 5}}});
-      rows.push_back({"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}}});
-      rows.push_back({"PCL GreedyProjectionTriangulation", "gp3", {{"radius", 3 * spacing}, {"mu", 2.5}, {"neighbours", 100}}});
+      const double viewpoint = shape.viewpoint ? 1 : 0;
+      rows.push_back({"PCL Poisson", "poisson", {{"depth", 5}, {"viewpoint", viewpoint}}});
+      rows.push_back({"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}, {"viewpoint", viewpoint}}});
+      rows.push_back({"PCL GreedyProjectionTriangulation", "gp3",
+                      {{"radius", 3 * spacing}, {"mu", 2.5}, {"neighbours", 100}, {"viewpoint", viewpoint}}});
       std::size_t ours_vertices = 0;
       MeshScore ours_sum{0, 0, 0, 0, 0};
       double ours_seconds = 0;

@@ -72,9 +72,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 8: paps::lpfDenoisePositions(p, {}); break;
       case 9: {  // optimal-transport reconstruction, a few collapses
         // Costly by design (400 points filling a cube take 11 s in a release build at the
-        // default quadrature; 150 points at the manuscript's took 0.4-0.8 s there and over the
-        // 20 s limit under the sanitizers): 100 points and the manuscript's quadrature run the
-        // same code within the fuzzer's limit.
+        // default quadrature; 150 such points took 0.4-1.3 s there and over the 20 s limit
+        // under the sanitizers): 100 points and the manuscript's quadrature run the same code
+        // within the fuzzer's limit.
         paps::TransportReconstructionParameters r;
         r.target_vertices = 4;
         r.candidates = 4;

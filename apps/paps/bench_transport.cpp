@@ -298,7 +298,7 @@ int runBenchTransport(int argc, char** argv) {
   }
 
   // (b) Reconstruction: the cube (planar faces, sharp edges), then the fandisk block (curved
-  // faces and creases; not in --quick).
+  // faces and creases) and the real scan rs1 (not in --quick).
   struct Shape {
     std::string name, part;
     TriangleMesh gt;

@@ -1,6 +1,7 @@
 // Tests of paps/surface/transport_reconstruction.h: a sampled cube is reconstructed with the
 // vertex budget asked, close to the cube and covering it, closer than with the manuscript's
-// coarser quadrature; outliers do not take the mesh with them; the same mesh with one or two threads, through the pcl stage, and with or without reused simulations; bad input.
+// coarser quadrature; outliers do not take the mesh with them; the same mesh with one or two
+// threads, through the pcl stage, and with or without reused simulations; bad input.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>

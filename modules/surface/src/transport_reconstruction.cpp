@@ -152,11 +152,11 @@ class Decimation {
     for (int v : vertices) vertex_step_[v] = step_;
     for (int f : facets) facet_step_[f] = step_;
   }
-  /// Marks what relocating v changes: v, its facets and their corners (its stencil's plan).
+  /// Marks what relocating v changes: its stencil (v, its facets and their corners).
   void touchAround(int v) {
-    std::vector<int> vs{v};
-    for (int f : plan_.facetsOf(v)) vs.insert(vs.end(), plan_.facet(f).begin(), plan_.facet(f).end());
-    touch(vs, plan_.facetsOf(v));
+    std::vector<int> vs, fs;
+    plan_.vertexStencilSimplices(v, vs, fs);
+    touch(vs, fs);
   }
   std::uint64_t step() const { return step_; }
   bool unchangedSince(const TransportPlan::Stencil& s, std::uint64_t since) const {
@@ -316,11 +316,10 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     ++report.collapses;
     for (int it = 0; it < params.relocation_iterations; ++it) plan.relocate(collapse.v);
     if (params.relocation_iterations > 0) dec.touchAround(collapse.v);
-    // Drop what this step made stale (bounds the cache by the live half-edges).
+    // Drop what this step made stale (a collapsed vertex is in its collapse's stencil, so this
+    // also drops its half-edges: the cache holds at most the live ones).
     for (auto it = cache.begin(); it != cache.end();)
-      it = dec.unchangedSince(it->second.collapse.before, it->second.step) && plan.vertexAlive(it->first.first)
-               ? std::next(it)
-               : cache.erase(it);
+      it = dec.unchangedSince(it->second.collapse.before, it->second.step) ? std::next(it) : cache.erase(it);
     rep.advance();
     if (rep.cancelled()) break;
   }

@@ -169,6 +169,8 @@ class TransportPlan {
   Stencil facetStencil(int f) const;
   /// Stencil of vertex v: its facets and all their vertices (and v).
   Stencil vertexStencil(int v) const;
+  /// The simplex ids of vertexStencil(v), without gathering its plan (vertices may repeat).
+  void vertexStencilSimplices(int v, std::vector<int>& vertices, std::vector<int>& facets) const;
   /// Sweeps over the facet stencils until the cost stalls (5.1.5). Returns the sweeps done.
   /// A progress callback hears of each sweep (of at most max_sweeps) and may cancel.
   int relax(const ProgressCallback& progress = {});
@@ -198,7 +200,6 @@ class TransportPlan {
   /// The local program of the stencil's points and mass onto the simplices of `targets`.
   LocalTransport solve(const Stencil& s, const Stencil& targets) const;
   void facetStencilSimplices(int f, std::vector<int>& vertices, std::vector<int>& facets) const;
-  void vertexStencilSimplices(int v, std::vector<int>& vertices, std::vector<int>& facets) const;
 
   TransportParameters params_;
   std::vector<Eigen::Vector3d> points_;

@@ -45,6 +45,8 @@ const char* kUsage =
     "  --quick     fewer points, Poisson depth 5, one noise level per part (a smoke run)\n"
     "  --samples DIR  sample data from scripts/fetch_samples.sh (default $PAPS_SAMPLES or\n"
     "              ~/.cache/paps/samples); its rs1_normals.ply is the real-scan shape of (b)\n"
+    "  --candidates K  half-edge collapses our reconstruction simulates per step (default 40,\n"
+    "              the library's; 0 = all)\n"
     "(a) feature recovery on a fandisk block: PCL Poisson (normals by PCL's NormalEstimationOMP,\n"
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
@@ -219,6 +221,7 @@ int runTransportWorker(int argc, char** argv) {
       p.target_vertices = static_cast<int>(params.get("vertices", p.target_vertices));
       p.density_threshold = static_cast<float>(params.get("density", p.density_threshold));
       p.seed = static_cast<std::uint64_t>(params.get("seed", 1));
+      p.candidates = static_cast<int>(params.get("candidates", p.candidates));
       TransportReconstructionReport r;
       mesh = transportReconstruct(input, p, &r);
       seconds = elapsed();
@@ -236,7 +239,9 @@ int runTransportWorker(int argc, char** argv) {
 int runBenchTransport(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "quick", "samples"});
+  a.allowOnly({"out", "quick", "samples", "candidates"});
+  const int candidates = a.integer("candidates", TransportReconstructionParameters().candidates);
+  if (candidates < 0) throw InvalidParameter("candidates", std::to_string(candidates), "0 (all half-edges) or more");
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
   const bool quick = a.has("quick");
   const std::string out_dir = a.text("out", "bench_out");
@@ -326,11 +331,11 @@ int runBenchTransport(int argc, char** argv) {
     const double diagonal = gt.boundingBoxDiagonal();
     const PointToMeshDistance gt_distance(gt);
     const Positions gt_samples = synthetic::sampleMesh(gt, 50000, 4);
-    std::printf("\nbench transport (b): reconstruction of %s, %zu points; ours with %d vertices, PCL Poisson "
+    std::printf("\nbench transport (b): reconstruction of %s, %zu points; ours with %d vertices and %d candidates a step, PCL Poisson "
                 "depth 5, the same Poisson mesh\nquadric-decimated (VTK through PCL) to ours' vertex count (time: Poisson + decimation), PCL "
                 "GreedyProjectionTriangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours);\n"
                 "errors in 1e-3 of the bounding-box diagonal (%.3f m)\n",
-                shape.name.c_str(), n, shape.vertices, diagonal);
+                shape.name.c_str(), n, shape.vertices, candidates, diagonal);
     std::printf("%-6s %-34s %7s %7s %9s %9s %9s %9s %8s %8s\n", "noise", "method", "verts", "facets", "m>gt.rms",
                 "m>gt.max", "gt>m.rms", "gt>m.max", "time(s)", "peak MB");
     for (const auto& [noise, outliers] : shape.cases) {
@@ -360,9 +365,9 @@ int runBenchTransport(int argc, char** argv) {
       const int seeds = quick ? 1 : 3;
       for (int seed = 1; seed <= seeds; ++seed)
         rows.push_back(outliers > 0 ? Row{fmt("ours (OT, density 0.5), seed %.0f", seed), "ot-reconstruction",
-                                          {{"vertices", shape.vertices}, {"density", 0.5}, {"seed", seed}}}
+                                          {{"vertices", shape.vertices}, {"density", 0.5}, {"seed", seed}, {"candidates", candidates}}}
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
-                                          {{"vertices", shape.vertices}, {"seed", seed}}});
+                                          {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates}}});
       const double viewpoint = shape.viewpoint ? 1 : 0;
       rows.push_back({"PCL Poisson", "poisson", {{"depth", 5}, {"viewpoint", viewpoint}}});
       rows.push_back({"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}, {"viewpoint", viewpoint}}});

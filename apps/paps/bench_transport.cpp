@@ -34,6 +34,7 @@
 #include "bench_worker.h"
 #include "cli_common.h"
 #include "commands.h"
+#include "render.h"
 
 namespace paps::cli {
 
@@ -312,6 +313,7 @@ int runBenchTransport(int argc, char** argv) {
     // (noise, outliers): a share of the points replaced by points uniform in the box enlarged
     // by 10% (the manuscript's Fig. 5.5 uses 20%).
     std::vector<std::pair<double, double>> cases;
+    View view{};  // of the picture
   };
   std::vector<Shape> shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30, false,
                                 quick ? std::vector<std::pair<double, double>>{{0, 0}}
@@ -324,6 +326,14 @@ int runBenchTransport(int argc, char** argv) {
     shapes.push_back({"rs1_normals.ply (real range scan)", "reconstruction-rs1", loadTriangleMesh(rs1), 100, true, {{0, 0}}});
   else if (!quick)
     std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): the real-scan rows are skipped\n", rs1.c_str());
+  // The synthetic shapes seen from above a corner; the scan from the scanner (at the origin,
+  // image rows along -y).
+  for (Shape& shape : shapes) {
+    Eigen::Vector3f centroid = Eigen::Vector3f::Zero();
+    for (const auto& v : shape.gt.vertices) centroid += v / static_cast<float>(shape.gt.vertices.size());
+    shape.view = shape.viewpoint ? View::looking(shape.gt.vertices, -centroid, -Eigen::Vector3f::UnitY())
+                                 : View::looking(shape.gt.vertices, {1.f, 0.6f, 0.8f});
+  }
   for (const Shape& shape : shapes) {
     const std::size_t n = quick ? 800 : 3000;
     const TriangleMesh& gt = shape.gt;
@@ -374,6 +384,8 @@ int runBenchTransport(int argc, char** argv) {
       rows.push_back({"PCL GreedyProjectionTriangulation", "gp3",
                       {{"radius", 3 * spacing}, {"mu", 2.5}, {"neighbours", 100}, {"viewpoint", viewpoint}}});
       std::size_t ours_vertices = 0;
+      // The picture: the true mesh, then ours (seed 1) and each peer, in the rows' order.
+      std::vector<TriangleMesh> panels{gt};
       MeshScore ours_sum{0, 0, 0, 0, 0};
       double ours_seconds = 0;
       int ours_runs = 0;
@@ -387,6 +399,7 @@ int runBenchTransport(int argc, char** argv) {
           w = runMeshWorker(out_dir, r.method, points, r.params, m);
         }
         if (r.method == "ot-reconstruction" && w.ok && ours_vertices == 0) ours_vertices = m.vertices.size();
+        if (r.method != "ot-reconstruction" || r.params["seed"] == 1) panels.push_back(w.ok ? m : TriangleMesh());
         if (!w.ok) {
           std::printf("%-6s %-34s failed: %s\n", noise_s.c_str(), r.name.c_str(), w.message.c_str());
           csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, MeshScore());
@@ -411,6 +424,13 @@ int runBenchTransport(int argc, char** argv) {
                     cell("%.2f", s.from_gt_max).c_str(), w.seconds, w.peak_mb);
         if (r.method == "poisson-decimated" && !w.chosen.empty()) std::printf("%-6s   %s\n", "", w.chosen.c_str());
         csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, s);
+      }
+      const std::string png = out_dir + "/" + shape.part + "_" + (outliers > 0 ? fmt("outliers%.0f", outliers * 100) : fmt("noise%.2f", noise * 100)) + ".png";
+      try {
+        renderMeshPanels(panels, shape.view, 320, png);
+        std::printf("%-6s   picture: %s (true mesh | ours, seed 1 | Poisson | Poisson decimated | GP3)\n", "", png.c_str());
+      } catch (const Error& e) {
+        std::fprintf(stderr, "warning: no picture: %s\n", e.what());
       }
     }
   }

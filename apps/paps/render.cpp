@@ -45,13 +45,27 @@ View View::fit(const Positions& points, float tilt_degrees) {
   return v;
 }
 
-namespace {
+View View::looking(const Positions& points, const Eigen::Vector3f& towards_viewer, const Eigen::Vector3f& up) {
+  const Eigen::Vector3f d = towards_viewer.normalized();
+  const Eigen::Vector3f x = up.cross(d);
+  if (!(x.norm() > 1e-6f) || !isFinite(d)) throw InvalidParameter("view", "up parallel to the view", "two directions apart");
+  View v;
+  v.axes.row(0) = x.normalized().transpose();
+  v.axes.row(2) = d.transpose();
+  v.axes.row(1) = d.cross(x.normalized()).transpose();
+  v.lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::max());
+  v.hi = -v.lo;
+  for (const auto& p : points)
+    if (isFinite(p)) {
+      const Eigen::Vector3f s = v.axes * p;
+      v.lo = v.lo.cwiseMin(s.head<2>());
+      v.hi = v.hi.cwiseMax(s.head<2>());
+    }
+  if (!(v.lo.x() <= v.hi.x())) throw InvalidInput("nothing to render");
+  return v;
+}
 
-struct Canvas {
-  int width = 0, height = 0;
-  std::vector<unsigned char> rgb;
-  Canvas(int w, int h) : width(w), height(h), rgb(static_cast<std::size_t>(w) * h * 3, 255) {}
-};
+namespace {
 
 int heightFor(const View& view, int width) {
   const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
@@ -61,9 +75,9 @@ int heightFor(const View& view, int width) {
 // Splats every point as a square block with a z-buffer into the panel of `panel_width`
 // columns starting at column `offset`; colour from `colour(i)`.
 template <typename ColourFn>
-void splat(const Positions& points, const View& view, int panel_width, int offset, Canvas& canvas, ColourFn colour) {
+void splat(const Positions& points, const View& view, int panel_width, int offset, Image& image, ColourFn colour) {
   const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
-  const int width = panel_width, height = canvas.height;
+  const int width = panel_width, height = image.height;
   std::vector<float> depth(static_cast<std::size_t>(width) * height, -std::numeric_limits<float>::max());
   // Splats as wide as the mean spacing on screen, so that the surface shows without holes.
   const std::size_t shown = std::max<std::size_t>(1, countFinite(points));
@@ -81,17 +95,17 @@ void splat(const Positions& points, const View& view, int panel_width, int offse
         const std::size_t k = static_cast<std::size_t>(y + dy) * width + (x + dx);
         if (x + dx >= width || y + dy >= height || s.z() <= depth[k]) continue;
         depth[k] = s.z();
-        const std::size_t o = (static_cast<std::size_t>(y + dy) * canvas.width + offset + x + dx) * 3;
+        const std::size_t o = (static_cast<std::size_t>(y + dy) * image.width + offset + x + dx) * 3;
         for (int ch = 0; ch < 3; ++ch)
-          canvas.rgb[o + ch] = static_cast<unsigned char>(std::clamp(c[ch], 0.f, 1.f) * 255.f);
+          image.rgb[o + ch] = static_cast<unsigned char>(std::clamp(c[ch], 0.f, 1.f) * 255.f);
       }
   }
 }
 
 // PCL's PNG writer reports nothing when it fails (e.g. a missing folder): check the file.
-void save(const Canvas& canvas, const std::string& png) {
+void save(const Image& image, const std::string& png) {
   std::remove(png.c_str());
-  pcl::io::saveRgbPNGFile(png, canvas.rgb.data(), canvas.width, canvas.height);
+  pcl::io::saveRgbPNGFile(png, image.rgb.data(), image.width, image.height);
   std::FILE* f = std::fopen(png.c_str(), "rb");
   if (!f) throw IoError("cannot write " + png);
   std::fclose(f);
@@ -114,26 +128,97 @@ void renderShaded(const Positions& points, const View& view, int width, const st
 void renderShadedPanels(const std::vector<std::pair<Positions, Normals>>& panels, const View& view, int width,
                         const std::string& png) {
   const Eigen::Vector3f light = view.axes.transpose() * Eigen::Vector3f(-0.4f, 0.5f, 0.77f).normalized();
-  Canvas canvas(width * static_cast<int>(panels.size()), heightFor(view, width));
+  Image image(width * static_cast<int>(panels.size()), heightFor(view, width));
   for (std::size_t k = 0; k < panels.size(); ++k) {
     const Normals& normals = panels[k].second;
-    splat(panels[k].first, view, width, static_cast<int>(k) * width, canvas,
+    splat(panels[k].first, view, width, static_cast<int>(k) * width, image,
           [&](std::size_t i) { return shade(normals[i], light); });
   }
-  save(canvas, png);
+  save(image, png);
+}
+
+void renderMeshPanels(const std::vector<TriangleMesh>& meshes, const View& view, int width, const std::string& png) {
+  save(drawMeshPanels(meshes, view, width), png);
+}
+
+Image drawMeshPanels(const std::vector<TriangleMesh>& meshes, const View& view, int width) {
+  const Eigen::Vector3f light = view.axes.transpose() * Eigen::Vector3f(-0.4f, 0.5f, 0.77f).normalized();
+  const int height = heightFor(view, width);
+  const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
+  // A 2% margin, so that edges on the border of the view show.
+  const float margin = 0.02f * static_cast<float>(width);
+  const float scale = std::min((width - 2 * margin) / ext.x(), (height - 2 * margin) / ext.y());
+  Image image(width * static_cast<int>(meshes.size()), height);
+  for (std::size_t k = 0; k < meshes.size(); ++k) {
+    const TriangleMesh& mesh = meshes[k];
+    std::vector<float> depth(static_cast<std::size_t>(width) * height, -std::numeric_limits<float>::max());
+    std::vector<Eigen::Vector3f> screen(mesh.vertices.size());
+    for (std::size_t i = 0; i < screen.size(); ++i) {
+      const Eigen::Vector3f s = view.axes * mesh.vertices[i];
+      screen[i] = {margin + (s.x() - view.lo.x()) * scale, margin + (view.hi.y() - s.y()) * scale, s.z()};
+    }
+    // Edges only where facets are large on screen (a dense mesh would turn dark).
+    double covered = 0;
+    for (const Eigen::Vector3i& t : mesh.triangles)
+      if (t.minCoeff() >= 0 && t.maxCoeff() < static_cast<int>(screen.size())) {
+        const Eigen::Vector3f u = screen[t[1]] - screen[t[0]], v = screen[t[2]] - screen[t[0]];
+        covered += 0.5 * std::abs(static_cast<double>(u.x() * v.y() - u.y() * v.x()));
+      }
+    const bool edges = !mesh.triangles.empty() && covered / static_cast<double>(mesh.triangles.size()) >= 40.0;
+    for (const Eigen::Vector3i& t : mesh.triangles) {
+      if (t.minCoeff() < 0 || t.maxCoeff() >= static_cast<int>(screen.size())) continue;
+      const Eigen::Vector3f a = screen[static_cast<std::size_t>(t[0])], b = screen[static_cast<std::size_t>(t[1])],
+                            c = screen[static_cast<std::size_t>(t[2])];
+      if (!isFinite(a) || !isFinite(b) || !isFinite(c)) continue;
+      // Twice the signed area on screen; a facet seen edge-on covers no pixel centre.
+      const float area2 = (b.x() - a.x()) * (c.y() - a.y()) - (b.y() - a.y()) * (c.x() - a.x());
+      if (std::abs(area2) < 1e-9f) continue;
+      const Eigen::Vector3f& pa = mesh.vertices[static_cast<std::size_t>(t[0])];
+      const Eigen::Vector3f n = (mesh.vertices[static_cast<std::size_t>(t[1])] - pa)
+                                    .cross(mesh.vertices[static_cast<std::size_t>(t[2])] - pa)
+                                    .normalized();
+      const Eigen::Vector3f fill = shade(n, light);
+      // Pixel distance to each edge = barycentric weight x twice the area / the edge's length.
+      const float len[3] = {(c - b).head<2>().norm(), (a - c).head<2>().norm(), (b - a).head<2>().norm()};
+      const int x0 = std::max(0, static_cast<int>(std::floor(std::min({a.x(), b.x(), c.x()}))));
+      const int x1 = std::min(width - 1, static_cast<int>(std::ceil(std::max({a.x(), b.x(), c.x()}))));
+      const int y0 = std::max(0, static_cast<int>(std::floor(std::min({a.y(), b.y(), c.y()}))));
+      const int y1 = std::min(height - 1, static_cast<int>(std::ceil(std::max({a.y(), b.y(), c.y()}))));
+      for (int y = y0; y <= y1; ++y)
+        for (int x = x0; x <= x1; ++x) {
+          const float px = x + 0.5f, py = y + 0.5f;
+          const float w[3] = {((b.x() - px) * (c.y() - py) - (b.y() - py) * (c.x() - px)) / area2,
+                              ((c.x() - px) * (a.y() - py) - (c.y() - py) * (a.x() - px)) / area2,
+                              ((a.x() - px) * (b.y() - py) - (a.y() - py) * (b.x() - px)) / area2};
+          if (w[0] < 0 || w[1] < 0 || w[2] < 0) continue;
+          const float z = w[0] * a.z() + w[1] * b.z() + w[2] * c.z();
+          const std::size_t d = static_cast<std::size_t>(y) * width + x;
+          if (z <= depth[d]) continue;
+          depth[d] = z;
+          float edge = INFINITY;
+          for (int e = 0; e < 3; ++e)
+            if (len[e] > 0) edge = std::min(edge, w[e] * std::abs(area2) / len[e]);
+          const Eigen::Vector3f colour = edges && edge < 0.8f ? Eigen::Vector3f(0.1f, 0.1f, 0.35f) : fill;
+          const std::size_t o = (static_cast<std::size_t>(y) * image.width + static_cast<std::size_t>(k) * width + x) * 3;
+          for (int ch = 0; ch < 3; ++ch)
+            image.rgb[o + ch] = static_cast<unsigned char>(std::clamp(colour[ch], 0.f, 1.f) * 255.f);
+        }
+    }
+  }
+  return image;
 }
 
 void renderValues(const Positions& points, const std::vector<double>& values, double vmax,
                   const View& view, int width, const std::string& png) {
-  Canvas canvas(width, heightFor(view, width));
-  splat(points, view, width, 0, canvas, [&](std::size_t i) {
+  Image image(width, heightFor(view, width));
+  splat(points, view, width, 0, image, [&](std::size_t i) {
     if (!std::isfinite(values[i])) return Eigen::Vector3f(0.6f, 0.6f, 0.6f);
     const float t = static_cast<float>(std::clamp(values[i] / vmax, 0.0, 1.0));
     // Blue -> cyan -> green -> yellow -> red (no grey in between).
     auto ramp = [](float x) { return std::clamp(1.5f - std::abs(x), 0.f, 1.f); };
     return Eigen::Vector3f(ramp(4.f * t - 3.f), ramp(4.f * t - 2.f), ramp(4.f * t - 1.f));
   });
-  save(canvas, png);
+  save(image, png);
 }
 
 }  // namespace paps::cli

@@ -294,11 +294,20 @@ int runBenchTransport(int argc, char** argv) {
       print("PCL Poisson", wp, poisson, wp.seconds);
       if (!wp.ok || poisson.triangles.empty()) continue;
       writeMeshRaw(out_dir + "/ot_mesh.bin", poisson);
+      std::vector<TriangleMesh> panels{gt, poisson};
       for (const int sweeps : {1, 5}) {
         TriangleMesh recovered;
         const WorkerResult wr = runMeshWorker(out_dir, "ot-recovery", points, {{"sweeps", sweeps}}, recovered);
         print("Poisson + OT recovery (" + std::to_string(sweeps) + (sweeps == 1 ? " sweep)" : " sweeps)"), wr, recovered,
               wp.seconds + wr.seconds);
+        panels.push_back(wr.ok ? recovered : TriangleMesh());
+      }
+      const std::string png = out_dir + "/recovery_noise" + fmt("%.2f", noise * 100) + ".png";
+      try {
+        renderMeshPanels(panels, View::looking(gt.vertices, {1.f, 0.6f, 0.8f}), 400, png);
+        std::printf("%-6s   picture: %s (true mesh | Poisson | + recovery, 1 sweep | 5 sweeps)\n", "", png.c_str());
+      } catch (const Error& e) {
+        std::fprintf(stderr, "warning: no picture: %s\n", e.what());
       }
     }
   }

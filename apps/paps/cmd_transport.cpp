@@ -46,6 +46,10 @@ const char* kReconstructUsage =
     "  --deletion-threshold D   after the decimation, a facet goes when passing its mass to\n"
     "                           its neighbours costs at most D x its mass x the median facet's\n"
     "                           mean squared transport distance (default 0.2; 0: keep all)\n"
+    "  --dangling-support S     at the end, a facet with a corner no other facet uses goes when\n"
+    "                           fewer than 2 points lie within S mean point spacings of that\n"
+    "                           corner (a facet held up by outliers); in [0, 1000] (default 2;\n"
+    "                           0: keep them)\n"
     "  --bins-per-area B        facet bins per unit area, the points scaled into a box of side\n"
     "                           0.5 (default 800; the manuscript's 200 is faster, less sharp)\n"
     "  --max-bins M             at most M bins a facet, 1 to 256 (default 64)\n"
@@ -156,7 +160,7 @@ int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
-               "bins-per-area", "max-bins", "bins-per-point", "quiet", "timings"});
+               "dangling-support", "bins-per-area", "max-bins", "bins-per-point", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireOutputApart();
   const std::string in_path = a.positional[0], out_path = a.positional[1];
@@ -168,12 +172,14 @@ int runReconstruct(int argc, char** argv) {
   p.seed = a.count("seed", p.seed);
   p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
   p.deletion_threshold = static_cast<float>(a.number("deletion-threshold", p.deletion_threshold));
+  p.dangling_support = static_cast<float>(a.number("dangling-support", p.dangling_support));
   p.transport.bins_per_area = a.number("bins-per-area", p.transport.bins_per_area);
   p.transport.max_bins_per_facet = a.integer("max-bins", p.transport.max_bins_per_facet);
   p.transport.bins_per_point = a.integer("bins-per-point", p.transport.bins_per_point);
   validateAsOptions(p, {{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
                         {"candidates", "candidates"}, {"density_threshold", "density-threshold"},
-                        {"deletion_threshold", "deletion-threshold"}, {"bins_per_area", "bins-per-area"},
+                        {"deletion_threshold", "deletion-threshold"}, {"dangling_support", "dangling-support"},
+                        {"bins_per_area", "bins-per-area"},
                         {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}});
   checkMeshOutput(out_path);
   const Positions points = loadPoints(in_path);
@@ -182,8 +188,9 @@ int runReconstruct(int argc, char** argv) {
   std::printf("reconstruct: Delaunay of %d points (%d facets), %d facets with mass; %d collapses (%d simulated, "
               "%d simulations reused)\n",
               r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations);
-  std::printf("reconstruct: %d facets deleted; transport cost %.4g -> %.4g, RMS transport distance %g m\n",
-              r.deleted_facets, r.initial_cost, r.final_cost, r.rms_transport);
+  std::printf("reconstruct: %d facets deleted, %d dangling facets dropped; transport cost %.4g -> %.4g, RMS transport "
+              "distance %g m\n",
+              r.deleted_facets, r.dangling_facets, r.initial_cost, r.final_cost, r.rms_transport);
   if (mesh.triangles.empty())
     throw InvalidInput("the reconstruction kept no facet (try a lower --density-threshold or more --vertices)");
   saveMeshAtomic(out_path, mesh);

@@ -1,7 +1,8 @@
 // Tests of paps/surface/transport_reconstruction.h: a sampled cube is reconstructed with the
 // vertex budget asked, close to the cube and covering it, closer than with the manuscript's
 // coarser quadrature; outliers do not take the mesh with them; the same mesh with one or two
-// threads, through the pcl stage, and with or without reused simulations; bad input.
+// threads, through the pcl stage, and with or without reused simulations; facets hanging
+// from points that are not there go; bad input.
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -171,6 +172,72 @@ TEST(TransportReconstruction, ProgressIsReportedAndCancels) {
                paps::Cancelled);
 }
 
+// Points on a grid of [0, 1]^2 (spacing 0.05), and the square as two facets.
+paps::Positions squarePoints() {
+  paps::Positions p;
+  for (int j = 0; j <= 20; ++j)
+    for (int i = 0; i <= 20; ++i) p.emplace_back(0.05f * i, 0.05f * j, 0.f);
+  return p;
+}
+TriangleMesh square() {
+  TriangleMesh m;
+  m.vertices = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  m.triangles = {{0, 1, 2}, {0, 2, 3}};
+  return m;
+}
+
+TEST(DanglingFacets, AFacetHangingFromNoPointsGoesAndTheSurfaceStays) {
+  const paps::Positions points = squarePoints();
+  TriangleMesh m = square();
+  // A fin on the edge y = 0, its free corner 0.4 above the points.
+  m.vertices.emplace_back(0.5f, 0.f, 0.4f);
+  m.triangles.emplace_back(0, 1, 4);
+  EXPECT_EQ(paps::dropDanglingFacets(m, points, 0.1f), 1);
+  EXPECT_EQ(m.triangles.size(), 2u);
+  ASSERT_EQ(m.vertices.size(), 4u);  // the fin's corner is gone, the rest renumbered
+  EXPECT_EQ(m.triangles, square().triangles);
+  // The square's own free corners, (1, 0) and (0, 1), have points around them: kept.
+  TriangleMesh s = square();
+  EXPECT_EQ(paps::dropDanglingFacets(s, points, 0.1f), 0);
+  EXPECT_EQ(s.triangles.size(), 2u);
+}
+
+TEST(DanglingFacets, OnePointIsNotSupportTwoAre) {
+  TriangleMesh fin = square();
+  fin.vertices.emplace_back(0.5f, 0.f, 0.4f);
+  fin.triangles.emplace_back(0, 1, 4);
+  paps::Positions points = squarePoints();
+  points.emplace_back(0.5f, 0.f, 0.45f);  // one outlier by the corner
+  TriangleMesh m = fin;
+  EXPECT_EQ(paps::dropDanglingFacets(m, points, 0.1f), 1);
+  points.emplace_back(0.55f, 0.f, 0.4f);  // and a second
+  m = fin;
+  EXPECT_EQ(paps::dropDanglingFacets(m, points, 0.1f), 0);
+  EXPECT_EQ(m.triangles.size(), 3u);
+}
+
+TEST(DanglingFacets, AChainGoesFacetByFacet) {
+  // A second fin hanging from the first one's corner: that corner is not free until the
+  // second goes.
+  TriangleMesh m = square();
+  m.vertices.emplace_back(0.5f, 0.f, 0.4f);
+  m.vertices.emplace_back(0.5f, 0.f, 0.8f);
+  m.vertices.emplace_back(0.6f, 0.f, 0.8f);
+  m.triangles.emplace_back(0, 1, 4);
+  m.triangles.emplace_back(4, 5, 6);
+  EXPECT_EQ(paps::dropDanglingFacets(m, squarePoints(), 0.1f), 2);
+  EXPECT_EQ(m.triangles, square().triangles);
+}
+
+TEST(DanglingFacets, RejectsBadInput) {
+  TriangleMesh m = square();
+  EXPECT_THROW(paps::dropDanglingFacets(m, squarePoints(), 0.f), paps::InvalidParameter);
+  EXPECT_THROW(paps::dropDanglingFacets(m, squarePoints(), NAN), paps::InvalidParameter);
+  m.triangles.emplace_back(0, 1, 7);
+  EXPECT_THROW(paps::dropDanglingFacets(m, squarePoints(), 0.1f), paps::InvalidInput);
+  EXPECT_EQ(m.triangles.size(), 3u);  // untouched
+}
+
 TEST(TransportReconstruction, RejectsBadInput) {
   using paps::Positions;
   EXPECT_THROW(paps::transportReconstruct({}, smallRun()), paps::InvalidInput);
@@ -191,6 +258,11 @@ TEST(TransportReconstruction, RejectsBadInput) {
   p = smallRun();
   p.density_threshold = -1;
   EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
+  for (const float bad : {-1.f, 1001.f, NAN}) {
+    p = smallRun();
+    p.dangling_support = bad;
+    EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
+  }
   paps::TransportReconstruction<pcl::PointXYZ> stage;  // no input cloud
   pcl::PolygonMesh mesh;
   EXPECT_THROW(stage.reconstruct(mesh), paps::InvalidInput);

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <memory>
 #include <numeric>
 #include <set>
 
@@ -12,6 +13,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
 #include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/random.h>
 
@@ -28,6 +30,8 @@ void TransportReconstructionParameters::validate() const {
     throw InvalidParameter("density_threshold", detail::toString(density_threshold), "in [0, 1)");
   if (!(deletion_threshold >= 0) || !std::isfinite(deletion_threshold) || deletion_threshold > 1e6)
     throw InvalidParameter("deletion_threshold", detail::toString(deletion_threshold), "in [0, 1e6]");
+  if (!(dangling_support >= 0) || !(dangling_support <= 1000))
+    throw InvalidParameter("dangling_support", detail::toString(dangling_support), "in [0, 1000]");
   transport.validate();
 }
 
@@ -175,6 +179,50 @@ class Decimation {
 };
 
 }  // namespace
+
+int dropDanglingFacets(TriangleMesh& mesh, const Positions& points, float radius) {
+  if (!(radius > 0) || !std::isfinite(radius)) throw InvalidParameter("radius", detail::toString(radius), "> 0");
+  for (const auto& t : mesh.triangles)
+    if (t.minCoeff() < 0 || t.maxCoeff() >= static_cast<int>(mesh.vertices.size()))
+      throw InvalidInput("dangling facets: a facet refers to a vertex that does not exist");
+  std::unique_ptr<SpatialIndex> index;  // built when a free corner needs it
+  std::vector<int> support(mesh.vertices.size(), -1), k;
+  std::vector<float> d2;
+  auto supported = [&](int v) {
+    if (support[v] < 0) {
+      if (!index) index = std::make_unique<SpatialIndex>(points);
+      support[v] = index->radiusSearch(mesh.vertices[v], radius, k, d2, 2);
+    }
+    return support[v] >= 2;
+  };
+  int dropped = 0;
+  for (bool again = true; again;) {
+    again = false;
+    std::vector<int> degree(mesh.vertices.size(), 0);
+    for (const auto& t : mesh.triangles)
+      for (int c = 0; c < 3; ++c) ++degree[t[c]];
+    std::vector<Eigen::Vector3i> kept;
+    kept.reserve(mesh.triangles.size());
+    for (const auto& t : mesh.triangles) {
+      bool hangs = false;
+      for (int c = 0; c < 3 && !hangs; ++c) hangs = degree[t[c]] == 1 && !supported(t[c]);
+      if (hangs) { ++dropped; again = true; } else kept.push_back(t);
+    }
+    mesh.triangles = std::move(kept);
+  }
+  if (dropped > 0) {  // keep only the vertices the facets use, in their order
+    std::vector<int> id(mesh.vertices.size(), -1);
+    Positions used;
+    for (auto& t : mesh.triangles)
+      for (int c = 0; c < 3; ++c) {
+        int& n = id[t[c]];
+        if (n < 0) { n = static_cast<int>(used.size()); used.push_back(mesh.vertices[t[c]]); }
+        t[c] = n;
+      }
+    mesh.vertices = std::move(used);
+  }
+  return dropped;
+}
 
 TriangleMesh transportReconstruct(const Positions& input, const TransportReconstructionParameters& params,
                                   TransportReconstructionReport* report_out, const ProgressCallback& progress) {
@@ -348,6 +396,23 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       t[k] = id;
     }
     out.triangles.push_back(t);
+  }
+  if (params.dangling_support > 0 && !out.triangles.empty()) {
+    // The mean spacing of the input (its finite points): distance to the nearest other point.
+    Positions finite;
+    finite.reserve(points.size());
+    for (const auto& p : points) finite.push_back(p.cast<float>());
+    const SpatialIndex index(finite);
+    std::vector<int> k;
+    std::vector<float> d2;
+    double spacing = 0;
+    for (const auto& p : finite) {
+      index.nearestK(p, 2, k, d2);
+      spacing += d2.size() > 1 ? std::sqrt(d2[1]) : 0.0;
+    }
+    spacing /= static_cast<double>(finite.size());
+    if (spacing > 0)
+      report.dangling_facets = dropDanglingFacets(out, finite, static_cast<float>(params.dangling_support * spacing));
   }
   report.output_vertices = static_cast<int>(out.vertices.size());
   report.output_facets = static_cast<int>(out.triangles.size());

@@ -145,8 +145,9 @@ Image drawMeshPanels(const std::vector<TriangleMesh>& meshes, const View& view, 
   const Eigen::Vector3f light = view.axes.transpose() * Eigen::Vector3f(-0.4f, 0.5f, 0.77f).normalized();
   const int height = heightFor(view, width);
   const Eigen::Vector2f ext = (view.hi - view.lo).cwiseMax(1e-12f);
-  // A 2% margin, so that edges on the border of the view show.
-  const float margin = 0.02f * static_cast<float>(width);
+  // A 2% margin, so that edges on the border of the view show (of the shorter side: a view
+  // of a flat mesh may be one row high).
+  const float margin = 0.02f * static_cast<float>(std::min(width, height));
   const float scale = std::min((width - 2 * margin) / ext.x(), (height - 2 * margin) / ext.y());
   Image image(width * static_cast<int>(meshes.size()), height);
   for (std::size_t k = 0; k < meshes.size(); ++k) {

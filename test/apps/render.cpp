@@ -108,6 +108,12 @@ TEST(MeshPicture, ViewsFromADirection) {
   EXPECT_NEAR(side.axes.row(0).dot(Eigen::Vector3f::UnitY()), 1.f, 1e-6f);
   EXPECT_NEAR(side.axes.row(1).dot(Eigen::Vector3f::UnitZ()), 1.f, 1e-6f);
   EXPECT_NEAR(drawnShare(drawMeshPanels({wall}, side, 100), 0, 100), 0.96 * 0.96, 0.03);
+  // A strip 100 times longer than wide: a picture 2 rows high, still drawn.
+  TriangleMesh strip = grid(1);
+  for (auto& v : strip.vertices) v.y() *= 0.01f;
+  const Image thin = drawMeshPanels({strip}, View::looking(strip.vertices, Eigen::Vector3f::UnitZ(), Eigen::Vector3f::UnitY()), 200);
+  ASSERT_EQ(thin.height, 2);
+  EXPECT_GT(drawnShare(thin, 0, 200), 0.9);
 }
 
 }  // namespace

@@ -365,17 +365,7 @@ int runBenchTransport(int argc, char** argv) {
       if (outliers > 0) synthetic::addOutliers(points, static_cast<float>(outliers), 9);
       const std::string noise_s = outliers > 0 ? fmt("+%.0f%%o", outliers * 100) : fmt("%.2f%%", noise * 100);
       // GP3's radius: 3x the mean distance of a point to its nearest neighbour.
-      double spacing = 0;
-      {
-        const SpatialIndex index(points);
-        std::vector<int> k;
-        std::vector<float> d2;
-        for (const auto& p : points) {
-          index.nearestK(p, 2, k, d2);
-          spacing += d2.size() > 1 ? std::sqrt(d2[1]) : 0.0;
-        }
-        spacing /= static_cast<double>(points.size());
-      }
+      const double spacing = meanNearestNeighbourDistance(points, SpatialIndex(points));
       struct Row {
         std::string name, method;
         std::map<std::string, double> params;

@@ -14,6 +14,24 @@
 
 namespace paps::cli {
 
+namespace {
+// The view along `axes`, its screen bounds those of the finite points.
+View framed(const Eigen::Matrix3f& axes, const Positions& points) {
+  View v;
+  v.axes = axes;
+  v.lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::max());
+  v.hi = -v.lo;
+  for (const auto& p : points)
+    if (isFinite(p)) {
+      const Eigen::Vector3f s = v.axes * p;
+      v.lo = v.lo.cwiseMin(s.head<2>());
+      v.hi = v.hi.cwiseMax(s.head<2>());
+    }
+  if (!(v.lo.x() <= v.hi.x())) throw InvalidInput("nothing to render");
+  return v;
+}
+}  // namespace
+
 View View::fit(const Positions& points, float tilt_degrees) {
   Eigen::Vector3d mean = Eigen::Vector3d::Zero();
   std::size_t n = 0;
@@ -32,37 +50,18 @@ View View::fit(const Positions& points, float tilt_degrees) {
   a.row(1) = a.row(2).cross(a.row(0));
   const float t = tilt_degrees * 3.14159265f / 180.f;
   const Eigen::Matrix3f tilt = Eigen::AngleAxisf(t, Eigen::Vector3f::UnitX()).toRotationMatrix();
-  View v;
-  v.axes = tilt * a;
-  v.lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::max());
-  v.hi = -v.lo;
-  for (const auto& p : points)
-    if (isFinite(p)) {
-      const Eigen::Vector3f s = v.axes * p;
-      v.lo = v.lo.cwiseMin(s.head<2>());
-      v.hi = v.hi.cwiseMax(s.head<2>());
-    }
-  return v;
+  return framed(tilt * a, points);
 }
 
 View View::looking(const Positions& points, const Eigen::Vector3f& towards_viewer, const Eigen::Vector3f& up) {
   const Eigen::Vector3f d = towards_viewer.normalized();
   const Eigen::Vector3f x = up.cross(d);
   if (!(x.norm() > 1e-6f) || !isFinite(d)) throw InvalidParameter("view", "up parallel to the view", "two directions apart");
-  View v;
-  v.axes.row(0) = x.normalized().transpose();
-  v.axes.row(2) = d.transpose();
-  v.axes.row(1) = d.cross(x.normalized()).transpose();
-  v.lo = Eigen::Vector2f::Constant(std::numeric_limits<float>::max());
-  v.hi = -v.lo;
-  for (const auto& p : points)
-    if (isFinite(p)) {
-      const Eigen::Vector3f s = v.axes * p;
-      v.lo = v.lo.cwiseMin(s.head<2>());
-      v.hi = v.hi.cwiseMax(s.head<2>());
-    }
-  if (!(v.lo.x() <= v.hi.x())) throw InvalidInput("nothing to render");
-  return v;
+  Eigen::Matrix3f axes;
+  axes.row(0) = x.normalized().transpose();
+  axes.row(2) = d.transpose();
+  axes.row(1) = d.cross(x.normalized()).transpose();
+  return framed(axes, points);
 }
 
 namespace {

@@ -172,6 +172,19 @@ TEST(SpatialIndex, NearestKMatchesBruteForce) {
   }
 }
 
+TEST(MeanNearestNeighbourDistance, IsTheGridStepAndSkipsNonFinitePoints) {
+  Positions grid;
+  for (int j = 0; j < 10; ++j)
+    for (int i = 0; i < 10; ++i) grid.emplace_back(0.05f * i, 0.05f * j, 0.f);
+  grid.emplace_back(NAN, 0.f, 0.f);
+  EXPECT_NEAR(paps::meanNearestNeighbourDistance(grid, SpatialIndex(grid)), 0.05, 1e-6);
+  // A copy of one point: that pair counts 0, the mean drops by 2 x 0.05 / 101.
+  grid.push_back(grid[0]);
+  EXPECT_NEAR(paps::meanNearestNeighbourDistance(grid, SpatialIndex(grid)), 0.05 * 99 / 101, 1e-6);
+  const Positions one{Eigen::Vector3f::Zero(), Eigen::Vector3f::Constant(NAN)};
+  EXPECT_THROW(paps::meanNearestNeighbourDistance(one, SpatialIndex(one)), paps::InvalidInput);
+}
+
 TEST(SpatialIndex, NearestKReturnsAtMostTheFinitePoints) {
   Positions p = {{0, 0, 0}, {kNaN, 0, 0}, {1, 0, 0}, {0, kNaN, kNaN}, {0, 2, 0}};
   const SpatialIndex index(p);

@@ -175,6 +175,22 @@ std::vector<int> spreadSample(const Positions& points, std::size_t samples) {
   return out;
 }
 
+double meanNearestNeighbourDistance(const Positions& points, const SpatialIndex& index) {
+  if (index.size() < 2)
+    throw InvalidInput("mean spacing: needs at least 2 finite points, got " + std::to_string(index.size()));
+  std::vector<int> k;
+  std::vector<float> d2;
+  double sum = 0;
+  std::size_t n = 0;
+  for (const auto& p : points) {
+    if (!isFinite(p)) continue;
+    index.nearestK(p, 2, k, d2);
+    sum += std::sqrt(static_cast<double>(d2[1]));
+    ++n;
+  }
+  return sum / static_cast<double>(n);
+}
+
 float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index, int target_count,
                               NeighbourCountStatistic statistic, int samples) {
   requireInRange("target_count", target_count, 2, 100000);

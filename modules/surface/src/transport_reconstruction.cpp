@@ -398,19 +398,10 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     out.triangles.push_back(t);
   }
   if (params.dangling_support > 0 && !out.triangles.empty()) {
-    // The mean spacing of the input (its finite points): distance to the nearest other point.
-    Positions finite;
+    Positions finite;  // the input's finite points
     finite.reserve(points.size());
     for (const auto& p : points) finite.push_back(p.cast<float>());
-    const SpatialIndex index(finite);
-    std::vector<int> k;
-    std::vector<float> d2;
-    double spacing = 0;
-    for (const auto& p : finite) {
-      index.nearestK(p, 2, k, d2);
-      spacing += d2.size() > 1 ? std::sqrt(d2[1]) : 0.0;
-    }
-    spacing /= static_cast<double>(finite.size());
+    const double spacing = meanNearestNeighbourDistance(finite, SpatialIndex(finite));
     if (spacing > 0)
       report.dangling_facets = dropDanglingFacets(out, finite, static_cast<float>(params.dangling_support * spacing));
   }

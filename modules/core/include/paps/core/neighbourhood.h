@@ -109,6 +109,11 @@ enum class NeighbourCountStatistic {
 /// (finite count / samples)-th finite point, in array order): indices into `points`.
 std::vector<int> spreadSample(const Positions& points, std::size_t samples);
 
+/// Mean distance (metres) from each finite point to its nearest other point (0 for an exact
+/// duplicate), `index` built on `points`. Throws InvalidInput when there are fewer than 2
+/// finite points.
+double meanNearestNeighbourDistance(const Positions& points, const SpatialIndex& index);
+
 /// Radius (metres) at which a ball holds `target_count` points (self included), measured on
 /// a deterministic sample of at most `samples` points: Median, the median of their distances
 /// to the target_count-th nearest point; Mean, from there the surface law count ~ r^2 until

@@ -185,56 +185,60 @@ TriangleMesh square() {
   m.triangles = {{0, 1, 2}, {0, 2, 3}};
   return m;
 }
+// The square and a fin on its edge y = 0, the fin's free corner (vertex 4) 0.4 above it.
+TriangleMesh squareWithFin() {
+  TriangleMesh m = square();
+  m.vertices.emplace_back(0.5f, 0.f, 0.4f);
+  m.triangles.emplace_back(0, 1, 4);
+  return m;
+}
+int dropDangling(TriangleMesh& m, const paps::Positions& points) {
+  return paps::dropDanglingFacets(m, paps::SpatialIndex(points), 0.1f);
+}
 
 TEST(DanglingFacets, AFacetHangingFromNoPointsGoesAndTheSurfaceStays) {
   const paps::Positions points = squarePoints();
-  TriangleMesh m = square();
-  // A fin on the edge y = 0, its free corner 0.4 above the points.
-  m.vertices.emplace_back(0.5f, 0.f, 0.4f);
-  m.triangles.emplace_back(0, 1, 4);
-  EXPECT_EQ(paps::dropDanglingFacets(m, points, 0.1f), 1);
+  TriangleMesh m = squareWithFin();
+  EXPECT_EQ(dropDangling(m, points), 1);
   EXPECT_EQ(m.triangles.size(), 2u);
   ASSERT_EQ(m.vertices.size(), 4u);  // the fin's corner is gone, the rest renumbered
   EXPECT_EQ(m.triangles, square().triangles);
   // The square's own free corners, (1, 0) and (0, 1), have points around them: kept.
   TriangleMesh s = square();
-  EXPECT_EQ(paps::dropDanglingFacets(s, points, 0.1f), 0);
+  EXPECT_EQ(dropDangling(s, points), 0);
   EXPECT_EQ(s.triangles.size(), 2u);
 }
 
 TEST(DanglingFacets, OnePointIsNotSupportTwoAre) {
-  TriangleMesh fin = square();
-  fin.vertices.emplace_back(0.5f, 0.f, 0.4f);
-  fin.triangles.emplace_back(0, 1, 4);
+  const TriangleMesh fin = squareWithFin();
   paps::Positions points = squarePoints();
   points.emplace_back(0.5f, 0.f, 0.45f);  // one outlier by the corner
   TriangleMesh m = fin;
-  EXPECT_EQ(paps::dropDanglingFacets(m, points, 0.1f), 1);
+  EXPECT_EQ(dropDangling(m, points), 1);
   points.emplace_back(0.55f, 0.f, 0.4f);  // and a second
   m = fin;
-  EXPECT_EQ(paps::dropDanglingFacets(m, points, 0.1f), 0);
+  EXPECT_EQ(dropDangling(m, points), 0);
   EXPECT_EQ(m.triangles.size(), 3u);
 }
 
 TEST(DanglingFacets, AChainGoesFacetByFacet) {
   // A second fin hanging from the first one's corner: that corner is not free until the
   // second goes.
-  TriangleMesh m = square();
-  m.vertices.emplace_back(0.5f, 0.f, 0.4f);
+  TriangleMesh m = squareWithFin();
   m.vertices.emplace_back(0.5f, 0.f, 0.8f);
   m.vertices.emplace_back(0.6f, 0.f, 0.8f);
-  m.triangles.emplace_back(0, 1, 4);
   m.triangles.emplace_back(4, 5, 6);
-  EXPECT_EQ(paps::dropDanglingFacets(m, squarePoints(), 0.1f), 2);
+  EXPECT_EQ(dropDangling(m, squarePoints()), 2);
   EXPECT_EQ(m.triangles, square().triangles);
 }
 
 TEST(DanglingFacets, RejectsBadInput) {
   TriangleMesh m = square();
-  EXPECT_THROW(paps::dropDanglingFacets(m, squarePoints(), 0.f), paps::InvalidParameter);
-  EXPECT_THROW(paps::dropDanglingFacets(m, squarePoints(), NAN), paps::InvalidParameter);
+  const paps::SpatialIndex points(squarePoints());
+  EXPECT_THROW(paps::dropDanglingFacets(m, points, 0.f), paps::InvalidParameter);
+  EXPECT_THROW(paps::dropDanglingFacets(m, points, NAN), paps::InvalidParameter);
   m.triangles.emplace_back(0, 1, 7);
-  EXPECT_THROW(paps::dropDanglingFacets(m, squarePoints(), 0.1f), paps::InvalidInput);
+  EXPECT_THROW(paps::dropDanglingFacets(m, points, 0.1f), paps::InvalidInput);
   EXPECT_EQ(m.triangles.size(), 3u);  // untouched
 }
 

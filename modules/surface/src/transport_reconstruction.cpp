@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
-#include <memory>
 #include <numeric>
 #include <set>
 
@@ -180,19 +179,15 @@ class Decimation {
 
 }  // namespace
 
-int dropDanglingFacets(TriangleMesh& mesh, const Positions& points, float radius) {
+int dropDanglingFacets(TriangleMesh& mesh, const SpatialIndex& points, float radius) {
   if (!(radius > 0) || !std::isfinite(radius)) throw InvalidParameter("radius", detail::toString(radius), "> 0");
   for (const auto& t : mesh.triangles)
     if (t.minCoeff() < 0 || t.maxCoeff() >= static_cast<int>(mesh.vertices.size()))
       throw InvalidInput("dangling facets: a facet refers to a vertex that does not exist");
-  std::unique_ptr<SpatialIndex> index;  // built when a free corner needs it
-  std::vector<int> support(mesh.vertices.size(), -1), k;
+  std::vector<int> support(mesh.vertices.size(), -1), k;  // -1: not searched yet
   std::vector<float> d2;
   auto supported = [&](int v) {
-    if (support[v] < 0) {
-      if (!index) index = std::make_unique<SpatialIndex>(points);
-      support[v] = index->radiusSearch(mesh.vertices[v], radius, k, d2, 2);
-    }
+    if (support[v] < 0) support[v] = points.radiusSearch(mesh.vertices[v], radius, k, d2, 2);
     return support[v] >= 2;
   };
   int dropped = 0;
@@ -401,9 +396,10 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     Positions finite;  // the input's finite points
     finite.reserve(points.size());
     for (const auto& p : points) finite.push_back(p.cast<float>());
-    const double spacing = meanNearestNeighbourDistance(finite, SpatialIndex(finite));
+    const SpatialIndex index(finite);  // one index for the spacing and the support searches
+    const double spacing = meanNearestNeighbourDistance(finite, index);
     if (spacing > 0)
-      report.dangling_facets = dropDanglingFacets(out, finite, static_cast<float>(params.dangling_support * spacing));
+      report.dangling_facets = dropDanglingFacets(out, index, static_cast<float>(params.dangling_support * spacing));
   }
   report.output_vertices = static_cast<int>(out.vertices.size());
   report.output_facets = static_cast<int>(out.triangles.size());

@@ -13,6 +13,7 @@
 #include <pcl/point_types.h>
 #include <pcl/surface/reconstruction.h>
 
+#include <paps/core/neighbourhood.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 #include <paps/core/thread_count.h>
@@ -109,9 +110,9 @@ TriangleMesh transportReconstruct(const Positions& points, const TransportRecons
                                   const ProgressCallback& progress = {});
 
 /// Drops, until none is left, every facet with a corner that no other facet uses and that
-/// has fewer than 2 of `points` within `radius` (metres, > 0); then the vertices no facet
-/// uses. Returns the number of facets dropped. The last step of transportReconstruct.
-int dropDanglingFacets(TriangleMesh& mesh, const Positions& points, float radius);
+/// has fewer than 2 of the indexed points within `radius` (metres, > 0); then the vertices no
+/// facet uses. Returns the number of facets dropped. The last step of transportReconstruct.
+int dropDanglingFacets(TriangleMesh& mesh, const SpatialIndex& points, float radius);
 
 /// The pcl::SurfaceReconstruction stage (indices honoured). The output mesh's cloud holds
 /// x, y, z of the kept vertices.

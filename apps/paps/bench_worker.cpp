@@ -164,6 +164,7 @@ int runBenchWorker(int argc, char** argv) {
       q.probing.neighbours = static_cast<int>(get("neighbours", q.probing.neighbours));
       q.probing.atoms = static_cast<int>(get("atoms", q.probing.atoms));
       q.iterations = static_cast<int>(get("passes", q.iterations));
+      q.bend_threshold = static_cast<float>(get("bend", q.bend_threshold));
       LpfDenoisingReport report;
       output = lpfDenoisePositions(input, q, &report);
       lf << "radius " << report.radius << "\n";

@@ -16,6 +16,10 @@ void LpfDenoisingParameters::validate() const {
   requireInRange("iterations", iterations, 1, 50);
   requireInRange("rounds_per_pass", rounds_per_pass, 0, 100);
   if (!(rate > 0 && rate <= 1)) throw InvalidParameter("rate", detail::toString(rate), "a value in (0, 1]");
+  if (!(bend_threshold >= 0 && bend_threshold <= 10))
+    throw InvalidParameter("bend_threshold", detail::toString(bend_threshold), "a value in [0, 10] (0: off)");
+  if (!(bent_share > 0 && bent_share <= 1))
+    throw InvalidParameter("bent_share", detail::toString(bent_share), "a value in (0, 1]");
   if (!(tau_p >= 0) || !std::isfinite(tau_p))
     throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (the pattern step) or a finite value > 0");
 }
@@ -64,6 +68,30 @@ Eigen::Vector3f reconstructedNode(const LocalProbingAnalysis& a, std::size_t j, 
   return out;
 }
 
+// RMS distance of field j's consolidated pattern (nodes u_i + (D a)_i, in its frame) to its
+// least-squares plane z = c0 + c1 x + c2 y, over the pattern radius.
+float fieldBend(const LocalProbingAnalysis& a, std::size_t j) {
+  const ProbingPattern& pattern = a.pattern();
+  const int m = pattern.size();
+  std::vector<Eigen::Vector3d> at(static_cast<std::size_t>(m));
+  Eigen::Matrix3d A = Eigen::Matrix3d::Zero();
+  Eigen::Vector3d b = Eigen::Vector3d::Zero();
+  for (int i = 0; i < m; ++i) {
+    const Eigen::Vector2f& u = pattern.node(i);
+    at[i] = (Eigen::Vector3f(u.x(), u.y(), 0.f) + reconstructedNode(a, j, i)).cast<double>();
+    const Eigen::Vector3d row(1, at[i].x(), at[i].y());
+    A += row * row.transpose();
+    b += row * at[i].z();
+  }
+  const Eigen::Vector3d c = A.ldlt().solve(b);
+  double ss = 0;
+  for (int i = 0; i < m; ++i) {
+    const double e = at[i].z() - (c[0] + c[1] * at[i].x() + c[2] * at[i].y());
+    ss += e * e;
+  }
+  return static_cast<float>(std::sqrt(ss / m) / pattern.radius());
+}
+
 Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParameters& params,
                                 LpfDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
                                 const ProgressCallback& progress) {
@@ -91,14 +119,35 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   const std::int64_t sn = static_cast<std::int64_t>(n);
   const NeighbourGraph cover = coveringFields(analysis, cur);
   ProgressReporter rep(progress, "LPF denoising", static_cast<std::size_t>(params.iterations) * n);
+  std::vector<std::uint8_t> first_pass_only;  // points near creases (bend_threshold)
   for (int pass = 0; pass < params.iterations; ++pass) {
     analysis.analyse(cur, pass == 0 ? params.probing.rounds : params.rounds_per_pass);
+    if (pass == 0 && params.bend_threshold > 0 && params.iterations > 1) {
+      const std::size_t nf = analysis.fieldCount();
+      std::vector<std::uint8_t> bent(nf, 0);
+#pragma omp parallel for schedule(dynamic, 256)
+      for (std::int64_t j = 0; j < static_cast<std::int64_t>(nf); ++j)
+        bent[j] = analysis.targetDimension(j) == 2 && fieldBend(analysis, j) > params.bend_threshold;
+      report.bent_fields = static_cast<std::size_t>(std::count(bent.begin(), bent.end(), 1));
+      first_pass_only.assign(n, 0);
+      for (std::int64_t p = 0; p < sn; ++p) {
+        int known = 0, bent_here = 0;
+        for (const int* jp = cover.begin(p); jp != cover.end(p); ++jp) {
+          if (analysis.targetDimension(static_cast<std::size_t>(*jp)) == 0) continue;
+          ++known;
+          bent_here += bent[static_cast<std::size_t>(*jp)];
+        }
+        first_pass_only[p] = known > 0 && bent_here >= params.bent_share * known;
+      }
+      report.first_pass_only = static_cast<std::size_t>(std::count(first_pass_only.begin(), first_pass_only.end(), 1));
+    }
     Positions next = cur;
     std::size_t moved = 0, isolated = 0;
 #pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved, isolated)
     for (std::int64_t p = 0; p < sn; ++p) {
       rep.advance();
       if (!isFinite(cur[p]) || (!movable.empty() && !movable[p])) continue;
+      if (pass > 0 && !first_pass_only.empty() && first_pass_only[p]) continue;
       // Every field whose target area holds the point projects it on its pattern plane and
       // proposes the consolidated pattern there: the bilinear blend of the consolidated
       // positions u + (D a) of the four nodes around the projection (3.3.2). On a surface

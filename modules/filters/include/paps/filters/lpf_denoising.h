@@ -56,9 +56,9 @@ struct LpfDenoisingParameters {
   /// `bent_share` of whose covering fields (of known dimension) are bent moves in the first
   /// pass only. The noise rule for the radius (r >= 6 sigma) keeps the noise's own bend of a
   /// flat field below about 0.08 r (99th percentile on the bench's plate at 0.3% and 0.5%),
-  /// hence 0.1. Measured (docs/lpf.md): fandisk block 1.15 -> 0.57 (0.15% noise), 1.26 -> 0.81,
-  /// 1.45 -> 1.40; held-out cube 1.25 -> 0.54, 1.38 -> 0.80, 1.58 -> 1.45; plate and wires
-  /// unchanged. 0 disables; bend_threshold in [0, 10], bent_share in (0, 1].
+  /// hence 0.1. Measured (docs/lpf.md; RMSE in thousandths of the diagonal at 0.15%, 0.3%
+  /// and 0.5% noise): fandisk block 1.15 -> 0.57, 1.26 -> 0.81, 1.45 -> 1.40; held-out cube
+  /// 1.25 -> 0.54, 1.38 -> 0.80, 1.58 -> 1.45; plate and wires unchanged. 0 disables; bend_threshold in [0, 10], bent_share in (0, 1].
   float bend_threshold = 0.1f;
   float bent_share = 0.25f;
   void validate() const;

@@ -121,6 +121,16 @@ TEST(LpfDenoising, CreasesMoveInTheFirstPassOnly) {
   EXPECT_LT(held.first_pass_only, noisy.size() / 2);
   EXPECT_EQ(every.bent_fields, 0u);
   EXPECT_EQ(every.first_pass_only, 0u);
+  // The held points, and so the output, do not depend on the thread count.
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  LpfDenoisingReport one;
+  const Positions single = paps::lpfDenoisePositions(noisy, {}, &one);
+  omp_set_num_threads(saved);
+  EXPECT_EQ(one.first_pass_only, held.first_pass_only);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < ours.size(); ++i) differ += !sameBits(single[i], ours[i]);
+  EXPECT_EQ(differ, 0u);
 }
 
 TEST(LpfDenoising, OutputDoesNotDependOnTheInputOrder) {

@@ -51,9 +51,10 @@ const char* kDenoiseUsage =
     "  --free-motion          points on surfaces may also move along them (the manuscript's\n"
     "                         rule; draws borders in)\n"
     "  --bend-threshold T     points near creases (where a quarter of the covering fields are\n"
-    "                         bent farther than T x the radius from a plane) move in the\n"
-    "                         first pass only (default 0.1; 0: every pass moves every point,\n"
-    "                         the manuscript's rule, which rounds creases more each pass)\n"
+    "                         bent farther than T x the radius from a plane, and fewer are\n"
+    "                         wires) move in the first pass only (default 0.08; 0: every pass\n"
+    "                         moves every point, the manuscript's rule, which rounds creases\n"
+    "                         more each pass)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 

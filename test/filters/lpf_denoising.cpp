@@ -98,7 +98,7 @@ TEST(LpfDenoising, CreasesMoveInTheFirstPassOnly) {
   // that moves the points of bent fields once. Measured in `paps bench lpf --shapes cube`
   // (50,000 points, 0.15% noise): 1.25e-3 -> 0.54e-3 of the diagonal; here (20,000 points,
   // larger fields) the manuscript's schedule ends above the input's error (2.09e-3 m against
-  // 1.28e-3), ours at 0.85e-3 with 38% of the points held.
+  // 1.28e-3).
   const paps::TriangleMesh cube = paps::synthetic::cube(0.5f, 16);
   Positions noisy = paps::synthetic::sampleMesh(cube, 20000, 7);
   paps::synthetic::addGaussianNoise(noisy, 0.0015f, 11);

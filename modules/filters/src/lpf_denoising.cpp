@@ -131,13 +131,17 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
       report.bent_fields = static_cast<std::size_t>(std::count(bent.begin(), bent.end(), 1));
       first_pass_only.assign(n, 0);
       for (std::int64_t p = 0; p < sn; ++p) {
-        int known = 0, bent_here = 0;
+        // Held: enough bent surface fields, and not on a wire (wires need their passes).
+        int known = 0, bent_here = 0, wires = 0;
         for (const int* jp = cover.begin(p); jp != cover.end(p); ++jp) {
-          if (analysis.targetDimension(static_cast<std::size_t>(*jp)) == 0) continue;
+          const int dimension = analysis.targetDimension(static_cast<std::size_t>(*jp));
+          if (dimension == 0) continue;
           ++known;
+          wires += dimension == 1;
           bent_here += bent[static_cast<std::size_t>(*jp)];
         }
-        first_pass_only[p] = known > 0 && bent_here >= params.bent_share * known;
+        first_pass_only[p] =
+            known > 0 && bent_here >= params.bent_share * known && wires < params.bent_share * known;
       }
       report.first_pass_only = static_cast<std::size_t>(std::count(first_pass_only.begin(), first_pass_only.end(), 1));
     }

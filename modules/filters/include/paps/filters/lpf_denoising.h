@@ -52,14 +52,16 @@ struct LpfDenoisingParameters {
   /// more (16 atoms draw a V poorly), so the rounding grows like a flow: on the fandisk block
   /// the points near creases ended worse than the input after 5 passes. A surface field is
   /// *bent* when its consolidated pattern (the first pass's u + D a) lies farther than
-  /// `bend_threshold` x the pattern radius (RMS) from its least-squares plane; a point at least
-  /// `bent_share` of whose covering fields (of known dimension) are bent moves in the first
-  /// pass only. The noise rule for the radius (r >= 6 sigma) keeps the noise's own bend of a
-  /// flat field below about 0.08 r (99th percentile on the bench's plate at 0.3% and 0.5%),
-  /// hence 0.1. Measured (docs/lpf.md; RMSE in thousandths of the diagonal at 0.15%, 0.3%
-  /// and 0.5% noise): fandisk block 1.15 -> 0.57, 1.26 -> 0.81, 1.45 -> 1.40; held-out cube
-  /// 1.25 -> 0.54, 1.38 -> 0.80, 1.58 -> 1.45; plate and wires unchanged. 0 disables; bend_threshold in [0, 10], bent_share in (0, 1].
-  float bend_threshold = 0.1f;
+  /// `bend_threshold` x the pattern radius (RMS) from its least-squares plane. A point moves
+  /// in the first pass only when at least `bent_share` of its covering fields (of known
+  /// dimension) are bent and fewer than `bent_share` are wire fields (wires need their
+  /// passes). The noise rule for the radius (r >= 6 sigma) keeps the noise's own bend of a
+  /// flat field below about 0.08 r (99th percentile on the bench's plate at 0.3% and 0.5%).
+  /// Measured (docs/lpf.md; RMSE in thousandths of the diagonal at 0.15%, 0.3% and 0.5%
+  /// noise): fandisk block 1.15 -> 0.55, 1.26 -> 0.77, 1.45 -> 1.28; held-out cube 1.25 ->
+  /// 0.54, 1.38 -> 0.76, 1.58 -> 1.29; plate and wires unchanged. 0 disables; bend_threshold
+  /// in [0, 10], bent_share in (0, 1].
+  float bend_threshold = 0.08f;
   float bent_share = 0.25f;
   void validate() const;
 };

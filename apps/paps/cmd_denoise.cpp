@@ -52,9 +52,9 @@ const char* kDenoiseUsage =
     "                         rule; draws borders in)\n"
     "  --bend-threshold T     points near creases (where a quarter of the covering fields are\n"
     "                         bent farther than T x the radius from a plane, and fewer are\n"
-    "                         wires) move in the first pass only (default 0.08; 0: every pass\n"
-    "                         moves every point, the manuscript's rule, which rounds creases\n"
-    "                         more each pass)\n"
+    "                         wires; tested after every analysis) stop moving after that pass\n"
+    "                         (default 0.08; 0: every pass moves every point, the manuscript's\n"
+    "                         rule, which rounds creases more each pass)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 
@@ -160,9 +160,12 @@ int runDenoise(int argc, char** argv) {
                 "%d passes; moved %zu points\n",
                 r.radius, p.probing.radius > 0 ? "" : chosen, r.step, r.pattern_nodes, r.fields, p.probing.atoms,
                 r.lambda, p.iterations, r.moved);
-    if (p.bend_threshold > 0 && p.iterations > 1)
-      std::printf("bent fields (creases): %zu; points moved in the first pass only: %zu\n", r.bent_fields,
-                  r.first_pass_only);
+    if (p.bend_threshold > 0 && p.iterations > 1) {
+      std::string by_pass;
+      for (std::size_t k = 0; k < r.held_after_pass.size(); ++k)
+        by_pass += (k ? ", " : "") + std::to_string(r.held_after_pass[k]) + " after pass " + std::to_string(k + 1);
+      std::printf("bent fields (creases): %zu; points held: %zu (%s)\n", r.bent_fields, r.held_points, by_pass.c_str());
+    }
     if (!r.round_errors.empty())
       std::printf("representation error per field: %.3g after the first round, %.3g after the last\n",
                   r.round_errors.front(), r.round_errors.back());

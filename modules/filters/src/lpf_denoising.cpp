@@ -119,18 +119,23 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   const std::int64_t sn = static_cast<std::int64_t>(n);
   const NeighbourGraph cover = coveringFields(analysis, cur);
   ProgressReporter rep(progress, "LPF denoising", static_cast<std::size_t>(params.iterations) * n);
-  std::vector<std::uint8_t> first_pass_only;  // points near creases (bend_threshold)
+  // Creases (bend_threshold): the pass from which each point stays where it is. Tested after
+  // every analysis, since the first pass lowers the noise that hides mild creases from the
+  // first test.
+  const bool hold_creases = params.bend_threshold > 0 && params.iterations > 1;
+  std::vector<int> held_from(hold_creases ? n : 0, params.iterations);
+  std::vector<std::uint8_t> ever_bent(hold_creases ? analysis.fieldCount() : 0, 0);
   for (int pass = 0; pass < params.iterations; ++pass) {
     analysis.analyse(cur, pass == 0 ? params.probing.rounds : params.rounds_per_pass);
-    if (pass == 0 && params.bend_threshold > 0 && params.iterations > 1) {
+    if (hold_creases && pass + 1 < params.iterations) {
       const std::size_t nf = analysis.fieldCount();
       std::vector<std::uint8_t> bent(nf, 0);
 #pragma omp parallel for schedule(dynamic, 256)
       for (std::int64_t j = 0; j < static_cast<std::int64_t>(nf); ++j)
         bent[j] = analysis.targetDimension(j) == 2 && fieldBend(analysis, j) > params.bend_threshold;
-      report.bent_fields = static_cast<std::size_t>(std::count(bent.begin(), bent.end(), 1));
-      first_pass_only.assign(n, 0);
+      std::size_t newly_held = 0;
       for (std::int64_t p = 0; p < sn; ++p) {
+        if (held_from[p] < params.iterations) continue;
         // Held: enough bent surface fields, and not on a wire (wires need their passes).
         int known = 0, bent_here = 0, wires = 0;
         for (const int* jp = cover.begin(p); jp != cover.end(p); ++jp) {
@@ -140,10 +145,14 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
           wires += dimension == 1;
           bent_here += bent[static_cast<std::size_t>(*jp)];
         }
-        first_pass_only[p] =
-            known > 0 && bent_here >= params.bent_share * known && wires < params.bent_share * known;
+        if (known > 0 && bent_here >= params.bent_share * known && wires < params.bent_share * known) {
+          held_from[p] = pass + 1;  // this pass still moves it
+          ++newly_held;
+        }
       }
-      report.first_pass_only = static_cast<std::size_t>(std::count(first_pass_only.begin(), first_pass_only.end(), 1));
+      for (std::size_t j = 0; j < nf; ++j) ever_bent[j] |= bent[j];
+      report.held_after_pass.push_back(newly_held);
+      report.held_points += newly_held;
     }
     Positions next = cur;
     std::size_t moved = 0, isolated = 0;
@@ -151,7 +160,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
     for (std::int64_t p = 0; p < sn; ++p) {
       rep.advance();
       if (!isFinite(cur[p]) || (!movable.empty() && !movable[p])) continue;
-      if (pass > 0 && !first_pass_only.empty() && first_pass_only[p]) continue;
+      if (hold_creases && pass >= held_from[p]) continue;
       // Every field whose target area holds the point projects it on its pattern plane and
       // proposes the consolidated pattern there: the bilinear blend of the consolidated
       // positions u + (D a) of the four nodes around the projection (3.3.2). On a surface
@@ -194,6 +203,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
     report.moved = moved;
     report.isolated = isolated;
   }
+  report.bent_fields = static_cast<std::size_t>(std::count(ever_bent.begin(), ever_bent.end(), 1));
   report.round_errors = analysis.roundErrors();
   rep.finish();
   if (report_out) *report_out = report;

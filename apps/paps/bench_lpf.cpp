@@ -49,7 +49,7 @@ struct Method {
 std::vector<Method> methods(float r, bool quick) {
   std::vector<Method> m;
   m.push_back({"lpf", "default", {}});
-  // The manuscript's schedule: every point moves in every pass (no first-pass-only creases).
+  // The manuscript's schedule: every point moves in every pass (no crease is held).
   if (!quick) m.push_back({"lpf", "every pass (bend 0)", {{"bend", 0}}, false});
   m.push_back({"ours", "similarity, default", {}});
   for (double f : quick ? std::vector<double>{1} : std::vector<double>{1, 2, 3})

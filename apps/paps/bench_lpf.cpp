@@ -33,7 +33,9 @@ const char* kUsage =
     "                   (default 0.0015,0.003,0.005)\n"
     "  --shapes LIST    plate-wires (a plate under a net of wires and a circle), fandisk\n"
     "                   (curved faces and creases), cube (flat faces, sharp edges and\n"
-    "                   corners) (default plate-wires,fandisk)\n"
+    "                   corners), tetrahedron (70.5-degree edges, acute corners), cylinder\n"
+    "                   (a curved side meeting flat caps at circular edges) (default\n"
+    "                   plate-wires,fandisk)\n"
     "  --quick          one noise level, no sweeps (a smoke run)\n"
     "  --resample       instead: LPF resampling x4 against QSR, APSS, RIMLS and PCL MLS\n"
     "                   upsampling at the same output count, on the plate and wires\n"
@@ -172,13 +174,16 @@ int runBenchLpf(int argc, char** argv) {
       auto s = synthetic::plateAndWires(n_points, 3);
       clean = std::move(s.points);
       on_curve = std::move(s.on_curve);
-    } else if (shape == "fandisk" || shape == "cube") {
-      const TriangleMesh mesh = shape == "cube" ? synthetic::cube(0.5f, 16) : synthetic::fandiskBlock(128);
+    } else if (shape == "fandisk" || shape == "cube" || shape == "tetrahedron" || shape == "cylinder") {
+      const TriangleMesh mesh = shape == "cube"          ? synthetic::cube(0.5f, 16)
+                                : shape == "tetrahedron" ? synthetic::tetrahedron(0.8f)
+                                : shape == "cylinder"    ? synthetic::cappedCylinder(0.3f, 0.6f, 256)
+                                                         : synthetic::fandiskBlock(128);
       clean = synthetic::sampleMesh(mesh, n_points, 7);
       on_curve.assign(clean.size(), 0);
       mesh_distance = std::make_unique<PointToMeshDistance>(mesh);
     } else {
-      throw InvalidParameter("shapes", shape, "plate-wires, fandisk or cube");
+      throw InvalidParameter("shapes", shape, "plate-wires, fandisk, cube, tetrahedron or cylinder");
     }
     const double diagonal = boundingBoxDiagonal(clean);
     const bool has_curves = std::count(on_curve.begin(), on_curve.end(), 1) > 0;

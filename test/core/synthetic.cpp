@@ -67,6 +67,32 @@ TEST(Cube, AreaVolumeAndClosedness) {
   EXPECT_THROW(syn::cube(1.f, 0), paps::InvalidParameter);
 }
 
+TEST(Tetrahedron, AreaVolumeAndClosedness) {
+  const float a = 0.8f;
+  const TriangleMesh m = syn::tetrahedron(a);
+  EXPECT_EQ(m.triangles.size(), 4u);
+  EXPECT_NEAR(m.area(), std::sqrt(3.0) * a * a, 1e-5);
+  EXPECT_NEAR(signedVolume(m), a * a * a / (6 * std::sqrt(2.0)), 1e-6);  // > 0: outwards
+  EXPECT_EQ(unmatchedEdges(m), 0);
+  for (const auto& v : m.vertices) EXPECT_NEAR(v.norm(), a * std::sqrt(6.0) / 4, 1e-6);  // circumradius
+  EXPECT_THROW(syn::tetrahedron(0.f), paps::InvalidParameter);
+}
+
+TEST(CappedCylinder, AreaVolumeAndClosedness) {
+  for (int n : {3, 7, 256}) {
+    const float r = 0.3f, h = 0.6f;
+    const TriangleMesh m = syn::cappedCylinder(r, h, n);
+    // The polygon of n sides: side n chords x h, caps 2 x n triangles of r^2 sin(2 pi / n) / 2.
+    const double cap = 0.5 * n * r * r * std::sin(2 * kPi / n);
+    EXPECT_NEAR(m.area(), n * 2 * r * std::sin(kPi / n) * h + 2 * cap, 1e-5);
+    EXPECT_NEAR(signedVolume(m), cap * h, 1e-6);
+    EXPECT_EQ(unmatchedEdges(m), 0);  // the caps' rims welded onto the side's
+    EXPECT_EQ(m.vertices.size(), static_cast<std::size_t>(2 * n + 2));
+  }
+  EXPECT_THROW(syn::cappedCylinder(0.3f, 0.6f, 2), paps::InvalidParameter);
+  EXPECT_THROW(syn::cappedCylinder(-0.3f), paps::InvalidParameter);
+}
+
 TEST(FandiskBlock, ClosedWithTheDocumentedVolume) {
   const TriangleMesh m = syn::fandiskBlock(64);
   EXPECT_EQ(unmatchedEdges(m), 0);

@@ -89,6 +89,46 @@ TriangleMesh cube(float size, int subdivisions) {
   return mesh;
 }
 
+TriangleMesh tetrahedron(float size) {
+  requirePositive("size", size);
+  // Alternate corners of a cube of side size / sqrt(2) have edges of length `size`.
+  const float h = size / (2.f * std::sqrt(2.f));
+  TriangleMesh mesh;
+  mesh.vertices = {{h, h, h}, {h, -h, -h}, {-h, h, -h}, {-h, -h, h}};
+  for (const Eigen::Vector3i& f : {Eigen::Vector3i(0, 1, 2), Eigen::Vector3i(0, 3, 1), Eigen::Vector3i(0, 2, 3),
+                                   Eigen::Vector3i(1, 3, 2)})
+    mesh.triangles.push_back(f);  // each counter-clockwise seen from outside
+  return mesh;
+}
+
+TriangleMesh cappedCylinder(float radius, float height, int segments) {
+  requirePositive("radius", radius);
+  requirePositive("height", height);
+  requireAtLeast("segments", segments, 3);
+  auto rim = [&](int i, float z) {
+    const double theta = 2 * kPi * (i % segments) / segments;
+    return Eigen::Vector3f(static_cast<float>(radius * std::cos(theta)), static_cast<float>(radius * std::sin(theta)), z);
+  };
+  const float top = 0.5f * height, bottom = -0.5f * height;
+  TriangleMesh mesh;
+  // u = angle, v = z: d/dtheta x d/dz points away from the axis.
+  addGrid(mesh, segments, 1, true, [&](int i, int j) { return rim(i, j ? top : bottom); });
+  for (const float z : {bottom, top}) {
+    const int centre = static_cast<int>(mesh.vertices.size());
+    mesh.vertices.emplace_back(0.f, 0.f, z);
+    for (int i = 0; i < segments; ++i) {
+      const int a = static_cast<int>(mesh.vertices.size());
+      mesh.vertices.push_back(rim(i, z));
+      mesh.vertices.push_back(rim(i + 1, z));
+      // The top cap turns counter-clockwise seen from +z, the bottom one from -z.
+      if (z > 0) mesh.triangles.emplace_back(centre, a, a + 1);
+      else mesh.triangles.emplace_back(centre, a + 1, a);
+    }
+  }
+  weldIdentical(mesh);  // the caps' rims onto the side's
+  return mesh;
+}
+
 // Geometry of the fandisk-like block (a closed extrusion along y, y in [-0.5, 0.5]):
 // the cross-section at y is { -0.5 <= x <= 0.5, 0 <= z <= top(x, y) } with
 //   top = 0.4                                   on x in [-0.5, -0.2]  (flat shelf)

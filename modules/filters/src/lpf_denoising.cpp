@@ -136,14 +136,16 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
       std::size_t newly_held = 0;
       for (std::int64_t p = 0; p < sn; ++p) {
         if (held_from[p] < params.iterations) continue;
-        // Held: enough bent surface fields, and not on a wire (wires need their passes).
+        // Held: enough bent or scattered fields, and not on a wire (wires need their passes).
         int known = 0, bent_here = 0, wires = 0;
         for (const int* jp = cover.begin(p); jp != cover.end(p); ++jp) {
           const int dimension = analysis.targetDimension(static_cast<std::size_t>(*jp));
           if (dimension == 0) continue;
           ++known;
           wires += dimension == 1;
-          bent_here += bent[static_cast<std::size_t>(*jp)];
+          // A scattered target area is no height field either: an edge or corner too sharp
+          // for the pattern (a tetrahedron's 70.5-degree edges), or clutter.
+          bent_here += bent[static_cast<std::size_t>(*jp)] || dimension == 3;
         }
         if (known > 0 && bent_here >= params.bent_share * known && wires < params.bent_share * known) {
           held_from[p] = pass + 1;  // this pass still moves it

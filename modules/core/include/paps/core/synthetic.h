@@ -12,6 +12,15 @@ namespace synthetic {
 /// `subdivisions`^2 quads (two triangles each).
 TriangleMesh cube(float size = 1.f, int subdivisions = 8);
 
+/// Regular tetrahedron of edge `size` centred at the origin: four flat faces meeting at
+/// 70.5-degree dihedral angles, sharper creases than the cube's 90.
+TriangleMesh tetrahedron(float size = 1.f);
+
+/// Closed cylinder (axis z, centred at the origin) of `radius` and `height`: a curved side
+/// meeting two flat caps at 90-degree circular creases; the circle is a polygon of
+/// `segments` sides (the side is one band of quads, the caps fans).
+TriangleMesh cappedCylinder(float radius = 0.3f, float height = 0.6f, int segments = 256);
+
 /// Fandisk-like block: a box whose top is a cylindrical bulge meeting a slanted chamfer,
 /// giving convex and concave creases and a smooth-to-sharp transition. Size about 1.
 TriangleMesh fandiskBlock(int resolution = 64);

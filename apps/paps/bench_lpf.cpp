@@ -34,8 +34,10 @@ const char* kUsage =
     "  --shapes LIST    plate-wires (a plate under a net of wires and a circle), fandisk\n"
     "                   (curved faces and creases), cube (flat faces, sharp edges and\n"
     "                   corners), tetrahedron (70.5-degree edges, acute corners), cylinder\n"
-    "                   (a curved side meeting flat caps at circular edges) (default\n"
-    "                   plate-wires,fandisk)\n"
+    "                   (a curved side meeting flat caps at circular edges), rs1 (points\n"
+    "                   sampled on opencv-doc's range-scan mesh rs1_normals.ply: real\n"
+    "                   geometry) (default plate-wires,fandisk)\n"
+    "  --samples DIR    sample data for rs1 (default $PAPS_SAMPLES or ~/.cache/paps/samples)\n"
     "  --quick          one noise level, no sweeps (a smoke run)\n"
     "  --resample       instead: LPF resampling x4 against QSR, APSS, RIMLS and PCL MLS\n"
     "                   upsampling at the same output count, on the plate and wires\n"
@@ -141,7 +143,7 @@ int runBenchLpfResample(const Arguments& a) {
 int runBenchLpf(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "resample"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "points", "noise", "shapes", "quick", "resample"});
+  a.allowOnly({"out", "points", "noise", "shapes", "quick", "resample", "samples"});
   if (a.has("resample")) {
 #ifdef PAPS_HAVE_SURFACE
     std::setvbuf(stdout, nullptr, _IOLBF, 0);
@@ -174,16 +176,23 @@ int runBenchLpf(int argc, char** argv) {
       auto s = synthetic::plateAndWires(n_points, 3);
       clean = std::move(s.points);
       on_curve = std::move(s.on_curve);
-    } else if (shape == "fandisk" || shape == "cube" || shape == "tetrahedron" || shape == "cylinder") {
+    } else if (shape == "fandisk" || shape == "cube" || shape == "tetrahedron" || shape == "cylinder" ||
+               shape == "rs1") {
+      // rs1: real geometry (opencv-doc's range-scan mesh, scripts/fetch_samples.sh), sampled
+      // as the synthetic meshes are; the truth is the mesh, scan noise and all.
+      const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
+      if (shape == "rs1" && !std::filesystem::exists(rs1))
+        throw InvalidInput(rs1 + " is missing: run scripts/fetch_samples.sh or give --samples DIR");
       const TriangleMesh mesh = shape == "cube"          ? synthetic::cube(0.5f, 16)
                                 : shape == "tetrahedron" ? synthetic::tetrahedron(0.8f)
                                 : shape == "cylinder"    ? synthetic::cappedCylinder(0.3f, 0.6f, 256)
+                                : shape == "rs1"         ? loadTriangleMesh(rs1)
                                                          : synthetic::fandiskBlock(128);
       clean = synthetic::sampleMesh(mesh, n_points, 7);
       on_curve.assign(clean.size(), 0);
       mesh_distance = std::make_unique<PointToMeshDistance>(mesh);
     } else {
-      throw InvalidParameter("shapes", shape, "plate-wires, fandisk, cube, tetrahedron or cylinder");
+      throw InvalidParameter("shapes", shape, "plate-wires, fandisk, cube, tetrahedron, cylinder or rs1");
     }
     const double diagonal = boundingBoxDiagonal(clean);
     const bool has_curves = std::count(on_curve.begin(), on_curve.end(), 1) > 0;

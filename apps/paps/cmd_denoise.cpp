@@ -51,10 +51,10 @@ const char* kDenoiseUsage =
     "  --free-motion          points on surfaces may also move along them (the manuscript's\n"
     "                         rule; draws borders in)\n"
     "  --bend-threshold T     points near creases (where a quarter of the covering fields are\n"
-    "                         bent farther than T x the radius from a plane, and fewer are\n"
-    "                         wires; tested after every analysis) stop moving after that pass\n"
-    "                         (default 0.08; 0: every pass moves every point, the manuscript's\n"
-    "                         rule, which rounds creases more each pass)\n"
+    "                         bent farther than T x the radius from a plane or scattered, and\n"
+    "                         fewer are wires; tested after every analysis) stop moving after\n"
+    "                         that pass (default 0.08; 0: every pass moves every point, the\n"
+    "                         manuscript's rule, which rounds creases more each pass)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 

@@ -56,10 +56,11 @@ struct LpfDenoisingParameters {
   /// target area is scattered (dimension 3: an edge or corner too sharp for a height field,
   /// such as a tetrahedron's) counts as bent. A point is held after the pass whose analysis
   /// first finds at least `bent_share` of its covering fields (of known dimension) bent and
-  /// fewer than `bent_share` of them wire fields (wires need their passes). The test is repeated after every analysis because the first pass lowers
-  /// the noise that hides mild creases at high noise. The noise rule for the radius
-  /// (r >= 6 sigma) keeps the noise's own bend of a flat field below about 0.08 r (99th
-  /// percentile on the bench's plate at 0.3% and 0.5%).
+  /// fewer than `bent_share` of them wire fields (wires need their passes). The test is
+  /// repeated after every analysis because the first pass lowers the noise that hides mild
+  /// creases at high noise. The noise rule for the radius (r >= 6 sigma) keeps the noise's
+  /// own bend of a flat field below about 0.08 r (99th percentile on the bench's plate at
+  /// 0.3% and 0.5%).
   /// Measured (docs/lpf.md; RMSE in thousandths of the diagonal at 0.15%, 0.3% and 0.5%
   /// noise, every pass -> this rule): fandisk block 1.15 -> 0.55, 1.26 -> 0.75, 1.45 -> 1.20;
   /// cube 1.25 -> 0.53, 1.38 -> 0.73, 1.58 -> 1.14; tetrahedron 1.37 -> 0.53, 1.52 -> 0.85,
@@ -81,8 +82,9 @@ struct LpfDenoisingReport {
   /// Points the last pass moved; points left in place because no candidate weighed
   /// anything (or fewer than 3 finite points in all); NaN/Inf.
   std::size_t moved = 0, isolated = 0, non_finite = 0;
-  /// Surface fields found bent by any analysis (scattered fields not counted), and the points held (bend_threshold): in
-  /// all, and after each pass but the last (entry k: points whose last move was pass k + 1).
+  /// Surface fields found bent by any analysis (scattered fields not counted), and the
+  /// points held (bend_threshold): in all, and after each pass but the last (entry k: points
+  /// whose last move was pass k + 1).
   std::size_t bent_fields = 0, held_points = 0;
   std::vector<std::size_t> held_after_pass;
 };

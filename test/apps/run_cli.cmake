@@ -679,7 +679,7 @@ elseif(CASE STREQUAL "bench_files")
   run_paps(bench files ${dir}/missing.pcd --out ${dir}/bench)
   expect_one_error_line("missing.pcd")
 elseif(CASE STREQUAL "bench_lpf_shapes")
-  # The held-out shapes of `paps bench lpf` end to end (child processes, table, CSV), and a
+  # The tetrahedron and cylinder of `paps bench lpf` end to end (child processes, table, CSV), and a
   # clear error for an unknown shape or a missing real-scan mesh.
   set(output ${dir}/bench/lpf.csv)
   run_paps(bench lpf --shapes tetrahedron,cylinder --points 4000 --noise 0.003 --quick --out ${dir}/bench)

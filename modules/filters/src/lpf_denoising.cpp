@@ -130,9 +130,14 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
     if (hold_creases && pass + 1 < params.iterations) {
       const std::size_t nf = analysis.fieldCount();
       std::vector<std::uint8_t> bent(nf, 0);
+      // Bent: a surface whose pattern leaves its plane, or a scattered target area, which is no
+      // height field either (an edge or corner too sharp for the pattern, such as a
+      // tetrahedron's 70.5-degree edges, or clutter).
 #pragma omp parallel for schedule(dynamic, 256)
-      for (std::int64_t j = 0; j < static_cast<std::int64_t>(nf); ++j)
-        bent[j] = analysis.targetDimension(j) == 2 && fieldBend(analysis, j) > params.bend_threshold;
+      for (std::int64_t j = 0; j < static_cast<std::int64_t>(nf); ++j) {
+        const int dimension = analysis.targetDimension(j);
+        bent[j] = dimension == 3 || (dimension == 2 && fieldBend(analysis, j) > params.bend_threshold);
+      }
       std::size_t newly_held = 0;
       for (std::int64_t p = 0; p < sn; ++p) {
         if (held_from[p] < params.iterations) continue;
@@ -143,9 +148,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
           if (dimension == 0) continue;
           ++known;
           wires += dimension == 1;
-          // A scattered target area is no height field either: an edge or corner too sharp
-          // for the pattern (a tetrahedron's 70.5-degree edges), or clutter.
-          bent_here += bent[static_cast<std::size_t>(*jp)] || dimension == 3;
+          bent_here += bent[static_cast<std::size_t>(*jp)];
         }
         if (known > 0 && bent_here >= params.bent_share * known && wires < params.bent_share * known) {
           held_from[p] = pass + 1;  // this pass still moves it

@@ -82,9 +82,9 @@ struct LpfDenoisingReport {
   /// Points the last pass moved; points left in place because no candidate weighed
   /// anything (or fewer than 3 finite points in all); NaN/Inf.
   std::size_t moved = 0, isolated = 0, non_finite = 0;
-  /// Surface fields found bent by any analysis (scattered fields not counted), and the
-  /// points held (bend_threshold): in all, and after each pass but the last (entry k: points
-  /// whose last move was pass k + 1).
+  /// Fields found bent (scattered ones included) by any analysis, and the points held
+  /// (bend_threshold): in all, and after each pass but the last (entry k: points whose last
+  /// move was pass k + 1).
   std::size_t bent_fields = 0, held_points = 0;
   std::vector<std::size_t> held_after_pass;
 };

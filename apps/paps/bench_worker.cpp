@@ -165,6 +165,7 @@ int runBenchWorker(int argc, char** argv) {
       q.probing.atoms = static_cast<int>(get("atoms", q.probing.atoms));
       q.iterations = static_cast<int>(get("passes", q.iterations));
       q.bend_threshold = static_cast<float>(get("bend", q.bend_threshold));
+      q.probing.free_curvature = get("free-curvature", 0) != 0;
       LpfDenoisingReport report;
       output = lpfDenoisePositions(input, q, &report);
       lf << "radius " << report.radius << "\n";

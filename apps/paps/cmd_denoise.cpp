@@ -55,6 +55,8 @@ const char* kDenoiseUsage =
     "                         fewer are wires; tested after every analysis) stop moving after\n"
     "                         that pass (default 0.08; 0: every pass moves every point, the\n"
     "                         manuscript's rule, which rounds creases more each pass)\n"
+    "  --free-curvature       keep each field's curvature out of the L1 penalty: better on\n"
+    "                         curved surfaces, worse on flat ones (see docs/lpf.md)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 
@@ -68,12 +70,12 @@ std::string adaptedNote(float noise, bool measured, float scale) {
 }  // namespace
 
 int runDenoise(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt", "free-motion"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt", "free-motion", "free-curvature"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
                "refilter", "aggregate", "own-weight", "noise", "no-adapt", "step", "atoms", "lambda",
-               "rounds", "seed-spacing", "free-motion", "bend-threshold"});
+               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireOutputApart();
   const std::string& in_path = a.positional[0];
@@ -148,6 +150,7 @@ int runDenoise(int argc, char** argv) {
     p.probing.seed_spacing = static_cast<float>(a.number("seed-spacing", 0));
     p.iterations = a.integer("passes", p.iterations);
     p.normal_motion_on_surfaces = !a.has("free-motion");
+    p.probing.free_curvature = a.has("free-curvature");
     p.bend_threshold = static_cast<float>(a.number("bend-threshold", p.bend_threshold));
     p.validate();
     LpfDenoisingReport r;
@@ -157,9 +160,9 @@ int runDenoise(int argc, char** argv) {
       std::snprintf(chosen, sizeof chosen, " (chosen: noise %.3g m measured, at least %g sigma)", r.noise_sigma,
                     p.probing.noise_sigmas);
     std::printf("LPF denoising: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %d atoms, lambda %g m, "
-                "%d passes; moved %zu points\n",
+                "%d passes%s; moved %zu points\n",
                 r.radius, p.probing.radius > 0 ? "" : chosen, r.step, r.pattern_nodes, r.fields, p.probing.atoms,
-                r.lambda, p.iterations, r.moved);
+                r.lambda, p.iterations, p.probing.free_curvature ? ", free curvature" : "", r.moved);
     if (p.bend_threshold > 0 && p.iterations > 1) {
       std::string by_pass;
       for (std::size_t k = 0; k < r.held_after_pass.size(); ++k)

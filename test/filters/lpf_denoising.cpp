@@ -250,6 +250,9 @@ TEST(LpfDenoising, BadParametersAreNamed) {
   expectInvalidParameter([&] { f.setRadius(nan); }, "radius");
   expectInvalidParameter([&] { f.setAtoms(0); }, "atoms");
   expectInvalidParameter([&] { f.setIterations(0); }, "iterations");
+  f.setFreeCurvature(true);
+  EXPECT_TRUE(f.getParameters().probing.free_curvature);
+  EXPECT_EQ(f.getParameters().iterations, LpfDenoisingParameters().iterations) << "a refused setter changed nothing";
   auto with = [&](auto change) {
     LpfDenoisingParameters p;
     change(p);
@@ -276,15 +279,19 @@ TEST(LpfDenoising, BadParametersAreNamed) {
 TEST(LpfDenoising, SameOutputWithOneOrTwoThreads) {
   Positions p = smallSphere(4000);
   p[10] = Eigen::Vector3f::Constant(payloadNaN());
-  const int saved = omp_get_max_threads();
-  omp_set_num_threads(1);
-  const Positions a = paps::lpfDenoisePositions(p, quick());
-  omp_set_num_threads(2);
-  const Positions b = paps::lpfDenoisePositions(p, quick());
-  omp_set_num_threads(saved);
-  std::size_t differ = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) differ += !sameBits(a[i], b[i]);
-  EXPECT_EQ(differ, 0u);
+  for (bool free_curvature : {false, true}) {
+    LpfDenoisingParameters q = quick();
+    q.probing.free_curvature = free_curvature;
+    const int saved = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const Positions a = paps::lpfDenoisePositions(p, q);
+    omp_set_num_threads(2);
+    const Positions b = paps::lpfDenoisePositions(p, q);
+    omp_set_num_threads(saved);
+    std::size_t differ = 0;
+    for (std::size_t i = 0; i < a.size(); ++i) differ += !sameBits(a[i], b[i]);
+    EXPECT_EQ(differ, 0u) << "free_curvature " << free_curvature;
+  }
 }
 
 TEST(LpfDenoising, MildCreasesFoundAfterTheFirstPass) {
@@ -299,6 +306,30 @@ TEST(LpfDenoising, MildCreasesFoundAfterTheFirstPass) {
   EXPECT_GT(held.held_after_pass[1], held.held_after_pass[0] / 50);
   EXPECT_LT(held.held_after_pass[1], held.held_after_pass[0]);
   EXPECT_LT(r.ours_rmse, 0.6 * r.all_passes_rmse) << r.noisy_rmse << " -> " << r.ours_rmse << " / " << r.all_passes_rmse;
+}
+
+TEST(LpfDenoising, FreeCurvatureStopsTheShrinkingOfASphere) {
+  // Every pass flattens every field a little towards its pattern plane (the L1 penalty): on
+  // a sphere the passes shrink it like a flow. With the fields' curvature out of the penalty
+  // it shrinks less. Measured here (20,000 points on the unit sphere, 0.15% noise, 5 passes,
+  // no point held): mean radial error -2.34e-3 without, -1.35e-3 with; RMS 2.41e-3 against
+  // 1.51e-3 (input 5.18e-3).
+  const Positions p = noisySphere(20000, 0.0015f, 3);
+  auto run = [&](bool free_curvature, double* bias) {
+    LpfDenoisingParameters q;
+    q.bend_threshold = 0;
+    q.probing.free_curvature = free_curvature;
+    const Positions out = paps::lpfDenoisePositions(p, q);
+    double b = 0;
+    for (const auto& x : out) b += x.cast<double>().norm() - 1.0;
+    *bias = b / out.size();
+    return sphereRmse(out);
+  };
+  double bias_off = 0, bias_free = 0;
+  const double rmse_off = run(false, &bias_off), rmse_free = run(true, &bias_free);
+  EXPECT_LT(bias_off, 0) << "the flow shrinks the sphere";
+  EXPECT_LT(std::abs(bias_free), 0.7 * std::abs(bias_off)) << bias_free << " against " << bias_off;
+  EXPECT_LT(rmse_free, 0.75 * rmse_off) << rmse_free << " against " << rmse_off;
 }
 
 TEST(LpfDenoising, ProgressCancels) {

@@ -265,6 +265,27 @@ LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalP
   if (step > r) throw InvalidParameter("step", detail::toString(step), "at most the pattern radius " + detail::toString(r));
   pattern_ = std::make_unique<ProbingPattern>(r, step);
   lambda_ = params_.lambda >= 0 ? params_.lambda : params_.lambda_factor * step;
+  {
+    // Least squares z = c0 + c1 x + c2 y + c3 x^2 + c4 x y + c5 y^2 over the nodes (in
+    // units of r): its pseudo-inverse, and the (A^T A)^-1 block of c3..c5, whose inverse
+    // weighs the curvature against the fit's residual (splitCurvature).
+    const int m = pattern_->size();
+    Eigen::MatrixXd A(m, 6);
+    for (int i = 0; i < m; ++i) {
+      const double x = pattern_->node(i).x() / r, y = pattern_->node(i).y() / r;
+      A.row(i) << 1, x, y, x * x, x * y, y * y;
+    }
+    const Eigen::Matrix<double, 6, 6> AtA = A.transpose() * A;
+    quadric_fit_ = AtA.ldlt().solve(A.transpose()).cast<float>();
+    quadric_basis_ = A.cast<float>();
+    const Eigen::Matrix<double, 6, 6> inv = AtA.inverse();
+    curvature_information_ = inv.bottomRightCorner<3, 3>().inverse().cast<float>();
+    // The free part is the quadratic terms less their own affine fit: zero mean and no tilt
+    // over the pattern, so the penalised rest keeps the field's offset and tilt (which the
+    // pose follows) and is not handed a constant to shrink.
+    const Eigen::MatrixXd affine = A.leftCols(3), quadratic = A.rightCols(3);
+    curvature_basis_ = (quadratic - affine * (affine.transpose() * affine).ldlt().solve(affine.transpose() * quadratic)).cast<float>();
+  }
 
   // Seeds and target areas.
   std::vector<int> seeds;
@@ -384,7 +405,59 @@ void LocalProbingAnalysis::align(std::size_t j, const Eigen::VectorXf& goal) {
   pose.frame = q.normalized().toRotationMatrix();
 }
 
-void LocalProbingAnalysis::recode() { codes_ = lassoCodes(dictionary_, fields_, lambda_, 100, params_.debias); }
+void LocalProbingAnalysis::recode() {
+  splitCurvature(+1);
+  codes_ = lassoCodes(dictionary_, fields_, lambda_, 100, params_.debias);
+  splitCurvature(-1);
+}
+
+float LocalProbingAnalysis::curvatureHeight(std::size_t j, int i) const {
+  return curvature_basis_.row(i).dot(curvature_.col(static_cast<Eigen::Index>(j)));
+}
+
+void LocalProbingAnalysis::splitCurvature(int sign) {
+  if (!params_.free_curvature) return;
+  const int m = pattern_->size();
+  const std::int64_t n = static_cast<std::int64_t>(poses_.size());
+  if (sign < 0) {
+#pragma omp parallel for schedule(static)
+    for (std::int64_t j = 0; j < n; ++j)
+      for (int i = 0; i < m; ++i) fields_(3 * i + 2, j) += curvatureHeight(j, i);
+    return;
+  }
+  curvature_.resize(3, n);
+#pragma omp parallel for schedule(static)
+  for (std::int64_t j = 0; j < n; ++j) {
+    // The curvature goes free in proportion to its significance: W = c^T Sigma^-1 c, with
+    // Sigma the covariance of c3..c5 given the residual of the field's own quadric fit, is
+    // chi-square with 3 degrees of freedom on a plane under white noise; c is scaled by
+    // max(0, 1 - q / W), q its 99th percentile (11.34).
+    const Eigen::Map<const Eigen::VectorXf, 0, Eigen::InnerStride<3>> z(fields_.col(j).data() + 2, m);
+    const Eigen::Matrix<float, 6, 1> c6 = quadric_fit_ * z;
+    const double residual = (z - quadric_basis_ * c6).squaredNorm() / std::max(1, m - 6);
+    const Eigen::Vector3f c = c6.tail<3>();
+    const double w = residual > 0 ? c.dot(curvature_information_ * c) / residual : INFINITY;
+    const double keep = w > 0 ? std::max(0.0, 1.0 - 11.34 / w) : 0.0;
+    curvature_.col(j) = c * static_cast<float>(keep);
+    for (int i = 0; i < m; ++i) fields_(3 * i + 2, j) -= curvatureHeight(j, i);
+  }
+}
+
+Eigen::VectorXf LocalProbingAnalysis::reconstructed(std::size_t j) const {
+  Eigen::VectorXf out = dictionary_ * codes_.col(static_cast<Eigen::Index>(j));
+  if (params_.free_curvature)
+    for (int i = 0; i < pattern_->size(); ++i) out[3 * i + 2] += curvatureHeight(j, i);
+  return out;
+}
+
+Eigen::Vector3f LocalProbingAnalysis::reconstructedNode(std::size_t j, int i) const {
+  const auto code = codes_.col(static_cast<Eigen::Index>(j));
+  Eigen::Vector3f out = Eigen::Vector3f::Zero();
+  for (Eigen::Index k = 0; k < code.size(); ++k)
+    if (code[k] != 0) out += code[k] * dictionary_.block<3, 1>(3 * i, k);
+  if (params_.free_curvature) out.z() += curvatureHeight(j, i);
+  return out;
+}
 
 void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const ProgressCallback& progress) {
   if (points.size() != points_)
@@ -399,10 +472,12 @@ void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const Pr
     dp.lambda = lambda_;
     dp.iterations = params_.dictionary_iterations;
     dp.seed = params_.seed + static_cast<std::uint64_t>(round);
+    splitCurvature(+1);
     LassoDictionaryResult learned = learnDictionaryLasso(fields_, dp, dictionary_);
     dictionary_ = std::move(learned.dictionary);
-    if (params_.debias) recode();
+    if (params_.debias) codes_ = lassoCodes(dictionary_, fields_, lambda_, 100, true);
     else codes_ = std::move(learned.codes);
+    splitCurvature(-1);
 #pragma omp parallel for schedule(dynamic, 256)
     for (std::int64_t j = 0; j < n; ++j) align(j, reconstructed(j));
     probe(points);
@@ -422,7 +497,9 @@ void LocalProbingAnalysis::analyse(const Positions& points, int rounds, const Pr
     dp.lambda = lambda_;
     dp.iterations = params_.dictionary_iterations;
     dp.seed = params_.seed;
+    splitCurvature(+1);
     dictionary_ = learnDictionaryLasso(fields_, dp).dictionary;
+    splitCurvature(-1);
   }
   recode();
   rep.finish();

@@ -58,16 +58,6 @@ NeighbourGraph coveringFields(const LocalProbingAnalysis& a, const Positions& po
   return NeighbourGraph::fromRows(std::move(offsets), std::move(fields));
 }
 
-// D a_j restricted to node i: the three values of the node in field j's frame.
-Eigen::Vector3f reconstructedNode(const LocalProbingAnalysis& a, std::size_t j, int i) {
-  const Eigen::MatrixXf& D = a.dictionary();
-  const auto code = a.codes().col(static_cast<Eigen::Index>(j));
-  Eigen::Vector3f out = Eigen::Vector3f::Zero();
-  for (Eigen::Index k = 0; k < code.size(); ++k)
-    if (code[k] != 0) out += code[k] * D.block<3, 1>(3 * i, k);
-  return out;
-}
-
 // RMS distance of field j's consolidated pattern (nodes u_i + (D a)_i, in its frame) to its
 // least-squares plane z = c0 + c1 x + c2 y, over the pattern radius.
 float fieldBend(const LocalProbingAnalysis& a, std::size_t j) {
@@ -78,7 +68,7 @@ float fieldBend(const LocalProbingAnalysis& a, std::size_t j) {
   Eigen::Vector3d b = Eigen::Vector3d::Zero();
   for (int i = 0; i < m; ++i) {
     const Eigen::Vector2f& u = pattern.node(i);
-    at[i] = (Eigen::Vector3f(u.x(), u.y(), 0.f) + reconstructedNode(a, j, i)).cast<double>();
+    at[i] = (Eigen::Vector3f(u.x(), u.y(), 0.f) + a.reconstructedNode(j, i)).cast<double>();
     const Eigen::Vector3d row(1, at[i].x(), at[i].y());
     A += row * row.transpose();
     b += row * at[i].z();
@@ -184,7 +174,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
         Eigen::Vector3f at[4], local = Eigen::Vector3f::Zero();
         for (int c = 0; c < 4; ++c) {
           const Eigen::Vector2f& u = pattern.node(corner[c]);
-          at[c] = Eigen::Vector3f(u.x(), u.y(), 0.f) + reconstructedNode(analysis, j, corner[c]);
+          at[c] = Eigen::Vector3f(u.x(), u.y(), 0.f) + analysis.reconstructedNode(j, corner[c]);
           local += weight[c] * at[c];
         }
         Eigen::Vector3f move = local - l;

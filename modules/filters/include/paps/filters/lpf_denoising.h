@@ -110,6 +110,8 @@ class LpfDenoising : public pcl::Filter<PointT>, public ThreadCountOption {
   /// Dictionary atoms d.
   void setAtoms(int d) { auto p = params_; p.probing.atoms = d; setParameters(p); }
   void setIterations(int n) { auto p = params_; p.iterations = n; setParameters(p); }
+  /// Fields' curvature out of the L1 penalty (LocalProbingParameters::free_curvature).
+  void setFreeCurvature(bool on) { auto p = params_; p.probing.free_curvature = on; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const LpfDenoisingReport& getReport() const { return report_; }
 

@@ -166,7 +166,7 @@ class LocalProbingAnalysis {
   Eigen::VectorXf reconstructed(std::size_t j) const;
   /// The same restricted to node i (x, y, z in field j's frame).
   Eigen::Vector3f reconstructedNode(std::size_t j, int i) const;
-  /// Representation error sum_j |V_j - D a_j|^2 / N after each round of analyse().
+  /// Representation error sum_j |V_j - reconstructed(j)|^2 / N after each round of analyse().
   const std::vector<double>& roundErrors() const { return round_errors_; }
   float radius() const { return pattern_->radius(); }
   /// The noise sigma measured for the automatic radius (0: not measured).
@@ -193,8 +193,8 @@ class LocalProbingAnalysis {
   Eigen::Matrix3Xf curvature_;      // per field: the x^2, xy, y^2 coefficients (free_curvature)
   Eigen::Matrix<float, 6, Eigen::Dynamic> quadric_fit_;  // the quadric's coefficients from the M heights
   Eigen::Matrix<float, Eigen::Dynamic, 6> quadric_basis_;  // 1, x, y, x^2, xy, y^2 at the nodes
-  Eigen::Matrix3f curvature_information_;
-  Eigen::Matrix<float, Eigen::Dynamic, 3> curvature_basis_;  // x^2, xy, y^2 at the nodes, less their affine fit  // inverse of the x^2, xy, y^2 block of (A^T A)^-1
+  Eigen::Matrix3f curvature_information_;  // inverse of the x^2, xy, y^2 block of (A^T A)^-1
+  Eigen::Matrix<float, Eigen::Dynamic, 3> curvature_basis_;  // x^2, xy, y^2 at the nodes, less their affine fit
   std::vector<double> round_errors_;
   std::size_t points_ = 0;  // size of the cloud the analysis was built on
   float noise_sigma_ = 0.f;

@@ -1,5 +1,6 @@
 #pragma once
 // Helpers shared by the tests of point-moving filters.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -8,6 +9,7 @@
 #include <utility>
 #include <vector>
 
+#include <omp.h>
 #include <pcl/point_types.h>
 
 #include <gtest/gtest.h>
@@ -149,6 +151,22 @@ void expectTinyCloudsGiveFiniteOutput(FilterFn filter) {
       EXPECT_LT((out[i] - p[i]).norm(), 0.05f) << n << " points, point " << i;
     }
   }
+}
+
+/// Points whose output differs (in any bit) between a run on one thread and one on two.
+/// `filter()` runs the filter on a fixed input.
+template <typename FilterFn>
+std::size_t pointsDifferingBetweenOneAndTwoThreads(FilterFn filter) {
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const Positions a = filter();
+  omp_set_num_threads(2);
+  const Positions b = filter();
+  omp_set_num_threads(saved);
+  if (a.size() != b.size()) return std::max(a.size(), b.size());
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) differ += !sameBits(a[i], b[i]);
+  return differ;
 }
 
 /// 200 copies of one point: with a given radius every point is every other's neighbour and no

@@ -282,15 +282,8 @@ TEST(LpfDenoising, SameOutputWithOneOrTwoThreads) {
   for (bool free_curvature : {false, true}) {
     LpfDenoisingParameters q = quick();
     q.probing.free_curvature = free_curvature;
-    const int saved = omp_get_max_threads();
-    omp_set_num_threads(1);
-    const Positions a = paps::lpfDenoisePositions(p, q);
-    omp_set_num_threads(2);
-    const Positions b = paps::lpfDenoisePositions(p, q);
-    omp_set_num_threads(saved);
-    std::size_t differ = 0;
-    for (std::size_t i = 0; i < a.size(); ++i) differ += !sameBits(a[i], b[i]);
-    EXPECT_EQ(differ, 0u) << "free_curvature " << free_curvature;
+    EXPECT_EQ(pointsDifferingBetweenOneAndTwoThreads([&] { return paps::lpfDenoisePositions(p, q); }), 0u)
+        << "free_curvature " << free_curvature;
   }
 }
 

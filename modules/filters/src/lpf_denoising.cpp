@@ -58,8 +58,9 @@ NeighbourGraph coveringFields(const LocalProbingAnalysis& a, const Positions& po
   return NeighbourGraph::fromRows(std::move(offsets), std::move(fields));
 }
 
-// RMS distance of field j's consolidated pattern (nodes u_i + (D a)_i, in its frame) to its
-// least-squares plane z = c0 + c1 x + c2 y, over the pattern radius.
+// RMS distance of field j's consolidated pattern (nodes u_i plus their reconstruction: D a,
+// and the free curvature if any; in its frame) to its least-squares plane
+// z = c0 + c1 x + c2 y, over the pattern radius.
 float fieldBend(const LocalProbingAnalysis& a, std::size_t j) {
   const ProbingPattern& pattern = a.pattern();
   const int m = pattern.size();
@@ -158,9 +159,10 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
       if (hold_creases && pass >= held_from[p]) continue;
       // Every field whose target area holds the point projects it on its pattern plane and
       // proposes the consolidated pattern there: the bilinear blend of the consolidated
-      // positions u + (D a) of the four nodes around the projection (3.3.2). On a surface
-      // that keeps the point's tangential place and takes the consolidated height; on a
-      // wire it keeps the place along the wire and takes the wire's consolidated axis.
+      // positions u + D a (plus any free curvature) of the four nodes around the projection
+      // (3.3.2). On a surface that keeps the point's tangential place and takes the
+      // consolidated height; on a wire it keeps the place along the wire and takes the
+      // wire's consolidated axis.
       Eigen::Vector3d acc = Eigen::Vector3d::Zero();
       double wsum = 0;
       for (const int* jp = cover.begin(p); jp != cover.end(p); ++jp) {

@@ -239,7 +239,7 @@ int runBenchCompress(int argc, char** argv) {
   };
   std::vector<OurRate> ours;
   {
-    const float default_spacing = float(a.number("seed-spacing", 1.25));
+    const float default_spacing = a.real("seed-spacing", 1.25);
     requireInRange("seed-spacing", default_spacing, 0.25f, 2.f);
     std::stringstream ss(a.text("ours", "40b10,48,64,100,160,256,400,700,1000,1300,1600,2400,100b12,160b12,256b12"));
     std::string item;

@@ -7,11 +7,14 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <string>
 #include <vector>
 
 #include <paps/core/cloud_io.h>
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
 #include <paps/core/neighbourhood.h>
 
 #include "bench_worker.h"
@@ -105,9 +108,20 @@ int runBenchFiles(int argc, char** argv) {
     stages.push_back(s);
   }
   if (stages.empty()) throw InvalidParameter("stages", "", "a comma list of denoise, superres, curvature");
-  for (const auto& path : a.positional)
-    if (!std::filesystem::is_regular_file(path)) throw IoError("cannot read '" + path + "': no such file");
+  for (const auto& path : a.positional) checkInputPath(path);
   std::filesystem::create_directories(out_dir);
+  // The workers' scratch files: removed at the end, when a run throws, and on Ctrl-C.
+  std::vector<std::string> scratch;
+  for (const char* f : {"worker_out.bin", "worker_log.txt", "sr_in0.bin", "sr_out.bin", "sr_log.txt"})
+    scratch.push_back(out_dir + "/" + f);
+  std::vector<std::unique_ptr<TemporaryFileGuard>> scratch_guards;
+  for (const auto& f : scratch) scratch_guards.push_back(std::make_unique<TemporaryFileGuard>(f));
+  struct RemoveOnExit {
+    const std::vector<std::string>& files;
+    ~RemoveOnExit() {
+      for (const auto& f : files) std::remove(f.c_str());
+    }
+  } remove_scratch{scratch};
   setWorkerLimits({timeout, memory_gb});
 
   std::printf("bench files: %zu input(s); each run limited to %s and %s of address space\n", a.positional.size(),
@@ -118,59 +132,63 @@ int runBenchFiles(int argc, char** argv) {
   std::vector<Run> runs;
   for (const auto& path : a.positional) {
     const std::string name = std::filesystem::path(path).stem().string();
-    const Positions pts = loadPositions(path);
-    const std::size_t finite = countFinite(pts);
-    std::printf("%s: %zu points (%zu finite)\n", path.c_str(), pts.size(), finite);
-    if (finite < 2) {
-      std::printf("%-14s skipped: fewer than 2 finite points\n", name.c_str());
-      continue;
-    }
-    // The fallback radius of the peers when ours gives none (it refused the input), and the
-    // superres kernel: a typical point holds 30 neighbours.
-    const SpatialIndex index(pts);
-    const float r30 = radiusForNeighbourCount(pts, index, 30, NeighbourCountStatistic::Median);
-    auto add = [&](const std::string& stage, const std::string& method, const std::string& setting, WorkerResult w) {
-      runs.push_back({name, stage, method, setting, pts.size(), w.output.size(), std::move(w)});
-      printRun(runs.back());
-      runs.back().w.output.clear();
-      runs.back().w.output.shrink_to_fit();
-      return runs.back().w;
-    };
-    // One raw copy of the input for every worker: the superres worker reads it by its name
-    // (sr_in0.bin of the scratch directory), the others take it as IN.
-    const std::string in = out_dir + "/sr_in0.bin", out = out_dir + "/worker_out.bin", log = out_dir + "/worker_log.txt";
-    writeRaw(in, pts);
-    auto run = [&](const char* command, const std::string& method, const std::map<std::string, double>& p) {
-      if (std::string(command) == "bench-worker-sr")
-        return spawnWorker({command, method, out_dir, "1"}, p, out_dir + "/sr_out.bin", out_dir + "/sr_log.txt");
-      return spawnWorker({command, method, in, out, log}, p, out, log);
-    };
-    for (const auto& stage : stages) {
-      const std::size_t first = runs.size();
-      if (stage == "denoise") {
-        const WorkerResult ours = add(stage, "ours", "default", run("bench-worker", "ours", {}));
-        const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
-        const std::string at = (ours.ok ? "radius of ours " : "30-neighbour radius ") + fmt("%.4g", r);
-        add(stage, "pcl-mls", at, run("bench-worker", "mls", {{"radius", r}, {"order", 2}, {"threads", 2}}));
-        add(stage, "bilateral", at, run("bench-worker", "bilateral", {{"radius", r}}));
-      } else if (stage == "superres") {
-        const std::map<std::string, double> p{{"count", factor * static_cast<double>(finite)}, {"radius", r30}};
-        for (const std::string m : {"qsr", "apss", "rimls", "pcl-mls-plane"})
-          add(stage, m, m == "pcl-mls-plane" ? "radius " + fmt("%.4g", r30) : "default", run("bench-worker-sr", m, p));
-      } else {
-        const WorkerResult ours = add(stage, "wavejets", "default", run("bench-worker-curv", "wavejets", {}));
-        const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
-        const std::string at = (ours.ok ? "R_phi of ours " : "30-neighbour radius ") + fmt("%.4g", r);
-        add(stage, "pcl", at, run("bench-worker-curv", "pcl", {{"radius", r}}));
-#ifdef PAPS_HAVE_CGAL
-        add(stage, "cgal", at + ", order 4", run("bench-worker-curv", "cgal", {{"radius", r}}));
-#endif
+    // One input that cannot be benched (unreadable, no radius to choose...) is reported and
+    // skipped: the others' rows and the CSV are still written.
+    try {
+      const Positions pts = loadPositions(path);
+      const std::size_t finite = countFinite(pts);
+      std::printf("%s: %zu points (%zu finite)\n", path.c_str(), pts.size(), finite);
+      if (finite < 2) {
+        std::printf("%-14s skipped: fewer than 2 finite points\n", name.c_str());
+        continue;
       }
-      printRatios(runs, first);
+      // The fallback radius of the peers when ours gives none (it refused the input), and the
+      // superres kernel: a typical point holds 30 neighbours.
+      const SpatialIndex index(pts);
+      const float r30 = radiusForNeighbourCount(pts, index, 30, NeighbourCountStatistic::Median);
+      auto add = [&](const std::string& stage, const std::string& method, const std::string& setting, WorkerResult w) {
+        runs.push_back({name, stage, method, setting, pts.size(), w.output.size(), std::move(w)});
+        printRun(runs.back());
+        runs.back().w.output.clear();
+        runs.back().w.output.shrink_to_fit();
+        return runs.back().w;
+      };
+      // One raw copy of the input for every worker: the superres worker reads it by its name
+      // (sr_in0.bin of the scratch directory), the others take it as IN.
+      const std::string in = out_dir + "/sr_in0.bin", out = out_dir + "/worker_out.bin", log = out_dir + "/worker_log.txt";
+      writeRaw(in, pts);
+      auto run = [&](const char* command, const std::string& method, const std::map<std::string, double>& p) {
+        if (std::string(command) == "bench-worker-sr")
+          return spawnWorker({command, method, out_dir, "1"}, p, out_dir + "/sr_out.bin", out_dir + "/sr_log.txt");
+        return spawnWorker({command, method, in, out, log}, p, out, log);
+      };
+      for (const auto& stage : stages) {
+        const std::size_t first = runs.size();
+        if (stage == "denoise") {
+          const WorkerResult ours = add(stage, "ours", "default", run("bench-worker", "ours", {}));
+          const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
+          const std::string at = (ours.ok ? "radius of ours " : "30-neighbour radius ") + fmt("%.4g", r);
+          add(stage, "pcl-mls", at, run("bench-worker", "mls", {{"radius", r}, {"order", 2}, {"threads", 2}}));
+          add(stage, "bilateral", at, run("bench-worker", "bilateral", {{"radius", r}}));
+        } else if (stage == "superres") {
+          const std::map<std::string, double> p{{"count", factor * static_cast<double>(finite)}, {"radius", r30}};
+          for (const std::string m : {"qsr", "apss", "rimls", "pcl-mls-plane"})
+            add(stage, m, m == "pcl-mls-plane" ? "radius " + fmt("%.4g", r30) : "default", run("bench-worker-sr", m, p));
+        } else {
+          const WorkerResult ours = add(stage, "wavejets", "default", run("bench-worker-curv", "wavejets", {}));
+          const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
+          const std::string at = (ours.ok ? "R_phi of ours " : "30-neighbour radius ") + fmt("%.4g", r);
+          add(stage, "pcl", at, run("bench-worker-curv", "pcl", {{"radius", r}}));
+  #ifdef PAPS_HAVE_CGAL
+          add(stage, "cgal", at + ", order 4", run("bench-worker-curv", "cgal", {{"radius", r}}));
+  #endif
+        }
+        printRatios(runs, first);
+      }
+    } catch (const Error& e) {
+      std::printf("%-14s skipped: %s\n", name.c_str(), e.what());
     }
   }
-  for (const char* scratch : {"worker_out.bin", "worker_log.txt", "sr_in0.bin", "sr_out.bin", "sr_log.txt"})
-    std::remove((out_dir + "/" + scratch).c_str());
   const std::string csv_path = out_dir + "/files.csv";
   {
     std::ofstream csv(csv_path + ".tmp");

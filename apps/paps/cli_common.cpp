@@ -1,6 +1,7 @@
 #include "cli_common.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -18,6 +19,7 @@
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
 
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 
@@ -31,7 +33,9 @@ Arguments Arguments::parse(int argc, char** argv, int first, const std::vector<s
       const std::string name = s.substr(2);
       const bool is_flag = std::find(flags.begin(), flags.end(), name) != flags.end();
       if (is_flag) { a.options[name] = "1"; continue; }
-      if (i + 1 >= argc) throw InvalidParameter(name, "(missing)", "a value after --" + name);
+      // A value missing at the end of the line is reported by allowOnly, after an unknown
+      // name (a misspelt flag is more likely than a forgotten value).
+      if (i + 1 >= argc) { a.options[name] = ""; a.missing_value = name; continue; }
       a.options[name] = argv[++i];
     } else {
       a.positional.push_back(s);
@@ -47,6 +51,16 @@ double Arguments::number(const std::string& name, double fallback) const {
   const double v = std::strtod(it->second.c_str(), &end);
   if (end == it->second.c_str() || *end != '\0') throw InvalidParameter(name, it->second, "a number");
   return v;
+}
+
+float Arguments::real(const std::string& name, float fallback) const {
+  if (!has(name)) return fallback;
+  const double v = number(name, fallback);
+  if (std::isfinite(v) && std::abs(v) > double(std::numeric_limits<float>::max()))
+    throw InvalidParameter(name, options.at(name), "a number of magnitude at most 3.4e38 (single precision)");
+  if (v != 0 && std::abs(v) < double(std::numeric_limits<float>::min()))
+    throw InvalidParameter(name, options.at(name), "0 or a number of magnitude at least 1.2e-38 (single precision)");
+  return static_cast<float>(v);
 }
 
 int Arguments::integer(const std::string& name, int fallback) const {
@@ -73,7 +87,8 @@ std::string Arguments::text(const std::string& name, const std::string& fallback
 void Arguments::allowOnly(const std::vector<std::string>& known) const {
   for (const auto& [name, value] : options)
     if (std::find(known.begin(), known.end(), name) == known.end())
-      throw InvalidParameter(name, value, "a known option (see paps --help)");
+      throw InvalidParameter(name, value.empty() ? "(no value)" : value, "a known option (see paps --help)");
+  if (!missing_value.empty()) throw InvalidParameter(missing_value, "(missing)", "a value after --" + missing_value);
 }
 
 void Arguments::requireOutputApart() const {
@@ -83,6 +98,27 @@ void Arguments::requireOutputApart() const {
   for (std::size_t i = 0; i + 1 < positional.size(); ++i)
     if (std::filesystem::equivalent(positional[i], positional.back(), ec))
       throw InvalidParameter("OUT", positional.back(), "a file other than the input (inputs are never overwritten)");
+}
+
+void Arguments::requireCloudOutput() const {
+  requireOutputApart();
+  if (!positional.empty()) checkCloudOutputPath(positional.back());
+}
+
+void Arguments::requireFileOutput(const std::string& extension) const {
+  requireOutputApart();
+  if (positional.empty()) return;
+  const std::string& out = positional.back();
+  checkOutputPath(out);
+  std::string ext = std::filesystem::path(out).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  if (ext != extension) throw InvalidParameter("OUT", out, "a " + extension + " file");
+}
+
+void requireOptionsOf(const Arguments& a, const std::vector<std::string>& applies, const std::string& variant) {
+  for (const auto& [name, value] : a.options)
+    if (std::find(applies.begin(), applies.end(), name) == applies.end())
+      throw InvalidParameter(name, value.empty() ? "(flag)" : value, "an option that " + variant + " uses (see --help)");
 }
 
 std::vector<std::string> splitList(const std::string& s) {
@@ -166,6 +202,10 @@ void takeThreadsOption(int& argc, char** argv) {
 void printRead(const std::string& path, const Positions& points) {
   const std::size_t finite = countFinite(points);
   std::printf("read %s: %zu points (%zu finite)\n", path.c_str(), points.size(), finite);
+  // Said here, in the file's words: deeper down an all-NaN cloud reads as an empty one.
+  if (finite == 0)
+    throw InvalidInput("'" + path + "' has no finite point (" + (points.empty() ? std::string("it holds no point")
+                       : "all " + std::to_string(points.size()) + " are NaN or Inf") + ")");
   float largest = 0.f;
   for (const auto& p : points)
     if (isFinite(p)) largest = std::max(largest, p.cwiseAbs().maxCoeff());

@@ -7,6 +7,7 @@
 
 #include <pcl/PCLPointCloud2.h>
 
+#include <paps/core/error.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -16,23 +17,51 @@ namespace paps::cli {
 struct Arguments {
   std::vector<std::string> positional;
   std::map<std::string, std::string> options;
+  std::string missing_value;  ///< an option given last without its value (reported by allowOnly)
 
   static Arguments parse(int argc, char** argv, int first, const std::vector<std::string>& flags);
   bool has(const std::string& name) const { return options.count(name) > 0; }
   /// Value of --name as a number; throws paps::InvalidParameter when it is not one.
   double number(const std::string& name, double fallback) const;
+  /// Value of --name as a single-precision number (what the library parameters hold); throws
+  /// paps::InvalidParameter when it is not a number, or is one that a float would turn into
+  /// infinity (1e300) or silently into 0 (1e-300).
+  float real(const std::string& name, float fallback) const;
   /// Value of --name as a whole number in the range of int (counts, orders, bits); throws
   /// paps::InvalidParameter naming the option otherwise ("1e12" is not silently wrapped).
   int integer(const std::string& name, int fallback) const;
   /// Value of --name as a point count in [0, 2^40]; throws paps::InvalidParameter otherwise.
   std::size_t count(const std::string& name, std::size_t fallback) const;
   std::string text(const std::string& name, const std::string& fallback) const;
-  /// Throws paps::InvalidParameter for an option not in `known`.
+  /// Throws paps::InvalidParameter for an option not in `known`, then for an option whose
+  /// value is missing.
   void allowOnly(const std::vector<std::string>& known) const;
   /// Throws paps::InvalidParameter when the output (the last positional argument) is one of
   /// the inputs (the others): inputs are never overwritten, not even on request.
   void requireOutputApart() const;
+  /// requireOutputApart, then the output file checked before any work (a long run must not
+  /// end on a path it cannot write): an existing folder that takes new files, and a name
+  /// ending in `extension` (".pcd or .ply" for clouds: checkCloudOutputPath).
+  void requireCloudOutput() const;
+  void requireFileOutput(const std::string& extension) const;
 };
+
+/// Runs `validate` (which sets or checks a library parameter struct) and re-throws an
+/// InvalidParameter under the name of the command-line option it came from: the library
+/// names its fields (target_neighbours), the user typed the option (--neighbours).
+template <typename F>
+void validateAsOptions(const std::map<std::string, std::string>& option_of, F&& validate) {
+  try {
+    validate();
+  } catch (const InvalidParameter& e) {
+    const auto it = option_of.find(e.parameter());
+    throw InvalidParameter(it == option_of.end() ? e.parameter() : it->second, e.value(), e.expected());
+  }
+}
+
+/// Throws InvalidParameter for an option given on the line that is not in `applies` (the
+/// options of the variant chosen, e.g. --atoms under --method similarity), naming `variant`.
+void requireOptionsOf(const Arguments& a, const std::vector<std::string>& applies, const std::string& variant);
 
 /// "a,b,,c" -> {"a", "b", "c"}.
 std::vector<std::string> splitList(const std::string& s);
@@ -52,7 +81,8 @@ std::string samplesDir();
 /// per finished stage with its wall time instead.
 ProgressCallback progressBar(bool quiet, bool timings = false);
 
-/// Prints "read PATH: N points (M finite)" and, on stderr, a warning when the coordinates are
+/// Prints "read PATH: N points (M finite)"; throws InvalidInput when no point is finite; and
+/// prints, on stderr, a warning when the coordinates are
 /// so large that float steps there reach a tenth of the points' typical spacing (UTM-like
 /// coordinates without an offset: the file itself has lost the detail).
 void printRead(const std::string& path, const Positions& points);

@@ -173,18 +173,6 @@ pcl::PCLPointCloud2 byteBlob(const char* name, const std::vector<std::uint8_t>& 
   return b;
 }
 
-// Runs `set` (which sets and validates a library parameter struct) and re-throws an
-// InvalidParameter under the name of the command-line option it came from.
-template <typename F>
-void validateAs(const std::map<std::string, std::string>& option_of, F&& validate) {
-  try {
-    validate();
-  } catch (const InvalidParameter& e) {
-    const auto it = option_of.find(e.parameter());
-    throw InvalidParameter(it == option_of.end() ? e.parameter() : it->second, e.value(), e.expected());
-  }
-}
-
 std::vector<RegisteredPhoto> readPhotos(const std::string& list) {
   const auto entries = loadPhotoList(list);
   if (entries.empty()) throw InvalidInput("photo list '" + list + "' holds no photo");
@@ -199,16 +187,16 @@ int runColorize(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kColorizeUsage, stdout); return 0; }
   a.allowOnly({"neighbours", "smoothness", "huber", "agreement", "occlusion-scale", "iterations", "quiet"});
   if (a.positional.size() != 3) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "CLOUD LIST OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   PointColorizationParameters p;
   p.neighbours = a.integer("neighbours", p.neighbours);
-  p.smoothness = static_cast<float>(a.number("smoothness", p.smoothness));
-  p.huber_threshold = static_cast<float>(a.number("huber", p.huber_threshold));
-  p.agreement_distance = static_cast<float>(a.number("agreement", p.agreement_distance));
-  p.occlusion_map_scale = static_cast<float>(a.number("occlusion-scale", p.occlusion_map_scale));
+  p.smoothness = a.real("smoothness", p.smoothness);
+  p.huber_threshold = a.real("huber", p.huber_threshold);
+  p.agreement_distance = a.real("agreement", p.agreement_distance);
+  p.occlusion_map_scale = a.real("occlusion-scale", p.occlusion_map_scale);
   p.iterations = a.integer("iterations", p.iterations);
   PointColorization<pcl::PointXYZRGB> colorize;
-  validateAs({{"neighbours", "neighbours"},
+  validateAsOptions({{"neighbours", "neighbours"},
               {"smoothness", "smoothness"},
               {"huber_threshold", "huber"},
               {"agreement_distance", "agreement"},
@@ -260,24 +248,24 @@ int runShadows(int argc, char** argv) {
   a.allowOnly({"sun", "relight", "ground", "sun-sky-ratio", "neighbours", "min-lightness-change",
                "max-reflectance-change", "graph-cut-scale", "quiet"});
   if (a.positional.size() != 3) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "CLOUD LIST OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   if (!a.has("sun")) throw InvalidParameter("sun", "missing", "--sun X,Y,Z, the direction towards the sun");
   ShadowCorrectionParameters cp;
   cp.sun_direction = parseDirection(a, "sun", cp.sun_direction);
   cp.ground_normal = parseDirection(a, "ground", cp.ground_normal);
-  cp.sun_sky_ratio = static_cast<float>(a.number("sun-sky-ratio", cp.sun_sky_ratio));
+  cp.sun_sky_ratio = a.real("sun-sky-ratio", cp.sun_sky_ratio);
   const std::string relight = a.text("relight", "lit");
   if (relight == "lit") cp.target = RelightTarget::AllLit;
   else if (relight == "shadow") cp.target = RelightTarget::AllShadow;
   else if (relight != "none") throw InvalidParameter("relight", relight, "lit, shadow or none");
   ShadowDetectionParameters dp;
   dp.neighbours = a.integer("neighbours", dp.neighbours);
-  dp.min_lightness_change = static_cast<float>(a.number("min-lightness-change", dp.min_lightness_change));
-  dp.max_reflectance_change = static_cast<float>(a.number("max-reflectance-change", dp.max_reflectance_change));
-  dp.graph_cut_scale = static_cast<float>(a.number("graph-cut-scale", dp.graph_cut_scale));
+  dp.min_lightness_change = a.real("min-lightness-change", dp.min_lightness_change);
+  dp.max_reflectance_change = a.real("max-reflectance-change", dp.max_reflectance_change);
+  dp.graph_cut_scale = a.real("graph-cut-scale", dp.graph_cut_scale);
   ShadowDetection<pcl::PointXYZRGBNormal> detect;
   ShadowCorrection<pcl::PointXYZRGBNormal> correct;
-  validateAs({{"neighbours", "neighbours"},
+  validateAsOptions({{"neighbours", "neighbours"},
               {"min_lightness_change", "min-lightness-change"},
               {"max_reflectance_change", "max-reflectance-change"},
               {"graph_cut_scale", "graph-cut-scale"},

@@ -55,8 +55,7 @@ const char* kDecompressUsage =
 namespace {
 
 std::vector<std::uint8_t> readFile(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+  checkInputPath(path);
   std::ifstream f(path, std::ios::binary);
   if (!f) throw IoError("cannot open '" + path + "'");
   std::vector<std::uint8_t> b((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
@@ -138,10 +137,11 @@ int runCompress(int argc, char** argv) {
   a.allowOnly({"preset", "radius", "patch-points", "bins", "atoms", "sparsity", "seed-bits", "coefficient-bits",
                "angle-bits", "dictionary-bits", "seed-spacing", "ksvd-iterations", "spacing", "error", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT.paps");
-  a.requireOutputApart();
+  // A stream named .pcd or .ply would later be taken for a cloud by every reader.
+  a.requireFileOutput(".paps");
   using namespace paps::compression;
   CompressionParameters p = compressionPreset(a.text("preset", "balanced"));
-  p.patch_radius = float(a.number("radius", p.patch_radius));
+  p.patch_radius = a.real("radius", p.patch_radius);
   p.patch_points = a.integer("patch-points", p.patch_points);
   p.bins = a.integer("bins", p.bins);
   p.atoms = a.integer("atoms", p.atoms);
@@ -150,9 +150,9 @@ int runCompress(int argc, char** argv) {
   p.coefficient_bits = a.integer("coefficient-bits", p.coefficient_bits);
   p.angle_bits = a.integer("angle-bits", p.angle_bits);
   p.dictionary_bits = a.integer("dictionary-bits", p.dictionary_bits);
-  p.seed_spacing = float(a.number("seed-spacing", p.seed_spacing));
+  p.seed_spacing = a.real("seed-spacing", p.seed_spacing);
   p.ksvd_iterations = a.integer("ksvd-iterations", p.ksvd_iterations);
-  p.output_spacing = float(a.number("spacing", p.output_spacing));
+  p.output_spacing = a.real("spacing", p.output_spacing);
   p.validate();
 
   Positions in;
@@ -208,11 +208,9 @@ int runDecompress(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kDecompressUsage, stdout); return 0; }
   a.allowOnly({"no-consolidate", "no-regularise", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN.paps and OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   using namespace paps::compression;
   const std::string& out_path = a.positional[1];
-  const std::string ext = std::filesystem::path(out_path).extension().string();
-  if (ext != ".pcd" && ext != ".ply") throw InvalidParameter("OUT", out_path, "a .pcd or .ply path");
   const std::vector<std::uint8_t> bytes = readFile(a.positional[0]);
   DecodeOptions o;
   o.consolidate = !a.has("no-consolidate");

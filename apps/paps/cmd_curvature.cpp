@@ -142,10 +142,10 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
 WavejetParameters wavejetParameters(const Arguments& a, const char* default_policy) {
   WavejetParameters w;
   w.order = a.integer("order", w.order);
-  w.beta = static_cast<float>(a.number("beta", w.beta));
+  w.beta = a.real("beta", w.beta);
   w.irls_iterations = a.integer("irls", w.irls_iterations);
   w.max_refits = a.integer("refits", w.max_refits);
-  w.refit_angle = static_cast<float>(a.number("refit-angle", w.refit_angle));
+  w.refit_angle = a.real("refit-angle", w.refit_angle);
   w.select_order = a.has("select-order");
   // The noise-aware policy decides unless the user set the order, beta or the policy.
   const std::string policy =
@@ -163,7 +163,9 @@ WavejetParameters wavejetParameters(const Arguments& a, const char* default_poli
   w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
   // The cap of narrowing (0: 4 x --neighbours).
   w.narrowed_neighbours = a.integer("max-neighbours", w.narrowed_neighbours);
-  w.validate();
+  validateAsOptions({{"irls_iterations", "irls"}, {"max_refits", "refits"}, {"refit_angle", "refit-angle"},
+                     {"narrowed_neighbours", "max-neighbours"}},
+                    [&] { w.validate(); });
   return w;
 }
 
@@ -217,9 +219,9 @@ int runCurvature(int argc, char** argv) {
   a.allowOnly({"radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle", "orient", "quiet",
                "timings", "select-order", "fixed-radius", "max-neighbours", "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   WavejetParameters params = wavejetParameters(a, "auto");
-  const float radius = static_cast<float>(a.number("radius", 0));
+  const float radius = a.real("radius", 0);
   const int neighbours = a.integer("neighbours", 50);
   const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0], &params.viewpoint);
   const Positions p = positionsOf(cloud);
@@ -276,16 +278,16 @@ int runEnhance(int argc, char** argv) {
                "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius", "max-neighbours",
                "order-policy"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   if (a.has("alpha0") == a.has("alpha1"))
     throw InvalidParameter("alpha0/alpha1", "both or neither", "exactly one of --alpha0 A or --alpha1 RE[,IM]");
   WavejetEnhancementParameters params;
   // Enhancement keeps the fixed order unless asked (WavejetEnhancementParameters::wavejet).
   params.wavejet = wavejetParameters(a, "fixed");
-  params.radius = static_cast<float>(a.number("radius", 0));
+  params.radius = a.real("radius", 0);
   params.target_neighbours = a.integer("neighbours", params.target_neighbours);
-  params.max_motion = static_cast<float>(a.number("max-motion", params.max_motion));
-  if (a.has("alpha0")) params.alpha0 = static_cast<float>(a.number("alpha0", 1));
+  params.max_motion = a.real("max-motion", params.max_motion);
+  if (a.has("alpha0")) params.alpha0 = a.real("alpha0", 1);
   if (a.has("alpha1")) {
     const std::string s = a.text("alpha1", "1");
     std::istringstream in(s);
@@ -295,7 +297,9 @@ int runEnhance(int argc, char** argv) {
       throw InvalidParameter("alpha1", s, "RE or RE,IM (numbers)");
     params.alpha1 = {static_cast<float>(re), static_cast<float>(im)};
   }
-  params.validate();
+  validateAsOptions({{"target_neighbours", "neighbours"}, {"max_motion", "max-motion"}, {"irls_iterations", "irls"},
+                     {"max_refits", "refits"}, {"refit_angle", "refit-angle"}, {"narrowed_neighbours", "max-neighbours"}},
+                    [&] { params.validate(); });
   pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0], &params.wavejet.viewpoint);
   const Positions p = positionsOf(cloud);
   printRead(a.positional[0], p);

@@ -77,12 +77,24 @@ int runDenoise(int argc, char** argv) {
                "refilter", "aggregate", "own-weight", "noise", "no-adapt", "step", "atoms", "lambda",
                "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   const std::string& in_path = a.positional[0];
   const std::string& out_path = a.positional[1];
   const std::string method = a.text("method", "similarity");
   if (method != "similarity" && method != "bilateral" && method != "lpf")
     throw InvalidParameter("method", method, "similarity, bilateral or lpf");
+  // An option of another method would be silently ignored: refused instead.
+  const std::vector<std::string> common = {"method", "radius", "neighbours", "quiet", "timings"};
+  std::vector<std::string> applies = common;
+  if (method == "similarity")
+    applies.insert(applies.end(), {"grid", "sigma", "sigma-scale", "smoothing", "patches", "checks", "guide", "passes",
+                                   "refilter", "aggregate", "own-weight", "noise", "no-adapt"});
+  else if (method == "lpf")
+    applies.insert(applies.end(), {"step", "atoms", "lambda", "rounds", "seed-spacing", "passes", "free-motion",
+                                   "free-curvature", "bend-threshold"});
+  else
+    applies.insert(applies.end(), {"iterations"});
+  requireOptionsOf(a, applies, "--method " + method);
 
   Eigen::Vector3f origin;
   pcl::PCLPointCloud2 cloud = loadCloud(in_path, &origin);
@@ -92,18 +104,18 @@ int runDenoise(int argc, char** argv) {
   Positions out;
   if (method == "similarity") {
     SimilarityDenoisingParameters p;
-    p.radius = static_cast<float>(a.number("radius", 0));
+    p.radius = a.real("radius", 0);
     p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.grid_size = a.integer("grid", p.grid_size);
-    p.sigma = static_cast<float>(a.number("sigma", 0));
-    p.sigma_scale = static_cast<float>(a.number("sigma-scale", p.sigma_scale));
+    p.sigma = a.real("sigma", 0);
+    p.sigma_scale = a.real("sigma-scale", p.sigma_scale);
     p.smoothing_iterations = a.integer("smoothing", p.smoothing_iterations);
     p.similar_patches = a.integer("patches", p.similar_patches);
     p.search_checks = a.integer("checks", p.search_checks);
     p.descriptor_smoothing = a.integer("guide", p.descriptor_smoothing);
     p.passes = a.integer("passes", p.passes);
     p.guided_passes = !a.has("refilter");
-    p.own_weight = static_cast<float>(a.number("own-weight", p.own_weight));
+    p.own_weight = a.real("own-weight", p.own_weight);
     const std::string aggregate = a.text("aggregate", "patch");
     if (aggregate == "centre") p.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
     else if (aggregate != "patch") throw InvalidParameter("aggregate", aggregate, "patch or centre");
@@ -111,9 +123,13 @@ int runDenoise(int argc, char** argv) {
       p.use_viewpoint = true;
       p.viewpoint = *known;
     }
-    p.noise_sigma = static_cast<float>(a.number("noise", 0));
+    p.noise_sigma = a.real("noise", 0);
     p.adapt_to_noise = !a.has("no-adapt");
-    p.validate();
+    validateAsOptions({{"target_neighbours", "neighbours"}, {"grid_size", "grid"}, {"sigma_scale", "sigma-scale"},
+                       {"smoothing_iterations", "smoothing"}, {"descriptor_smoothing", "guide"},
+                       {"similar_patches", "patches"}, {"search_checks", "checks"}, {"own_weight", "own-weight"},
+                       {"noise_sigma", "noise"}},
+                      [&] { p.validate(); });
     // Schedule options given on the command line go over the noise rule's choice.
     SimilarityDenoisingReport choice, r;
     SimilarityDenoisingParameters run = p;
@@ -141,18 +157,19 @@ int runDenoise(int argc, char** argv) {
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
   } else if (method == "lpf") {
     LpfDenoisingParameters p;
-    p.probing.radius = static_cast<float>(a.number("radius", 0));
+    p.probing.radius = a.real("radius", 0);
     p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
-    p.probing.step = static_cast<float>(a.number("step", 0));
+    p.probing.step = a.real("step", 0);
     p.probing.atoms = a.integer("atoms", p.probing.atoms);
-    p.probing.lambda = static_cast<float>(a.number("lambda", p.probing.lambda));
+    p.probing.lambda = a.real("lambda", p.probing.lambda);
     p.probing.rounds = a.integer("rounds", p.probing.rounds);
-    p.probing.seed_spacing = static_cast<float>(a.number("seed-spacing", 0));
+    p.probing.seed_spacing = a.real("seed-spacing", 0);
     p.iterations = a.integer("passes", p.iterations);
     p.normal_motion_on_surfaces = !a.has("free-motion");
     p.probing.free_curvature = a.has("free-curvature");
-    p.bend_threshold = static_cast<float>(a.number("bend-threshold", p.bend_threshold));
-    p.validate();
+    p.bend_threshold = a.real("bend-threshold", p.bend_threshold);
+    validateAsOptions({{"seed_spacing", "seed-spacing"}, {"iterations", "passes"}, {"bend_threshold", "bend-threshold"}},
+                      [&] { p.validate(); });
     LpfDenoisingReport r;
     out = lpfDenoisePositions(in, p, &r, {}, progress);
     char chosen[96] = " (chosen)";
@@ -175,9 +192,10 @@ int runDenoise(int argc, char** argv) {
     if (r.isolated) std::fprintf(stderr, "warning: %zu points had no field to move them and were left in place\n", r.isolated);
   } else {
     PointBilateralParameters p;
-    p.radius = static_cast<float>(a.number("radius", 0));
+    p.radius = a.real("radius", 0);
     p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.iterations = a.integer("iterations", p.iterations);
+    validateAsOptions({{"target_neighbours", "neighbours"}}, [&] { p.validate(); });
     PointBilateralReport r;
     out = bilateralFilterPositions(in, p, &r, {}, progress);
     std::printf("bilateral filter: radius %g m%s, %d passes; moved %zu points\n", r.radius,

@@ -12,6 +12,7 @@
 #include <pcl/conversions.h>
 #include <pcl/point_types.h>
 
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/core/random.h>
@@ -111,7 +112,9 @@ int runMakeStreet(int argc, char** argv) {
   const std::string dir = a.positional[0];
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  if (!std::filesystem::is_directory(dir, ec)) throw IoError("cannot create folder '" + dir + "'");
+  if (!std::filesystem::is_directory(dir))
+    throw IoError("cannot create folder '" + dir + "'" + (ec ? ": " + ec.message() : std::string()));
+  checkOutputPath((std::filesystem::path(dir) / "photo.txt").string());  // a folder that takes files
   const synthetic::StreetScene scene(o);
   const synthetic::StreetScan scan = scene.scan();
   pcl::PointCloud<pcl::PointXYZ> xyz;
@@ -175,7 +178,9 @@ int runRegister(int argc, char** argv) {
   a.allowOnly({"values", "metric", "alpha", "light", "band", "coarse-only", "truth", "quiet"});
   if (a.positional.size() != 3) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "CLOUD LIST OUT_LIST");
   a.requireOutputApart();
-  if (a.has("truth") && a.text("truth", "") == a.positional[2])
+  checkOutputPath(a.positional[2]);
+  std::error_code same_ec;
+  if (a.has("truth") && std::filesystem::equivalent(a.text("truth", ""), a.positional[2], same_ec))
     throw InvalidParameter("truth", a.text("truth", ""), "a file other than OUT_LIST");
   ImageRegistrationParameters p;
   const std::string metric = a.text("metric", "midhog");
@@ -197,6 +202,12 @@ int runRegister(int argc, char** argv) {
   // Inputs read and checked before any work.
   const auto entries = loadPhotoList(a.positional[1]);
   if (entries.empty()) throw InvalidInput("photo list '" + a.positional[1] + "' holds no photo");
+  // The photos are inputs too: OUT_LIST must not be written over one of them.
+  for (const auto& e : entries)
+    if (std::filesystem::equivalent(std::filesystem::absolute(a.positional[1]).parent_path() / e.image, a.positional[2],
+                                    same_ec))
+      throw InvalidParameter("OUT_LIST", a.positional[2], "a file other than the inputs (it is the photo '" + e.image +
+                                                              "' of the list; inputs are never overwritten)");
   std::vector<PhotoListEntry> truth;
   if (a.has("truth")) {
     truth = loadPhotoList(a.text("truth", ""));
@@ -321,7 +332,9 @@ int runRgbdPhoto(int argc, char** argv) {
   const std::string dir = a.positional[1];
   std::error_code ec;
   std::filesystem::create_directories(dir, ec);
-  if (!std::filesystem::is_directory(dir, ec)) throw IoError("cannot create folder '" + dir + "'");
+  if (!std::filesystem::is_directory(dir))
+    throw IoError("cannot create folder '" + dir + "'" + (ec ? ": " + ec.message() : std::string()));
+  checkOutputPath((std::filesystem::path(dir) / "photo.txt").string());  // a folder that takes files
   pcl::PointCloud<pcl::PointXYZRGB> out;
   out.resize(finite.points.size());
   for (std::size_t i = 0; i < finite.points.size(); ++i) {

@@ -80,14 +80,19 @@ int runSuperres(int argc, char** argv) {
                "refit", "max-neighbours", "seed-disc", "thin-disc", "normals", "orient"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
-  a.requireOutputApart();
+  a.requireCloudOutput();
   const std::string method = a.text("method", "qsr");
   if (method != "qsr" && method != "apss" && method != "rimls" && method != "lpf")
     throw InvalidParameter("method", method, "qsr, apss, rimls or lpf");
-  if (method == "lpf" && (a.has("count") || a.has("normals")))
-    throw InvalidParameter(a.has("count") ? "count" : "normals", "given", "--method qsr, apss or rimls (LPF sets its density by --factor and gives no normals)");
-  if (method != "qsr" && a.has("thin-disc"))
-    throw InvalidParameter("thin-disc", a.text("thin-disc", ""), "--method qsr (APSS and RIMLS have no thin-ball test)");
+  // An option of another method would be silently ignored: refused instead (LPF sets its
+  // density by --factor and gives no normals; APSS and RIMLS have no thin-ball test).
+  std::vector<std::string> applies = {"factor", "method", "radius", "neighbours", "quiet", "timings"};
+  if (method == "qsr")
+    applies.insert(applies.end(), {"count", "similarity", "grid-lr", "grid-sr", "patches", "kernel", "similarity-scale",
+                                   "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient"});
+  else if (method != "lpf")
+    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient"});
+  requireOptionsOf(a, applies, "--method " + method);
   const std::string out_path = a.positional.back();
   // Parameters are checked before the scans are read, so a bad value fails at once.
   std::vector<Positions> scans;
@@ -110,8 +115,8 @@ int runSuperres(int argc, char** argv) {
   if (a.has("orient") && !normals_out) throw InvalidParameter("orient", orient, "with --normals (it orients them)");
   if (method == "lpf") {
     LpfResamplingParameters p;
-    p.factor = static_cast<float>(a.number("factor", p.factor));
-    p.probing.radius = static_cast<float>(a.number("radius", 0));
+    p.factor = a.real("factor", p.factor);
+    p.probing.radius = a.real("radius", 0);
     p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
     p.validate();
     readScans();
@@ -122,20 +127,20 @@ int runSuperres(int argc, char** argv) {
                 p.probing.radius > 0 ? "" : " (chosen)", r.step, r.pattern_nodes, r.fields, r.proposals);
   } else if (method == "qsr") {
     QuadricSuperResolutionParameters p;
-    p.factor = static_cast<float>(a.number("factor", p.factor));
+    p.factor = a.real("factor", p.factor);
     p.output_count = count;
-    p.patch_radius = static_cast<float>(a.number("radius", 0));
+    p.patch_radius = a.real("radius", 0);
     p.target_neighbours = a.integer("neighbours", p.target_neighbours);
-    p.similarity_radius = static_cast<float>(a.number("similarity", 0));
+    p.similarity_radius = a.real("similarity", 0);
     p.grid_lr = a.integer("grid-lr", 0);
     p.grid_sr = a.integer("grid-sr", 0);
     p.similar_patches = a.integer("patches", p.similar_patches);
-    p.kernel_scale = static_cast<float>(a.number("kernel", p.kernel_scale));
-    p.similarity_scale = static_cast<float>(a.number("similarity-scale", p.similarity_scale));
+    p.kernel_scale = a.real("kernel", p.kernel_scale);
+    p.similarity_scale = a.real("similarity-scale", p.similarity_scale);
     p.irls_iterations = a.integer("irls", p.irls_iterations);
-    p.noise_sigma = static_cast<float>(a.number("noise", 0));
-    p.seed_disc = static_cast<float>(a.number("seed-disc", p.seed_disc));
-    p.thin_disc = static_cast<float>(a.number("thin-disc", p.thin_disc));
+    p.noise_sigma = a.real("noise", 0);
+    p.seed_disc = a.real("seed-disc", p.seed_disc);
+    p.thin_disc = a.real("thin-disc", p.thin_disc);
     const std::string denoise = a.text("denoise", "auto");
     if (denoise == "auto") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Auto;
     else if (denoise == "on") p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
@@ -190,9 +195,9 @@ int runSuperres(int argc, char** argv) {
     if (r.unprojected) std::fprintf(stderr, "warning: %zu output points had no patch nearby and were not projected\n", r.unprojected);
   } else {
     MlsUpsamplingParameters p;
-    p.factor = static_cast<float>(a.number("factor", p.factor));
+    p.factor = a.real("factor", p.factor);
     p.output_count = count;
-    p.radius = static_cast<float>(a.number("radius", 0));
+    p.radius = a.real("radius", 0);
     p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.fit_per_input_point = !a.has("refit");
     p.max_neighbours = a.integer("max-neighbours", 0);

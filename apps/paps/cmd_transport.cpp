@@ -80,9 +80,7 @@ std::string lowerExtension(const std::string& path) {
 // An ASCII point list: one point a line, x y z first (separated by spaces, tabs or commas),
 // further columns ignored; empty lines and lines starting with '#' skipped.
 Positions loadXyz(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw IoError("cannot read '" + path + "': it is a folder");
-  if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+  checkInputPath(path);
   std::ifstream f(path);
   if (!f) throw IoError("cannot read '" + path + "': not readable");
   Positions out;
@@ -115,19 +113,6 @@ void checkMeshOutput(const std::string& path) {
   checkOutputPath(path);
   if (lowerExtension(path) != ".ply")
     throw InvalidParameter("OUT", path, "a .ply file (the mesh is written as binary PLY)");
-}
-
-// Validates library parameters, naming a bad one by the option the user typed (the library
-// names its fields: target_vertices is --vertices).
-template <typename Params>
-void validateAsOptions(const Params& p, std::initializer_list<std::pair<const char*, const char*>> options) {
-  try {
-    p.validate();
-  } catch (const InvalidParameter& e) {
-    for (const auto& [field, option] : options)
-      if (e.parameter() == field) throw InvalidParameter(option, e.value(), e.expected());
-    throw;
-  }
 }
 
 // Writes the mesh as binary PLY to a temporary file beside `path`, then renames it: the target
@@ -168,20 +153,20 @@ int runReconstruct(int argc, char** argv) {
   // Parameters and the output path are checked before the points are read.
   TransportReconstructionParameters p;
   p.target_vertices = a.integer("vertices", p.target_vertices);
-  p.initial_fraction = static_cast<float>(a.number("initial-fraction", p.initial_fraction));
+  p.initial_fraction = a.real("initial-fraction", p.initial_fraction);
   p.candidates = a.integer("candidates", p.candidates);
   p.seed = a.count("seed", p.seed);
-  p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
-  p.deletion_threshold = static_cast<float>(a.number("deletion-threshold", p.deletion_threshold));
-  p.dangling_support = static_cast<float>(a.number("dangling-support", p.dangling_support));
+  p.density_threshold = a.real("density-threshold", p.density_threshold);
+  p.deletion_threshold = a.real("deletion-threshold", p.deletion_threshold);
+  p.dangling_support = a.real("dangling-support", p.dangling_support);
   p.transport.bins_per_area = a.number("bins-per-area", p.transport.bins_per_area);
   p.transport.max_bins_per_facet = a.integer("max-bins", p.transport.max_bins_per_facet);
   p.transport.bins_per_point = a.integer("bins-per-point", p.transport.bins_per_point);
-  validateAsOptions(p, {{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
-                        {"candidates", "candidates"}, {"density_threshold", "density-threshold"},
-                        {"deletion_threshold", "deletion-threshold"}, {"dangling_support", "dangling-support"},
-                        {"bins_per_area", "bins-per-area"},
-                        {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}});
+  validateAsOptions({{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
+                     {"density_threshold", "density-threshold"}, {"deletion_threshold", "deletion-threshold"},
+                     {"dangling_support", "dangling-support"}, {"bins_per_area", "bins-per-area"},
+                     {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}},
+                    [&] { p.validate(); });
   checkMeshOutput(out_path);
   const Positions points = loadPoints(in_path);
   TransportReconstructionReport r;
@@ -209,8 +194,8 @@ int runRecoverFeatures(int argc, char** argv) {
   const std::string mesh_path = a.positional[0], in_path = a.positional[1], out_path = a.positional[2];
   TransportFeatureRecoveryParameters p;
   p.sweeps = a.integer("sweeps", p.sweeps);
-  p.density_threshold = static_cast<float>(a.number("density-threshold", p.density_threshold));
-  validateAsOptions(p, {{"sweeps", "sweeps"}, {"density_threshold", "density-threshold"}});
+  p.density_threshold = a.real("density-threshold", p.density_threshold);
+  validateAsOptions({{"density_threshold", "density-threshold"}}, [&] { p.validate(); });
   checkMeshOutput(out_path);
   const TriangleMesh smooth = loadTriangleMesh(mesh_path);
   std::printf("read %s: %zu vertices, %zu facets\n", mesh_path.c_str(), smooth.vertices.size(), smooth.triangles.size());

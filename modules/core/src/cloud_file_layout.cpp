@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <charconv>
 #include <cstdlib>
+#include <cerrno>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -11,6 +12,8 @@
 #include <map>
 
 #include <paps/core/error.h>
+
+#include <unistd.h>
 
 namespace paps {
 
@@ -28,8 +31,7 @@ struct HeaderText {
 
 HeaderText readHead(const std::string& path) {
   std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) throw IoError("cannot read '" + path + "': it is a folder");
-  if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+  checkInputPath(path);
   HeaderText h;
   h.file_size = std::filesystem::file_size(path, ec);
   if (ec) throw IoError("cannot read '" + path + "': " + ec.message());
@@ -439,6 +441,14 @@ PlyLayout readPlyLayoutForPcl(const std::string& path) {
   return ply;
 }
 
+void checkInputPath(const std::string& path, const std::string& what) {
+  std::error_code ec;
+  const std::string head = "cannot read " + what + "'" + path + "': ";
+  if (std::filesystem::is_directory(path, ec)) throw IoError(head + "it is a folder");
+  if (!std::filesystem::is_regular_file(path, ec)) throw IoError(head + "no such file");
+  if (::access(path.c_str(), R_OK) != 0) throw IoError(head + std::strerror(errno));
+}
+
 void checkOutputPath(const std::string& path) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -446,6 +456,9 @@ void checkOutputPath(const std::string& path) {
   if (fs::is_directory(path, ec)) throw IoError("cannot write '" + path + "': it is a folder");
   const fs::path dir = fs::path(path).has_parent_path() ? fs::path(path).parent_path() : fs::path(".");
   if (!fs::is_directory(dir, ec)) throw IoError("cannot write '" + path + "': folder '" + dir.string() + "' does not exist");
+  // The temporary file is created beside the target, so the folder itself must take new files.
+  if (::access(dir.c_str(), W_OK | X_OK) != 0)
+    throw IoError("cannot write '" + path + "': folder '" + dir.string() + "' is not writable (" + std::strerror(errno) + ")");
 }
 
 }  // namespace paps

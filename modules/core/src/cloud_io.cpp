@@ -90,9 +90,7 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   }
   else if (ext == ".ply") readPlyLayoutForPcl(path);
   else {
-    std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) throw IoError("cannot read '" + path + "': it is a folder");
-    if (!std::filesystem::is_regular_file(path, ec)) throw IoError("cannot read '" + path + "': no such file");
+    checkInputPath(path);
     throw IoError("cannot read '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
   }
   // PCL's readers also throw, e.g. std::out_of_range on an ASCII row with too few values:
@@ -123,11 +121,16 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) 
   return cloud;
 }
 
-void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud, const Eigen::Vector3f& sensor_origin) {
+void checkCloudOutputPath(const std::string& path) {
   checkOutputPath(path);
   const std::string ext = extensionOf(path);
   if (ext != ".pcd" && ext != ".ply")
     throw IoError("cannot write '" + path + "': unknown format '" + ext + "' (expected .pcd or .ply)");
+}
+
+void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud, const Eigen::Vector3f& sensor_origin) {
+  checkCloudOutputPath(path);
+  const std::string ext = extensionOf(path);
   // PCL's PLY writer turns a field of several values into a list property (which PLY readers
   // of point clouds, ours and PCL's own, refuse), and writes an integer "rgb" in 4 bytes where
   // its header declares 3 (every later record misaligned): refused, not written wrong.

@@ -123,12 +123,7 @@ TriangleMesh readObj(const std::string& path) {
 }  // namespace
 
 TriangleMesh loadTriangleMesh(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::exists(path, ec))
-    throw IoError("cannot read mesh '" + path + "': no such file");
-  if (!std::filesystem::is_regular_file(path, ec))
-    throw IoError("cannot read mesh '" + path + "': not a regular file");
-  if (!std::ifstream(path).good()) throw IoError("cannot read mesh '" + path + "': not readable");
+  checkInputPath(path, "mesh ");
 
   std::string ext = std::filesystem::path(path).extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),

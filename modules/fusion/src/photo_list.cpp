@@ -11,6 +11,7 @@
 
 #include <opencv2/imgcodecs.hpp>
 
+#include <paps/core/cloud_file_layout.h>
 #include <paps/core/error.h>
 
 namespace paps {
@@ -79,6 +80,7 @@ std::vector<PhotoListEntry> parsePhotoList(const std::string& text, const std::s
 }
 
 std::vector<PhotoListEntry> loadPhotoList(const std::string& path) {
+  checkInputPath(path, "photo list ");
   std::ifstream f(path, std::ios::binary);
   if (!f) throw IoError("cannot read photo list '" + path + "'");
   std::ostringstream s;
@@ -88,6 +90,7 @@ std::vector<PhotoListEntry> loadPhotoList(const std::string& path) {
 }
 
 void savePhotoListAtomic(const std::string& path, const std::vector<PhotoListEntry>& entries) {
+  checkOutputPath(path);
   std::ostringstream s;
   s << "# paps photo list: image width height fx fy cx cy k1 k2 p1 p2 k3, then the camera-to-world pose\n"
        "# r00 r01 r02 tx r10 r11 r12 ty r20 r21 r22 tz (OpenCV camera axes: x right, y down, z forward)\n";

@@ -77,8 +77,13 @@ PlyLayout readPlyLayout(const std::string& path);
 /// vertices (it asserts when a list changes length from one vertex to the next).
 PlyLayout readPlyLayoutForPcl(const std::string& path);
 
+/// Throws IoError "cannot read <what>'path': ..." when `path` is a folder, does not exist or
+/// cannot be opened for reading (`what`, e.g. "photo list ", names the kind of file).
+void checkInputPath(const std::string& path, const std::string& what = "");
+
 /// Throws IoError naming what is wrong when `path` cannot be an output file: empty, a
-/// folder, or in a folder that does not exist.
+/// folder, or in a folder that does not exist or does not take new files. Commands call it
+/// before any work, so that a long run does not end on an unwritable path.
 void checkOutputPath(const std::string& path);
 
 }  // namespace paps

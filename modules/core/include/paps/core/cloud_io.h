@@ -22,6 +22,10 @@ pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin =
 void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud,
                      const Eigen::Vector3f& sensor_origin = Eigen::Vector3f::Zero());
 
+/// What saveCloudAtomic checks of `path` before writing: checkOutputPath, and a .pcd or .ply
+/// name. Throws IoError naming the problem; for a command to call before any work.
+void checkCloudOutputPath(const std::string& path);
+
 /// x, y, z of every point of a blob (float32 or float64 fields).
 Positions positionsOf(const pcl::PCLPointCloud2& cloud);
 /// Writes positions back into the x, y, z fields of a blob of the same size; is_dense follows.

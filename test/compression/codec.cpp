@@ -207,6 +207,23 @@ TEST(PointCloudCompression, StreamsLikeTheOctreeCoder) {
   EXPECT_TRUE(out->is_dense);
   std::stringstream junk("not a compressed cloud at all");
   EXPECT_THROW(decoder.decodePointCloud(junk, out), CorruptStream);
+  // Decoding into a cloud that held other points replaces it whole: no stale colour, header
+  // or sensor pose (the stream carries none of them).
+  pcl::PointCloud<pcl::PointXYZRGB>::Ptr reused(new pcl::PointCloud<pcl::PointXYZRGB>);
+  reused->resize(10 * out->size());
+  for (auto& q : reused->points) q.r = 200;
+  reused->header.frame_id = "stale_frame";
+  reused->sensor_origin_ = Eigen::Vector4f(1, 2, 3, 0);
+  PointCloudCompression<pcl::PointXYZRGB> rgb_decoder;
+  std::stringstream again(stream.str());
+  rgb_decoder.decodePointCloud(again, reused);
+  ASSERT_EQ(reused->size(), out->size());
+  for (std::size_t i = 0; i < reused->size(); ++i) {
+    ASSERT_EQ(reused->points[i].r, 0);
+    ASSERT_EQ(reused->points[i].x, out->points[i].x);
+  }
+  EXPECT_EQ(reused->header.frame_id, "");
+  EXPECT_EQ(reused->sensor_origin_, Eigen::Vector4f::Zero());
   // One thread or two: the same bytes (setNumberOfThreads, as on the other stages).
   PointCloudCompression<pcl::PointXYZ> one(compressionPreset("compact"));
   one.setNumberOfThreads(1);

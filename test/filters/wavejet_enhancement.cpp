@@ -237,6 +237,38 @@ TEST(WavejetEnhancement, PclFilterPositionsAndNormals) {
   }
 }
 
+// A dense cloud whose far point has no neighbour within the radius: left in place with a NaN
+// normal in both modes, so the output is no longer dense (PCL: no NaN in any field).
+TEST(WavejetEnhancement, NaNNormalsMakeTheOutputNotDense) {
+  pcl::PointCloud<pcl::PointNormal>::Ptr cloud(new pcl::PointCloud<pcl::PointNormal>);
+  for (int i = 0; i < 30; ++i)
+    for (int j = 0; j < 30; ++j) {
+      pcl::PointNormal q;
+      q.getVector3fMap() = Eigen::Vector3f(0.01f * i, 0.01f * j, 0.002f * std::sin(0.7f * i));
+      q.getNormalVector3fMap() = Eigen::Vector3f::UnitZ();
+      cloud->push_back(q);
+    }
+  pcl::PointNormal far;
+  far.getVector3fMap() = Eigen::Vector3f(5.f, 5.f, 0.f);
+  far.getNormalVector3fMap() = Eigen::Vector3f::UnitZ();
+  cloud->push_back(far);
+  ASSERT_TRUE(cloud->is_dense);
+  for (const bool normal_mode : {false, true}) {
+    paps::WavejetEnhancement<pcl::PointNormal> f;
+    f.setInputCloud(cloud);
+    f.setRadius(0.03f);
+    if (normal_mode) f.setNormalGain({2.f, 0.f});
+    else f.setPositionGain(1.5f);
+    pcl::PointCloud<pcl::PointNormal> out;
+    f.filter(out);
+    ASSERT_EQ(out.size(), cloud->size());
+    EXPECT_TRUE(std::isnan(out.back().normal_z)) << normal_mode;
+    EXPECT_TRUE(paps::test::sameBits(out.back().getVector3fMap(), far.getVector3fMap())) << normal_mode;
+    EXPECT_FALSE(out.is_dense) << normal_mode;
+    EXPECT_TRUE(std::isfinite(out[450].normal_z)) << normal_mode;
+  }
+}
+
 TEST(WavejetEnhancement, BadParameters) {
   paps::WavejetEnhancement<pcl::PointXYZ> f;
   EXPECT_THROW(f.setRadius(-1.f), paps::InvalidParameter);

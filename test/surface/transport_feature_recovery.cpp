@@ -67,12 +67,18 @@ TEST(TransportFeatureRecovery, SameMeshWithOneOrTwoThreadsAndThroughThePclStage)
   auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   for (const auto& q : points) cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
   auto mesh = std::make_shared<pcl::PolygonMesh>(paps::toPolygonMesh(rounded));
+  mesh->header.frame_id = mesh->cloud.header.frame_id = "mesh_frame";
+  mesh->header.stamp = 778;
   paps::TransportFeatureRecovery<pcl::PointXYZ> stage;
   stage.setParameters(p);
   stage.setInputMesh(mesh);
   stage.setInputCloud(cloud);
   pcl::PolygonMesh result;
   stage.process(result);
+  // The input mesh's header, as pcl::MeshProcessing::process gives it (it was overwritten).
+  EXPECT_EQ(result.header.frame_id, "mesh_frame");
+  EXPECT_EQ(result.header.stamp, 778u);
+  EXPECT_EQ(result.cloud.header.frame_id, "mesh_frame");
   const TriangleMesh back = paps::toTriangleMesh(result);
   ASSERT_EQ(back.vertices.size(), one.vertices.size());
   for (std::size_t v = 0; v < one.vertices.size(); ++v) ASSERT_EQ(back.vertices[v], one.vertices[v]) << v;

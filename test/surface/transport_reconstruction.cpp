@@ -105,11 +105,17 @@ TEST(TransportReconstruction, SameMeshWithOneOrTwoThreadsAndThroughThePclStage) 
   auto cloud = std::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   for (const auto& q : points) cloud->push_back(pcl::PointXYZ(q.x(), q.y(), q.z()));
   if (!std::getenv("NONAN")) cloud->push_back(pcl::PointXYZ(NAN, NAN, NAN));  // skipped
+  cloud->header.frame_id = "scan_frame";
+  cloud->header.stamp = 777;
   paps::TransportReconstruction<pcl::PointXYZ> stage;
   stage.setParameters(p);
   stage.setInputCloud(cloud);
   pcl::PolygonMesh mesh;
   stage.reconstruct(mesh);
+  // The input's header, as pcl::SurfaceReconstruction gives it (it was overwritten).
+  EXPECT_EQ(mesh.header.frame_id, "scan_frame");
+  EXPECT_EQ(mesh.header.stamp, 777u);
+  EXPECT_EQ(mesh.cloud.header.frame_id, "scan_frame");
   const TriangleMesh back = paps::toTriangleMesh(mesh);
   ASSERT_EQ(back.vertices.size(), one.vertices.size());
   for (std::size_t v = 0; v < one.vertices.size(); ++v) ASSERT_EQ(back.vertices[v], one.vertices[v]);

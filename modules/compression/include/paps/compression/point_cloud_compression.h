@@ -46,8 +46,10 @@ class PointCloudCompression : public ThreadCountOption {
     if (!out) throw IoError("writing the compressed stream failed");
   }
 
-  /// Reads one stream written by encodePointCloud from `in` into `cloud`.
-  /// Throws CorruptStream for truncated, corrupted or foreign data.
+  /// Reads one stream written by encodePointCloud from `in` into `cloud`, which is replaced
+  /// as a whole: a cloud that held other points keeps none of their fields, header or sensor
+  /// pose (the stream has none of them). Throws CorruptStream for truncated, corrupted or
+  /// foreign data; `cloud` is then left as it was.
   void decodePointCloud(std::istream& in, PointCloudPtr& cloud) {
     char len[8];
     if (!in.read(len, 8)) throw CorruptStream("the stream is empty or truncated");
@@ -67,7 +69,9 @@ class PointCloudCompression : public ThreadCountOption {
     const ScopedThreadCount threads(threads_);
     const Positions p = decompressPositions(b.data(), b.size(), decode_options_, &decode_report_, progress_);
     if (!cloud) cloud.reset(new pcl::PointCloud<PointT>);
-    writePositions(p, *cloud);
+    pcl::PointCloud<PointT> decoded;  // default header, pose and fields
+    writePositions(p, decoded);
+    cloud->swap(decoded);
   }
 
   const EncodeReport& encodeReport() const { return encode_report_; }

@@ -42,7 +42,12 @@ void WavejetEnhancement<PointT>::applyFilter(PointCloud& output) {
     const Normals n = enhanceNormals(positionsOf(*this->input_), params_, &report_, progress_,
                                      have_hints ? &hints : nullptr);
     output = *this->input_;
-    for (const auto i : *this->indices_) detail::writeNormal(output[i], n[i]);
+    // As pcl::NormalEstimation: a point without an estimate gets a NaN normal, and the cloud
+    // is then not dense.
+    for (const auto i : *this->indices_) {
+      detail::writeNormal(output[i], n[i]);
+      if (!isFinite(n[i])) output.is_dense = false;
+    }
     return;
   }
   Normals corrected;
@@ -51,8 +56,12 @@ void WavejetEnhancement<PointT>::applyFilter(PointCloud& output) {
                         return enhancePositions(in, params_, &report_, movable, progress_,
                                                 have_hints ? &hints : nullptr, &corrected);
                       });
+  // A point left in place (too few neighbours to fit) gets a NaN normal: no estimate.
   if (pcl::traits::has_normal_v<PointT>)
-    for (const auto i : *this->indices_) detail::writeNormal(output[i], corrected[i]);
+    for (const auto i : *this->indices_) {
+      detail::writeNormal(output[i], corrected[i]);
+      if (!isFinite(corrected[i])) output.is_dense = false;
+    }
 }
 
 }  // namespace paps

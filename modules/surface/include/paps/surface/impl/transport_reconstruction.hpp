@@ -16,7 +16,11 @@ TriangleMesh TransportReconstruction<PointT>::run() {
 
 template <typename PointT>
 void TransportReconstruction<PointT>::performReconstruction(pcl::PolygonMesh& output) {
+  // The headers pcl::SurfaceReconstruction::reconstruct set from the input cloud stay.
+  const pcl::PCLHeader header = output.header, cloud_header = output.cloud.header;
   output = toPolygonMesh(run());
+  output.header = header;
+  output.cloud.header = cloud_header;
 }
 
 template <typename PointT>

@@ -177,8 +177,6 @@ int runReconstruct(int argc, char** argv) {
   std::printf("reconstruct: %d facets deleted, %d dangling facets dropped; transport cost %.4g -> %.4g, RMS transport "
               "distance %g m\n",
               r.deleted_facets, r.dangling_facets, r.initial_cost, r.final_cost, r.rms_transport);
-  if (mesh.triangles.empty())
-    throw InvalidInput("the reconstruction kept no facet (try a lower --density-threshold or more --vertices)");
   saveMeshAtomic(out_path, mesh);
   std::printf("wrote %s: %zu vertices, %zu facets\n", out_path.c_str(), mesh.vertices.size(), mesh.triangles.size());
   return 0;

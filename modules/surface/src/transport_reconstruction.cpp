@@ -224,13 +224,27 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   params.validate();
   TransportReconstructionReport report;
   // In spatial order (finite points only): the output does not depend on the input order.
+  // Copies of one position (overlapping scans) are one point of their summed mass: the same
+  // transport, but the initial subset no longer draws the same position several times
+  // (300 points stored 3 times: 4 vertices, or no facet at all, instead of the 10 asked).
+  // In spatial order the copies are consecutive.
   std::vector<Eigen::Vector3d> points;
+  std::vector<double> masses;
   points.reserve(input.size());
-  for (int k : spatialOrderAll(input))
-    if (isFinite(input[k])) points.push_back(input[k].cast<double>());
-  report.points = points.size();
+  for (int k : spatialOrderAll(input)) {
+    if (!isFinite(input[k])) continue;
+    ++report.points;
+    const Eigen::Vector3d p = input[k].cast<double>();
+    if (!points.empty() && points.back() == p) {
+      masses.back() += 1;
+      continue;
+    }
+    points.push_back(p);
+    masses.push_back(1);
+  }
   if (points.size() < 4)
-    throw InvalidInput("transport reconstruction needs at least 4 finite points, got " + std::to_string(points.size()));
+    throw InvalidInput("transport reconstruction needs at least 4 distinct finite points, got " +
+                       std::to_string(points.size()));
 
   // Initial subset: a seeded shuffle, so the result does not depend on anything else.
   std::vector<int> order(points.size());
@@ -250,7 +264,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     throw InvalidInput("transport reconstruction: the initial points are coplanar or collinear (dimension " +
                        std::to_string(dt.dimension()) + ")");
 
-  TransportPlan plan(points, {}, params.transport);
+  TransportPlan plan(points, masses, params.transport);
   // Vertex ids by site index and facets in sorted order: CGAL's iteration order depends on
   // its spatial sort, which draws from a process-wide random generator (two runs in one
   // process gave different meshes when ids followed it).
@@ -393,7 +407,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     out.triangles.push_back(t);
   }
   if (params.dangling_support > 0 && !out.triangles.empty()) {
-    Positions finite;  // the input's finite points
+    Positions finite;  // the input's distinct finite points
     finite.reserve(points.size());
     for (const auto& p : points) finite.push_back(p.cast<float>());
     const SpatialIndex index(finite);  // one index for the spacing and the support searches
@@ -404,6 +418,9 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   report.output_vertices = static_cast<int>(out.vertices.size());
   report.output_facets = static_cast<int>(out.triangles.size());
   if (report_out) *report_out = report;
+  // An empty mesh is no answer (the PCL stage would hand it on as one).
+  if (out.triangles.empty())
+    throw InvalidInput("transport reconstruction kept no facet (lower the density threshold or ask for more vertices)");
   return out;
 }
 

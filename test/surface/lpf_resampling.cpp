@@ -141,6 +141,8 @@ TEST(LpfResampling, BadInputAndParametersAreNamed) {
   EXPECT_THROW(paps::lpfResample(Positions{{0, 0, 0}, {1, 0, 0}}, {}), paps::InvalidInput);
   const float nan = std::nanf("");
   EXPECT_THROW(paps::lpfResample(Positions(10, Eigen::Vector3f::Constant(nan)), {}), paps::InvalidInput);
+  // Three points: no field holds enough of them; an error, not an empty cloud.
+  EXPECT_THROW(paps::lpfResample(Positions{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}}, {}), paps::InvalidInput);
   LpfResamplingParameters p;
   p.factor = 0.5f;
   EXPECT_THROW(p.validate(), paps::InvalidParameter);

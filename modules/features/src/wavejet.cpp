@@ -484,6 +484,10 @@ WavejetResult fitWavejet(const Positions& points, const int* neighbours, int cou
   ws.finite.clear();
   for (int j = 0; j < count; ++j)
     if (isFinite(points[neighbours[j]])) ws.finite.push_back(neighbours[j]);
+  // In index order: the fit must not depend on the order a search returned the ball in
+  // (pcl::search::KdTree sorted or not; on a scan's border fits, where the least squares are
+  // ill-conditioned, the summation order moved mean curvatures from 0.105 to 0.65).
+  std::sort(ws.finite.begin(), ws.finite.end());
   const int l = static_cast<int>(ws.finite.size());
   int order = params.order;
   while (order >= 0 && l < params.beta * wavejetUnknowns(order)) --order;

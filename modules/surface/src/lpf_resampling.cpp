@@ -90,10 +90,11 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
     Positions().swap(f);
   }
   report.proposals = proposals.size();
-  if (proposals.empty()) {
-    if (report_out) *report_out = report;
-    return {};
-  }
+  if (report_out) *report_out = report;
+  // An empty cloud is no answer (the PCL stage would hand it on as one).
+  if (proposals.empty())
+    throw InvalidInput("LPF resampling proposed no point: no field holds enough points (" +
+                       std::to_string(countFinite(points)) + " finite points)");
 
   // Consensus (eq. 3.8): in proposal order, a proposal that no kept point conflicts with (one
   // within tau) gathers the proposals within tau of it; their mean is kept unless a kept point
@@ -161,7 +162,7 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
 Positions lpfResample(const Positions& points, const LpfResamplingParameters& params, LpfResamplingReport* report,
                       const ProgressCallback& progress) {
   params.validate();
-  if (points.empty()) throw InvalidInput("the input cloud is empty");
+  if (points.empty()) throw InvalidInput("no point to resample (the cloud, or its indices, are empty)");
   // In spatial order: the output does not depend on the input order.
   const std::vector<int> order = spatialOrderAll(points);
   return resampleInSpatialOrder(gathered(points, order), params, report, progress);

@@ -45,8 +45,8 @@ struct LpfResamplingReport {
 };
 
 /// Resamples `points` (NaN entries ignored). Deterministic; the output does not depend on
-/// the thread count. Throws InvalidInput for fewer than 3 finite points, InvalidParameter
-/// for bad parameters.
+/// the thread count. Throws InvalidInput for fewer than 3 finite points, or points no field
+/// can hold enough of to propose any, InvalidParameter for bad parameters.
 Positions lpfResample(const Positions& points, const LpfResamplingParameters& params,
                       LpfResamplingReport* report = nullptr, const ProgressCallback& progress = {});
 

@@ -266,7 +266,8 @@ int runBenchDenoise(int argc, char** argv) {
 
 int runBench(int argc, char** argv) {
   if (argc < 3 || std::string(argv[2]) == "--help") {
-    std::fputs("usage: paps bench denoise|lpf [options]\n", stderr);
+    std::fputs("usage: paps bench denoise|lpf|compress|curvature|superres|transport|fusion|files [options]\n"
+               "Run 'paps bench NAME --help' for the options of a bench.\n", stderr);
     return 2;
   }
   if (std::string(argv[2]) == "denoise") return runBenchDenoise(argc, argv);

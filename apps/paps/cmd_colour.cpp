@@ -233,6 +233,9 @@ int runColorize(int argc, char** argv) {
               "%d iterations (last change %.2g)\n",
               r.coloured, r.unseen, field.empty() ? "black" : ("input " + field + " kept").c_str(), r.non_finite, r.candidates,
               photos.size(), r.iterations, r.last_change);
+  if (r.coloured == 0)
+    std::fprintf(stderr, "warning: no photo sees any point (check the poses and the cloud's frame): every point is %s\n",
+                 field.empty() ? "black" : "left with its input colour");
   std::printf("colorize: points seen per photo:");
   for (const auto s : r.seen_per_photo) std::printf(" %zu", s);
   std::printf("\n");

@@ -36,7 +36,7 @@ const char* kCompressUsage =
     "  --seed-bits B           seed coordinate quantization in [4, 21] (default 16)\n"
     "  --coefficient-bits B    coefficient quantization in [2, 12] (default 8)\n"
     "  --angle-bits B          frame angle quantization in [3, 12] (default 8)\n"
-    "  --dictionary-bits B     dictionary atom quantization in [3, 8] (default 6)\n"
+    "  --dictionary-bits B     dictionary atom quantization in [3, 8] (default 6; compact: 5)\n"
     "  --seed-spacing S        seeds at least S x R apart, in [0.25, 2] (default 1, the manuscript's;\n"
     "                          1.25: about 30% fewer bytes for 3-7% more D2 error, see docs/compression.md)\n"
     "  --ksvd-iterations N     K-SVD rounds (default 10)\n"

@@ -66,7 +66,7 @@ const char* kRecoverUsage =
     "  IN                       the points (.pcd, .ply, or .xyz: one 'x y z' a line)\n"
     "  OUT.ply                  MESH with its vertices moved onto the creases and corners the\n"
     "                           points describe (binary PLY)\n"
-    "  --sweeps N               relocation sweeps over all vertices, 1 to 1000 (default 10)\n"
+    "  --sweeps N               relocation sweeps over all vertices, 1 to 1000 (default 1)\n"
     "  --density-threshold T    facets whose mass density is below T x the mean are dropped,\n"
     "                           in [0, 1) (default 0: every facet kept, a closed mesh stays closed)\n"
     "  --quiet, --timings       no progress bar / wall time of each stage\n";

@@ -210,6 +210,8 @@ TEST(ShadowCorrection, BadInputThrows) {
     EXPECT_THROW(c.setParameters(q), paps::InvalidParameter);
   };
   bad([](auto& q) { q.sun_direction = Eigen::Vector3f::Zero(); });
+  bad([](auto& q) { q.sun_direction = -q.ground_normal; });  // below the horizon
+  bad([](auto& q) { q.sun_direction = Eigen::Vector3f(1, 0, 0); q.ground_normal = Eigen::Vector3f(0, 0, 1); });
   bad([](auto& q) { q.ground_normal = Eigen::Vector3f::Constant(INFINITY); });
   bad([](auto& q) { q.sun_sky_ratio = -1; });
   bad([](auto& q) { q.sun_sky_ratio = 1e9f; });

@@ -21,6 +21,11 @@ void ShadowCorrectionParameters::validate() const {
   if (!ground_normal.allFinite() || !(ground_normal.norm() > 1e-6f))
     throw InvalidParameter("ground_normal", "(" + detail::toString(ground_normal.transpose()) + ")",
                            "a finite non-zero direction");
+  // A sun at or below the horizon lights no ground: the sun-sky model of the correction
+  // (the lit ground's irradiance grows with the sun's elevation) has nothing to relight.
+  if (!(sun_direction.dot(ground_normal) > 0))
+    throw InvalidParameter("sun_direction", "(" + detail::toString(sun_direction.transpose()) + ")",
+                           "a direction above the ground plane (positive along ground_normal)");
   requireNonNegative("sun_sky_ratio", sun_sky_ratio, "estimated");
   if (sun_sky_ratio > 1000) throw InvalidParameter("sun_sky_ratio", detail::toString(sun_sky_ratio), "0 (estimated) to 1000");
   requireInRange("neighbours", neighbours, 2, 128);

@@ -21,6 +21,9 @@
 #include <paps/filters/similarity_denoising.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
+// Coloured output types are not in the compiled list: their bodies, as PAPS_NO_PRECOMPILE gives.
+#include <paps/surface/impl/mls_upsampling.hpp>
+#include <paps/surface/impl/quadric_super_resolution.hpp>
 
 using namespace paps;
 
@@ -159,6 +162,48 @@ TEST(QuadricSuperResolution, MultiScanAndPclStage) {
   ASSERT_EQ(expected.size(), out.size());
   for (std::size_t i = 0; i < out.size(); ++i) ASSERT_EQ(out[i].getVector3fMap(), expected[i]) << i;
   EXPECT_EQ(qsr.getReport().patches, r.patches);
+}
+
+// A coloured output type gets the colour of the input point each new point was made from, as
+// PCL's MLS copies the missing fields (it was left at 0: r = g = b = 0 on all 6,400 points).
+// Two halves of a wavy sheet in two colours; the points away from the seam keep their side's.
+TEST(QuadricSuperResolution, ColouredOutputsKeepTheSourcePointsColour) {
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZRGB>>();
+  paps::Random rng(5);
+  for (int i = 0; i < 3000; ++i) {
+    pcl::PointXYZRGB q;
+    q.x = static_cast<float>(rng.uniform() - 0.5);
+    q.y = static_cast<float>(rng.uniform() - 0.5);
+    q.z = 0.02f * std::sin(6.f * q.x);
+    q.r = q.x < 0 ? 200 : 50;
+    q.g = 7;
+    q.b = q.x < 0 ? 0 : 99;
+    cloud->push_back(q);
+  }
+  auto check = [&](const pcl::PointCloud<pcl::PointXYZRGB>& out, const char* what) {
+    ASSERT_GT(out.size(), cloud->size()) << what;
+    std::size_t away = 0, right = 0;
+    for (const auto& q : out) {
+      EXPECT_EQ(q.g, 7) << what;
+      if (std::abs(q.x) < 0.05f) continue;
+      ++away;
+      right += q.x < 0 ? (q.r == 200 && q.b == 0) : (q.r == 50 && q.b == 99);
+    }
+    EXPECT_GT(away, out.size() / 2) << what;
+    EXPECT_EQ(right, away) << what;
+  };
+  QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZRGB> qsr;
+  qsr.setInputCloud(cloud);
+  qsr.setUpsamplingFactor(2);
+  pcl::PointCloud<pcl::PointXYZRGB> out;
+  qsr.process(out);
+  check(out, "qsr");
+  APSSUpsampling<pcl::PointXYZRGB, pcl::PointXYZRGB> apss;
+  apss.setInputCloud(cloud);
+  apss.setUpsamplingFactor(2);
+  pcl::PointCloud<pcl::PointXYZRGB> out2;
+  apss.process(out2);
+  check(out2, "apss");
 }
 
 TEST(QuadricSuperResolution, BadInput) {

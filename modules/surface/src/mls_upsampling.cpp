@@ -1064,7 +1064,7 @@ PAPS_AVX2_CLONE __attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float 
 namespace {
 Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                                  MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals_out,
-                                 std::vector<float>* curvature_out) {
+                                 std::vector<float>* curvature_out, std::vector<int>* source_out) {
   const std::size_t finite = countFinite(points);
   if (finite < 3) throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
   checkOutputCount(params.output_count, finite);
@@ -1157,6 +1157,7 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
     curvature_out->resize(out.size());
     for (std::size_t s = 0; s < out.size(); ++s) (*curvature_out)[s] = variation[origin[s]];
   }
+  if (source_out) *source_out = origin;
   const float inv_h = 1.f / h;
   // What the projections read, in units of h: the sphere at the input point reads its
   // neighbours within h; a projection at a seed (within disc of its input point) those within
@@ -1235,11 +1236,15 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
 
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                       MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals,
-                      std::vector<float>* curvature) {
+                      std::vector<float>* curvature, std::vector<int>* source) {
   params.validate();
   // In Z order, as QSR: neighbourhood loops stay in cache, the output ignores the input order.
-  return upsampleInSpatialOrder(gathered(points, spatialOrderAll(points)), surface, params, report, progress, normals,
-                                curvature);
+  const std::vector<int> order = spatialOrderAll(points);
+  Positions out =
+      upsampleInSpatialOrder(gathered(points, order), surface, params, report, progress, normals, curvature, source);
+  if (source)
+    for (int& s : *source) s = order[static_cast<std::size_t>(s)];  // back to the input's order
+  return out;
 }
 
 template class MlsUpsampling<pcl::PointXYZ, pcl::PointXYZ, MlsSurface::Apss>;

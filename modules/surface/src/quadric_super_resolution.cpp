@@ -177,7 +177,8 @@ struct Similar {
 namespace {
 Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                                      QuadricSuperResolutionReport* report, const ProgressCallback& progress,
-                                     Normals* normals_out, std::vector<float>* curvature_out) {
+                                     Normals* normals_out, std::vector<float>* curvature_out,
+                                     std::vector<int>* source_out) {
   if (scans.empty()) throw InvalidInput("no scan to super-resolve");
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
@@ -812,7 +813,8 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       rep.narrowed_discs += params.thin_disc < 1.f;
     }
   std::vector<int> origin;
-  Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed, curvature_out ? &origin : nullptr,
+  Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed,
+                                  curvature_out || source_out ? &origin : nullptr,
                                   nullptr, 0.f, &disc_scale);
   if (normals_out) normals_out->assign(out.size(), Eigen::Vector3f::Constant(NAN));
   if (curvature_out) {  // PCL's MLS: the surface variation of the ball a point was made from
@@ -820,6 +822,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     if (variation0.size() == n0)
       for (std::size_t q = 0; q < out.size(); ++q) (*curvature_out)[q] = variation0[origin[q]];
   }
+  if (source_out) *source_out = origin;
   {
     const SpatialIndex& index0 = *sc[0].nh.index;
     const float inv_2sig2 = 1.f / (2.f * 0.5f * s0 * 0.5f * s0);
@@ -933,14 +936,22 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
 
 Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                               QuadricSuperResolutionReport* report, const ProgressCallback& progress,
-                              Normals* normals, std::vector<float>* curvature) {
+                              Normals* normals, std::vector<float>* curvature, std::vector<int>* source) {
   params.validate();
   // Every stage loops over neighbourhoods: the scans run in Z order (in input order a shuffled
   // scan waits on memory), which also makes the output independent of the input order.
   std::vector<Positions> sorted;
   sorted.reserve(scans.size());
-  for (const Positions& scan : scans) sorted.push_back(gathered(scan, spatialOrderAll(scan)));
-  return superResolveInSpatialOrder(sorted, params, report, progress, normals, curvature);
+  std::vector<int> order0;
+  for (const Positions& scan : scans) {
+    std::vector<int> order = spatialOrderAll(scan);
+    sorted.push_back(gathered(scan, order));
+    if (order0.empty()) order0 = std::move(order);
+  }
+  Positions out = superResolveInSpatialOrder(sorted, params, report, progress, normals, curvature, source);
+  if (source)
+    for (int& s : *source) s = order0[static_cast<std::size_t>(s)];  // back to scans[0]'s order
+  return out;
 }
 
 template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ>;

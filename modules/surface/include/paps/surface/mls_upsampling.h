@@ -84,10 +84,13 @@ struct MlsUpsamplingReport {
 /// propagated over the cloud. A seed that could not be projected stays on its input point's
 /// tangent disc, with that plane's normal. With `curvature`, what PCL's MLS writes in the
 /// curvature field: the surface variation of the kernel ball of the input point each output
-/// point was made from (NaN where that ball has no normal).
+/// point was made from (NaN where that ball has no normal). With `source`, the index of that
+/// input point (the PCL stages copy its other fields, colour or intensity, to the new point,
+/// as PCL's MLS does).
 Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                       MlsUpsamplingReport* report = nullptr, const ProgressCallback& progress = {},
-                      Normals* normals = nullptr, std::vector<float>* curvature = nullptr);
+                      Normals* normals = nullptr, std::vector<float>* curvature = nullptr,
+                      std::vector<int>* source = nullptr);
 
 /// Throws InvalidParameter("output_count") unless an explicit output count (0: from the
 /// factor) is at most 1000 x the input points, the bound of the factor: a larger one is a

@@ -163,10 +163,13 @@ QuadricSuperResolutionParameters noiseAdaptedParameters(const QuadricSuperResolu
 /// point was not projected), oriented as the input's normals propagated over the scan. With
 /// `curvature`, what PCL's MLS writes in the curvature field: the surface variation of the
 /// patch ball of the point of scans[0] each output point was made from (of the denoised scan
-/// when QSR denoises first; NaN where that ball has no normal).
+/// when QSR denoises first; NaN where that ball has no normal). With `source`, the index in
+/// scans[0] of that point (the PCL stage copies its other fields, colour or intensity, to the
+/// new point, as PCL's MLS does).
 Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                               QuadricSuperResolutionReport* report = nullptr, const ProgressCallback& progress = {},
-                              Normals* normals = nullptr, std::vector<float>* curvature = nullptr);
+                              Normals* normals = nullptr, std::vector<float>* curvature = nullptr,
+                              std::vector<int>* source = nullptr);
 
 /// The pcl::CloudSurfaceProcessing stage: the input cloud (with its indices) is the scan to
 /// super-resolve; addScan() adds other scans of the same object, already registered. An

@@ -1,7 +1,12 @@
 #pragma once
+#include <type_traits>
+
+#include <pcl/point_types.h>
+
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/positions.h>
+#include <paps/core/source_fields.h>
 #include <paps/surface/quadric_super_resolution.h>
 
 namespace paps {
@@ -22,9 +27,14 @@ void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointClou
   // PCL's MLS also fills the curvature field (the surface variation of the input ball).
   std::vector<float> curvature;
   constexpr bool with_curvature = detail::HasCurvature<PointOut>::value;
+  // The other fields (colour, intensity) of the input point each new point was made from, as
+  // PCL's MLS copies them; none to copy into a PointXYZ.
+  std::vector<int> source;
+  constexpr bool with_fields = !std::is_same_v<PointOut, pcl::PointXYZ>;
   const Positions out = superResolveQuadric(scans, params_, &report_, progress_, with_normals ? &normals : nullptr,
-                                            with_curvature ? &curvature : nullptr);
+                                            with_curvature ? &curvature : nullptr, with_fields ? &source : nullptr);
   if (with_normals) this->orientTowardsViewPoint(out, normals, this->input_->sensor_origin_);
+  if (with_fields && source.size() == out.size()) copySourceFields(*this->input_, *this->indices_, source, output);
   writePositionsAndNormals(out, normals, output);
   writeCurvatures(curvature, output);
 }

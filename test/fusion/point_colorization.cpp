@@ -65,6 +65,26 @@ TEST(PointColorization, UniformPhotoGivesItsColourAndUnseenPointsKeepTheirs) {
   EXPECT_EQ(out.back().b, 7);
   EXPECT_EQ(colorize.getReport().unseen, 1u);
   EXPECT_EQ(colorize.getReport().coloured, s.cloud->size() - 1);
+  EXPECT_EQ(colorize.getReport().non_finite, 0u);
+
+  // Half the points indexed: the others keep their colour and are not counted as non-finite
+  // (they enter as NaN); no index at all is said so, not "no finite point".
+  pcl::IndicesPtr half(new pcl::Indices);
+  for (std::size_t i = 0; i + 1 < s.cloud->size(); i += 2) half->push_back(static_cast<int>(i));
+  colorize.setIndices(half);
+  Cloud out2;
+  colorize.filter(out2);
+  EXPECT_EQ(colorize.getReport().non_finite, 0u);
+  EXPECT_EQ(colorize.getReport().coloured, half->size());
+  EXPECT_EQ(out2[0].r, 200);
+  EXPECT_EQ(out2[1].r, (*s.cloud)[1].r);
+  colorize.setIndices(pcl::IndicesPtr(new pcl::Indices));
+  try {
+    colorize.filter(out2);
+    ADD_FAILURE() << "empty indices accepted";
+  } catch (const paps::InvalidInput& e) {
+    EXPECT_NE(std::string(e.what()).find("the indices are empty"), std::string::npos) << e.what();
+  }
 }
 
 TEST(PointColorization, WeightedMedianOfCandidates) {

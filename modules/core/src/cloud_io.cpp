@@ -19,6 +19,8 @@
 #include <paps/core/error.h>
 #include <paps/core/interrupt_cleanup.h>
 
+#include "quiet_pcl_io.h"
+
 namespace paps {
 
 namespace {
@@ -58,25 +60,7 @@ XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
 
 }  // namespace
 
-namespace {
-// Runs one of PCL's readers or writers (a call returning PCL's int status) with its console
-// silenced (it prints its own complaint; our exception is the one clear line), and turns an
-// exception from it into status -1 with its message in `thrown`.
-template <typename F>
-int quietPclIo(F&& io, std::string& thrown) {
-  const auto level = pcl::console::getVerbosityLevel();
-  pcl::console::setVerbosityLevel(pcl::console::L_ALWAYS);
-  int rc = -1;
-  try {
-    rc = io();
-  } catch (const std::exception& e) {
-    thrown = e.what();
-    rc = -1;
-  }
-  pcl::console::setVerbosityLevel(level);
-  return rc;
-}
-}  // namespace
+using detail::quietPclIo;
 
 pcl::PCLPointCloud2 loadCloud(const std::string& path, Eigen::Vector3f* origin) {
   if (origin) origin->setZero();

@@ -15,6 +15,8 @@
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 
+#include "quiet_pcl_io.h"
+
 namespace paps {
 
 double TriangleMesh::area() const {
@@ -135,7 +137,10 @@ TriangleMesh loadTriangleMesh(const std::string& path) {
   if (ext == ".ply") {
     readPlyLayoutForPcl(path);  // a header PCL would crash on or trust into a huge allocation
     pcl::PolygonMesh mesh;
-    if (pcl::io::loadPLYFile(path, mesh) < 0) throw IoError("cannot read mesh '" + path + "': the file could not be parsed");
+    std::string thrown;
+    if (detail::quietPclIo([&] { return pcl::io::loadPLYFile(path, mesh); }, thrown) < 0)
+      throw IoError("cannot read mesh '" + path + "': the file could not be parsed" +
+                    (thrown.empty() ? "" : " (" + thrown + ")"));
     try {
       out = toTriangleMesh(mesh);
     } catch (const InvalidInput& e) {

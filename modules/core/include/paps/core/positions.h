@@ -170,6 +170,7 @@ Positions positionsAt(const pcl::PointCloud<PointT>& input, const pcl::Indices& 
 template <typename PointT>
 Positions positionsWithin(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices) {
   checkIndices(indices, input.size());
+  if (indices.empty() && !input.empty()) throw InvalidInput("no point to process: the indices are empty");
   Positions out(input.size(), Eigen::Vector3f::Constant(NAN));
   for (const auto i : indices) out[static_cast<std::size_t>(i)] = input[static_cast<std::size_t>(i)].getVector3fMap();
   return out;

@@ -1,4 +1,8 @@
 #pragma once
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
 #include <paps/core/error.h>
 #include <paps/fusion/colour_space.h>
 #include <paps/fusion/point_colorization.h>
@@ -27,6 +31,10 @@ void PointColorization<PointT>::applyFilter(PointCloud& output) {
   const Positions points = positionsWithin(input, *this->indices_);
   const std::vector<Eigen::Vector3f> colours = colour::coloursOf(input);
   const std::vector<Eigen::Vector3f> out = colorizePoints(points, colours, photos_, params_, &report_, progress_);
+  // The points outside the indices entered as NaN: they are not the input's non-finite points.
+  std::vector<std::uint8_t> indexed(input.size(), 0);
+  for (const auto i : *this->indices_) indexed[static_cast<std::size_t>(i)] = 1;
+  report_.non_finite -= static_cast<std::size_t>(std::count(indexed.begin(), indexed.end(), 0));
   PointCloud result = input;
   colour::setColours(out, result);
   output = std::move(result);

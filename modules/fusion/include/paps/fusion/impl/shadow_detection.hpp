@@ -1,6 +1,10 @@
 #pragma once
 #include <string>
 
+#include <algorithm>
+#include <cstdint>
+#include <vector>
+
 #include <paps/core/error.h>
 #include <paps/fusion/colour_space.h>
 #include <paps/fusion/shadow_detection.h>
@@ -30,6 +34,10 @@ void ShadowDetection<PointT>::detect(ShadowDetectionResult& result) {
   for (std::size_t i = 0; i < input.size(); ++i) normals[i] = input[i].getNormalVector3fMap();
   const std::vector<Eigen::Vector3f> colours = colour::coloursOf(input);
   result = detectShadows(points, normals, colours, reflectance_, photos_, params_, progress_);
+  // The points outside the indices entered as NaN: they are not the input's non-finite points.
+  std::vector<std::uint8_t> indexed(input.size(), 0);
+  for (const auto i : *this->indices_) indexed[static_cast<std::size_t>(i)] = 1;
+  result.non_finite -= static_cast<std::size_t>(std::count(indexed.begin(), indexed.end(), 0));
   this->deinitCompute();
 }
 

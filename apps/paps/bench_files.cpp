@@ -199,7 +199,7 @@ int runBenchFiles(int argc, char** argv) {
           << ",\"" << r.w.message << "\"\n";
     if (!csv) throw IoError("cannot write '" + csv_path + ".tmp'");
   }
-  std::filesystem::rename(csv_path + ".tmp", csv_path);
+  commitTemporaryFile(csv_path + ".tmp", csv_path);
   std::printf("wrote %s\n", csv_path.c_str());
   return 0;
 }

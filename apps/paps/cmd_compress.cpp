@@ -77,12 +77,7 @@ void writeFileAtomic(const std::string& path, const std::vector<std::uint8_t>& b
       throw IoError("cannot write '" + path + "'");
     }
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write '" + path + "': " + ec.message());
-  }
+  commitTemporaryFile(tmp, path);
 }
 
 // Writes float x y z as binary PCD or PLY straight from Positions (no PCL copies of the
@@ -117,12 +112,12 @@ void writeXyzAtomic(const std::string& path, const Positions& pts) {
     f.flush();
     ok = ok && bool(f);
   }
-  std::error_code ec;
-  if (ok) std::filesystem::rename(tmp, path, ec);
-  if (!ok || ec) {
+  if (!ok) {
+    std::error_code ec;
     std::filesystem::remove(tmp, ec);
     throw IoError("cannot write '" + path + "'");
   }
+  commitTemporaryFile(tmp, path);
 }
 
 double seconds(std::chrono::steady_clock::time_point t0) {

@@ -90,12 +90,12 @@ void writeImageAtomic(const std::string& path, const cv::Mat& image) {
   } catch (const cv::Exception&) {
     ok = false;
   }
-  std::error_code ec;
-  if (ok) std::filesystem::rename(tmp, path, ec);
-  if (!ok || ec) {
+  if (!ok) {
+    std::error_code ec;
     std::filesystem::remove(tmp, ec);
     throw IoError("cannot write image '" + path + "'");
   }
+  commitTemporaryFile(tmp, path, "image ");
 }
 
 }  // namespace

@@ -133,11 +133,7 @@ void saveMeshAtomic(const std::string& path, const TriangleMesh& mesh) {
     std::filesystem::remove(tmp, ec);
     throw IoError("cannot write '" + path + "': the PLY writer failed");
   }
-  std::filesystem::rename(tmp, target, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write '" + path + "': " + ec.message());
-  }
+  commitTemporaryFile(tmp, path);
 }
 
 }  // namespace

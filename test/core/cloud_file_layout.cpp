@@ -451,4 +451,35 @@ TEST(CloudFileLayout, FuzzCorpusReplays) {
   EXPECT_EQ(mesh_seeds, 1);
 }
 
+// A complete temporary replaces the target whole and is gone; a target that cannot be written
+// leaves the old file as it was and no temporary behind; the checks name the path and why.
+TEST(CloudFileLayout, CommitTemporaryFileReplacesWholeOrLeavesAsItWas) {
+  const fs::path target = scratch("commit_target.txt"), tmp = scratch(".commit_target.tmp");
+  writeBytes(target, "old");
+  writeBytes(tmp, "new contents");
+  paps::commitTemporaryFile(tmp.string(), target.string());
+  EXPECT_EQ(readBytes(target), "new contents");
+  EXPECT_FALSE(fs::exists(tmp));
+  writeBytes(tmp, "never");
+  const fs::path missing = scratch("no_such_folder") / "x.txt";
+  EXPECT_THROW(paps::commitTemporaryFile(tmp.string(), missing.string(), "photo list "), paps::IoError);
+  EXPECT_FALSE(fs::exists(tmp));
+  EXPECT_EQ(readBytes(target), "new contents");
+  EXPECT_THROW(paps::commitTemporaryFile(scratch("no_such_tmp").string(), target.string()), paps::IoError);
+  EXPECT_EQ(readBytes(target), "new contents");
+  try {
+    paps::checkOutputPath(missing.string());
+    ADD_FAILURE() << "a missing folder was accepted";
+  } catch (const paps::IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("does not exist"), std::string::npos) << e.what();
+  }
+  try {
+    paps::checkInputPath(scratch("").string(), "mesh ");
+    ADD_FAILURE() << "a folder was accepted as input";
+  } catch (const paps::IoError& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot read mesh '"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("it is a folder"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace

@@ -13,6 +13,7 @@
 
 #include <paps/core/error.h>
 
+#include <fcntl.h>
 #include <unistd.h>
 
 namespace paps {
@@ -447,6 +448,33 @@ void checkInputPath(const std::string& path, const std::string& what) {
   if (std::filesystem::is_directory(path, ec)) throw IoError(head + "it is a folder");
   if (!std::filesystem::is_regular_file(path, ec)) throw IoError(head + "no such file");
   if (::access(path.c_str(), R_OK) != 0) throw IoError(head + std::strerror(errno));
+}
+
+void commitTemporaryFile(const std::string& tmp, const std::string& path, const std::string& what) {
+  const std::string head = "cannot write " + what + "'" + path + "': ";
+  const int fd = ::open(tmp.c_str(), O_RDONLY);
+  const bool synced = fd >= 0 && ::fsync(fd) == 0;
+  const int sync_errno = errno;
+  if (fd >= 0) ::close(fd);
+  std::error_code ec;
+  if (!synced) {
+    std::filesystem::remove(tmp, ec);
+    throw IoError(head + "flushing the data failed (" + std::strerror(sync_errno) + ")");
+  }
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) {
+    std::error_code ignored;
+    std::filesystem::remove(tmp, ignored);
+    throw IoError(head + ec.message());
+  }
+  // The new directory entry: without this a power loss can bring back the old file.
+  const std::filesystem::path target(path);
+  const std::string dir = target.has_parent_path() ? target.parent_path().string() : ".";
+  const int dfd = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (dfd >= 0) {
+    ::fsync(dfd);
+    ::close(dfd);
+  }
 }
 
 void checkOutputPath(const std::string& path) {

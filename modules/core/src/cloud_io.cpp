@@ -146,11 +146,7 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud, 
     std::filesystem::remove(tmp, ec);
     throw IoError("cannot write '" + path + "': the writer failed" + (thrown.empty() ? "" : " (" + thrown + ")"));
   }
-  std::filesystem::rename(tmp, target, ec);
-  if (ec) {
-    std::filesystem::remove(tmp, ec);
-    throw IoError("cannot write '" + path + "': " + ec.message());
-  }
+  commitTemporaryFile(tmp, path);
 }
 
 Positions positionsOf(const pcl::PCLPointCloud2& cloud) {

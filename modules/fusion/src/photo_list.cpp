@@ -117,12 +117,7 @@ void savePhotoListAtomic(const std::string& path, const std::vector<PhotoListEnt
       throw IoError("cannot write photo list '" + path + "'");
     }
   }
-  std::error_code ec;
-  std::filesystem::rename(tmp, path, ec);
-  if (ec) {
-    std::remove(tmp.c_str());
-    throw IoError("cannot write photo list '" + path + "': " + ec.message());
-  }
+  commitTemporaryFile(tmp, path, "photo list ");
 }
 
 std::vector<RegisteredPhoto> loadPhotos(const std::string& list_path, const std::vector<PhotoListEntry>& entries) {

@@ -81,6 +81,12 @@ PlyLayout readPlyLayoutForPcl(const std::string& path);
 /// cannot be opened for reading (`what`, e.g. "photo list ", names the kind of file).
 void checkInputPath(const std::string& path, const std::string& what = "");
 
+/// Moves a complete temporary file onto `path`: its data flushed to the disk, then renamed
+/// (atomic), then the folder's entry flushed, so that `path` is the old file or the whole new
+/// one even after a power loss. On failure removes `tmp` and throws IoError naming `what`
+/// ("photo list ", or "" for a plain file) and `path`.
+void commitTemporaryFile(const std::string& tmp, const std::string& path, const std::string& what = "");
+
 /// Throws IoError naming what is wrong when `path` cannot be an output file: empty, a
 /// folder, or in a folder that does not exist or does not take new files. Commands call it
 /// before any work, so that a long run does not end on an unwritable path.

@@ -97,11 +97,21 @@ int runSuperres(int argc, char** argv) {
   // Parameters are checked before the scans are read, so a bad value fails at once.
   std::vector<Positions> scans;
   Eigen::Vector3f origin = Eigen::Vector3f::Zero();  // the first scan's sensor origin (.pcd VIEWPOINT)
+  pcl::PCLPointCloud2 first;  // the first scan as read: its other fields go to the new points
   auto readScans = [&] {
     for (std::size_t i = 0; i + 1 < a.positional.size(); ++i) {
-      scans.push_back(i == 0 ? positionsOf(loadCloud(a.positional[i], &origin)) : loadPositions(a.positional[i]));
+      if (i == 0) first = loadCloud(a.positional[i], &origin);
+      scans.push_back(i == 0 ? positionsOf(first) : loadPositions(a.positional[i]));
       printRead(a.positional[i], scans.back());
     }
+  };
+  // Each new point's input point (of the first scan), when that scan has fields besides x y z
+  // (colour, intensity): they are carried to the new points, as PCL's MLS does.
+  std::vector<int> source;
+  auto carries = [&] {
+    for (const auto& f : first.fields)
+      if (f.name != "x" && f.name != "y" && f.name != "z" && f.name != "_") return true;
+    return false;
   };
   const std::size_t count = a.count("count", 0);
   if (count > 4000000000u) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
@@ -150,7 +160,8 @@ int runSuperres(int argc, char** argv) {
     p.validate();
     readScans();
     QuadricSuperResolutionReport r;
-    out = superResolveQuadric(scans, p, &r, progress, normals_out, normals_out ? &curvature : nullptr);
+    out = superResolveQuadric(scans, p, &r, progress, normals_out, normals_out ? &curvature : nullptr,
+                              carries() ? &source : nullptr);
     std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
                 p.patch_radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.similarity_radius,
                 p.similarity_radius > 0 ? "" : " (chosen)");
@@ -211,7 +222,7 @@ int runSuperres(int argc, char** argv) {
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress, normals_out,
-                      normals_out ? &curvature : nullptr);
+                      normals_out ? &curvature : nullptr, carries() ? &source : nullptr);
     std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,
                 p.radius > 0 ? "" : " (chosen)", r.disc_radius);
     if (r.capped)
@@ -221,7 +232,14 @@ int runSuperres(int argc, char** argv) {
     if (r.unprojected) std::fprintf(stderr, "warning: %zu output points could not be projected\n", r.unprojected);
   }
   pcl::PCLPointCloud2 cloud;
-  {
+  if (!source.empty() && source.size() == out.size()) {
+    cloud = gatherPoints(first, source);
+    writePositions(out, cloud);
+    std::string kept;
+    for (const auto& f : cloud.fields)
+      if (f.name != "x" && f.name != "y" && f.name != "z" && f.name != "_") kept += " " + f.name;
+    std::printf("superres: kept from the input point each new point was made from:%s\n", kept.c_str());
+  } else {
     pcl::PointCloud<pcl::PointXYZ> xyz;
     writePositions(out, xyz);
     pcl::toPCLPointCloud2(xyz, cloud);
@@ -229,8 +247,9 @@ int runSuperres(int argc, char** argv) {
   if (normals_out) {
     if (orient == "viewpoint") orientNormalsTowards(out, normals, origin);
     // PCL's `curvature` beside the normals, as its MLS writes it: the surface variation of
-    // the input ball each output point was made from.
-    setNormals(cloud, normals, &curvature);
+    // the input ball each output point was made from (an input with normals keeps its own
+    // curvature field, carried from that point).
+    setNormals(cloud, normals, hasField(cloud, "normal_x") ? nullptr : &curvature);
   }
   saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());

@@ -276,6 +276,26 @@ int origin(const std::string& path) {
   return 0;
 }
 
+// OUT made of new points from IN's (written by `write`, intensity = index): every new point
+// carries the intensity of an input point within `reach` of it, and some input points are
+// carried more than once (there are more new points than input points).
+int sources(const std::string& in_path, const std::string& out_path, float reach) {
+  pcl::PointCloud<pcl::PointXYZI> in, out;
+  if (pcl::io::loadPCDFile(in_path, in) != 0 || pcl::io::loadPCDFile(out_path, out) != 0)
+    return fail("cannot read " + in_path + " or " + out_path);
+  if (out.size() <= in.size()) return fail("no more points out than in");
+  for (std::size_t q = 0; q < out.size(); ++q) {
+    const float k = out[q].intensity;
+    if (!(k >= 0) || k != std::floor(k) || k >= static_cast<float>(in.size()))
+      return fail("point " + std::to_string(q) + " carries intensity " + std::to_string(k) + ", no input point's");
+    const auto& s = in[static_cast<std::size_t>(k)];
+    if ((s.getVector3fMap() - out[q].getVector3fMap()).norm() > reach)
+      return fail("point " + std::to_string(q) + " carries the intensity of a point " +
+                  std::to_string((s.getVector3fMap() - out[q].getVector3fMap()).norm()) + " away");
+  }
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -288,6 +308,7 @@ int main(int argc, char** argv) {
   if (mode == "origin" && argc == 3) return origin(argv[2]);
   if (mode == "halves" && argc == 4) return halves(argv[2], argv[3]);
   if (mode == "normals" && (argc == 4 || argc == 5)) return normals(argv[2], std::atof(argv[3]), argc == 5 ? argv[4] : "");
+  if (mode == "sources" && argc == 5) return sources(argv[2], argv[3], static_cast<float>(std::atof(argv[4])));
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

@@ -277,9 +277,10 @@ elseif(CASE STREQUAL "superres_normals")
     if(NOT crc STREQUAL "0")
       message(FATAL_ERROR "${method} --normals: ${cerr}")
     endif()
-    # PCL's curvature field beside the normals, as its MLS writes them.
+    # PCL's curvature field beside the normals, as its MLS writes them; the input's intensity
+    # carried from the point each new point was made from.
     file(STRINGS ${output} header LIMIT_COUNT 4)
-    if(NOT header MATCHES "FIELDS x y z normal_x normal_y normal_z curvature")
+    if(NOT header MATCHES "FIELDS x y z intensity normal_x normal_y normal_z curvature")
       message(FATAL_ERROR "${method} --normals: no curvature field (${header})")
     endif()
   endforeach()
@@ -720,6 +721,19 @@ elseif(CASE STREQUAL "bench_lpf_shapes")
   expect_error_line("shapes")
   run_paps(bench lpf --shapes rs1 --samples ${dir}/no_samples --out ${dir}/bench)
   expect_error_line("rs1_normals.ply")
+elseif(CASE STREQUAL "superres_keeps_fields")
+  # New points carry the other fields of the input point each was made from (the input's
+  # intensity is its index), as PCL's MLS does; with --normals too.
+  write_input(3000)
+  foreach(method qsr apss rimls)
+    run_paps(superres ${input} ${output} --factor 2 --method ${method} --normals --quiet)
+    expect_success_saying("kept from the input point each new point was made from: intensity")
+    execute_process(COMMAND ${TOOL} sources ${input} ${output} 0.06 RESULT_VARIABLE src ERROR_VARIABLE serr)
+    if(NOT src STREQUAL "0")
+      message(FATAL_ERROR "${method}: ${serr}")
+    endif()
+    file(REMOVE ${output})
+  endforeach()
 elseif(CASE STREQUAL "checked_before_work")
   # What can be known before the work is refused before the work: the output's folder and
   # name, options of another method, numbers a float cannot hold, a cloud with no finite

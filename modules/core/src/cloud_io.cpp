@@ -193,6 +193,27 @@ void writePositions(const Positions& p, pcl::PCLPointCloud2& cloud) {
 
 Positions loadPositions(const std::string& path) { return positionsOf(loadCloud(path)); }
 
+pcl::PCLPointCloud2 gatherPoints(const pcl::PCLPointCloud2& cloud, const std::vector<int>& rows) {
+  const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
+  pcl::PCLPointCloud2 out;
+  out.header = cloud.header;
+  out.fields = cloud.fields;
+  out.is_bigendian = cloud.is_bigendian;
+  out.point_step = cloud.point_step;
+  out.width = static_cast<std::uint32_t>(rows.size());
+  out.height = 1;
+  out.row_step = out.point_step * out.width;
+  out.is_dense = cloud.is_dense;
+  out.data.resize(rows.size() * cloud.point_step);
+  for (std::size_t q = 0; q < rows.size(); ++q) {
+    if (rows[q] < 0 || static_cast<std::size_t>(rows[q]) >= n)
+      throw InvalidParameter("rows", std::to_string(rows[q]), "an index of the cloud's " + std::to_string(n) + " points");
+    std::memcpy(out.data.data() + q * cloud.point_step, cloud.data.data() + static_cast<std::size_t>(rows[q]) * cloud.point_step,
+                cloud.point_step);
+  }
+  return out;
+}
+
 pcl::PCLPointCloud2 appendFields(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointCloud2& extra) {
   const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
   if (static_cast<std::size_t>(extra.width) * extra.height != n)

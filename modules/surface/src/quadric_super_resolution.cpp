@@ -235,6 +235,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   // aggregation then work on points within a fraction of the noise of the surface. The
   // patches keep the radius chosen on the input.
   std::vector<Positions> denoised;
+  std::vector<int> resorted0;  // denoised scans[0] position -> scans[0] position (it is sorted again)
   if (params.denoise_input == Denoise::On || smooth_and_noisy ||
       (params.denoise_input == Denoise::Auto && R > 0 && noise >= kQuietNoise * R)) {
     denoised.resize(scans.size());
@@ -250,7 +251,9 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       dp.passes = 1;
       // Sorted again on the denoised positions: the run is then the one on a denoised input.
       const Positions d = denoiseBySimilarity(scans[s], dp, nullptr, {}, progress);
-      denoised[s] = gathered(d, spatialOrderAll(d));
+      std::vector<int> resort = spatialOrderAll(d);
+      denoised[s] = gathered(d, resort);
+      if (s == 0) resorted0 = std::move(resort);
       sc[s].points = &denoised[s];
       sc[s].nh = buildRadiusNeighbourhood(denoised[s], R, params.target_neighbours, 4 * params.target_neighbours, progress);
     }
@@ -822,7 +825,11 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     if (variation0.size() == n0)
       for (std::size_t q = 0; q < out.size(); ++q) (*curvature_out)[q] = variation0[origin[q]];
   }
-  if (source_out) *source_out = origin;
+  if (source_out) {  // indices of scans[0] as given (the denoised scan was sorted again)
+    *source_out = origin;
+    if (!resorted0.empty())
+      for (int& o : *source_out) o = resorted0[static_cast<std::size_t>(o)];
+  }
   {
     const SpatialIndex& index0 = *sc[0].nh.index;
     const float inv_2sig2 = 1.f / (2.f * 0.5f * s0 * 0.5f * s0);

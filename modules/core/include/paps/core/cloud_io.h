@@ -37,6 +37,12 @@ void writePositions(const Positions& p, pcl::PCLPointCloud2& cloud);
 /// input's own fields (intensity, colour...) and organisation.
 pcl::PCLPointCloud2 appendFields(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointCloud2& extra);
 
+/// The points `rows` of a blob (indices into its width x height points, any order, repeats
+/// allowed), every field as it is, as one row of rows.size() points: how a stage that makes
+/// new points from input points carries their other fields (colour, intensity) along.
+/// Throws InvalidParameter for an index outside the blob.
+pcl::PCLPointCloud2 gatherPoints(const pcl::PCLPointCloud2& cloud, const std::vector<int>& rows);
+
 /// Loads a cloud straight into positions (any file loadCloud accepts).
 Positions loadPositions(const std::string& path);
 

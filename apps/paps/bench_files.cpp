@@ -179,9 +179,9 @@ int runBenchFiles(int argc, char** argv) {
           const double r = ours.ok && ours.radius > 0 ? ours.radius : r30;
           const std::string at = (ours.ok ? "R_phi of ours " : "30-neighbour radius ") + fmt("%.4g", r);
           add(stage, "pcl", at, run("bench-worker-curv", "pcl", {{"radius", r}}));
-  #ifdef PAPS_HAVE_CGAL
+#ifdef PAPS_HAVE_CGAL
           add(stage, "cgal", at + ", order 4", run("bench-worker-curv", "cgal", {{"radius", r}}));
-  #endif
+#endif
         }
         printRatios(runs, first);
       }

@@ -107,12 +107,18 @@ void Arguments::requireCloudOutput() const {
 
 void Arguments::requireFileOutput(const std::string& extension) const {
   requireOutputApart();
-  if (positional.empty()) return;
-  const std::string& out = positional.back();
-  checkOutputPath(out);
-  std::string ext = std::filesystem::path(out).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-  if (ext != extension) throw InvalidParameter("OUT", out, "a " + extension + " file");
+  if (!positional.empty()) checkFileOutput(positional.back(), extension);
+}
+
+std::string lowerExtension(const std::string& path) {
+  std::string e = std::filesystem::path(path).extension().string();
+  for (auto& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return e;
+}
+
+void checkFileOutput(const std::string& path, const std::string& extension) {
+  checkOutputPath(path);
+  if (lowerExtension(path) != extension) throw InvalidParameter("OUT", path, "a " + extension + " file");
 }
 
 void requireOptionsOf(const Arguments& a, const std::vector<std::string>& applies, const std::string& variant) {

@@ -46,6 +46,13 @@ struct Arguments {
   void requireFileOutput(const std::string& extension) const;
 };
 
+/// The extension of `path` in lower case, with its dot (".ply"; "" when it has none).
+std::string lowerExtension(const std::string& path);
+
+/// checkOutputPath, then a name ending in `extension` (lower case, with its dot): throws
+/// InvalidParameter("OUT") otherwise.
+void checkFileOutput(const std::string& path, const std::string& extension);
+
 /// Runs `validate` (which sets or checks a library parameter struct) and re-throws an
 /// InvalidParameter under the name of the command-line option it came from: the library
 /// names its fields (target_neighbours), the user typed the option (--neighbours).

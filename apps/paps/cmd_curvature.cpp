@@ -139,6 +139,11 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
   return true;
 }
 
+// The Wavejet fields by the options that set them (for error messages).
+const std::map<std::string, std::string> kWavejetOptions = {
+    {"irls_iterations", "irls"}, {"max_refits", "refits"}, {"refit_angle", "refit-angle"},
+    {"narrowed_neighbours", "max-neighbours"}};
+
 WavejetParameters wavejetParameters(const Arguments& a, const char* default_policy) {
   WavejetParameters w;
   w.order = a.integer("order", w.order);
@@ -163,9 +168,7 @@ WavejetParameters wavejetParameters(const Arguments& a, const char* default_poli
   w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
   // The cap of narrowing (0: 4 x --neighbours).
   w.narrowed_neighbours = a.integer("max-neighbours", w.narrowed_neighbours);
-  validateAsOptions({{"irls_iterations", "irls"}, {"max_refits", "refits"}, {"refit_angle", "refit-angle"},
-                     {"narrowed_neighbours", "max-neighbours"}},
-                    [&] { w.validate(); });
+  validateAsOptions(kWavejetOptions, [&] { w.validate(); });
   return w;
 }
 
@@ -297,9 +300,9 @@ int runEnhance(int argc, char** argv) {
       throw InvalidParameter("alpha1", s, "RE or RE,IM (numbers)");
     params.alpha1 = {static_cast<float>(re), static_cast<float>(im)};
   }
-  validateAsOptions({{"target_neighbours", "neighbours"}, {"max_motion", "max-motion"}, {"irls_iterations", "irls"},
-                     {"max_refits", "refits"}, {"refit_angle", "refit-angle"}, {"narrowed_neighbours", "max-neighbours"}},
-                    [&] { params.validate(); });
+  std::map<std::string, std::string> names = kWavejetOptions;
+  names.insert({{"target_neighbours", "neighbours"}, {"max_motion", "max-motion"}});
+  validateAsOptions(names, [&] { params.validate(); });
   pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0], &params.wavejet.viewpoint);
   const Positions p = positionsOf(cloud);
   printRead(a.positional[0], p);

@@ -84,8 +84,7 @@ int runDenoise(int argc, char** argv) {
   if (method != "similarity" && method != "bilateral" && method != "lpf")
     throw InvalidParameter("method", method, "similarity, bilateral or lpf");
   // An option of another method would be silently ignored: refused instead.
-  const std::vector<std::string> common = {"method", "radius", "neighbours", "quiet", "timings"};
-  std::vector<std::string> applies = common;
+  std::vector<std::string> applies = {"method", "radius", "neighbours", "quiet", "timings"};
   if (method == "similarity")
     applies.insert(applies.end(), {"grid", "sigma", "sigma-scale", "smoothing", "patches", "checks", "guide", "passes",
                                    "refilter", "aggregate", "own-weight", "noise", "no-adapt"});

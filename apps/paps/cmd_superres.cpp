@@ -108,11 +108,13 @@ int runSuperres(int argc, char** argv) {
   // Each new point's input point (of the first scan), when that scan has fields besides x y z
   // (colour, intensity): they are carried to the new points, as PCL's MLS does.
   std::vector<int> source;
-  auto carries = [&] {
-    for (const auto& f : first.fields)
-      if (f.name != "x" && f.name != "y" && f.name != "z" && f.name != "_") return true;
-    return false;
+  auto otherFields = [](const pcl::PCLPointCloud2& c) {
+    std::string names;
+    for (const auto& f : c.fields)
+      if (f.name != "x" && f.name != "y" && f.name != "z" && f.name != "_") names += " " + f.name;
+    return names;
   };
+  auto carries = [&] { return !otherFields(first).empty(); };
   const std::size_t count = a.count("count", 0);
   if (count > 4000000000u) throw InvalidParameter("count", std::to_string(count), "a count in [0, 4e9]");
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
@@ -235,10 +237,7 @@ int runSuperres(int argc, char** argv) {
   if (!source.empty() && source.size() == out.size()) {
     cloud = gatherPoints(first, source);
     writePositions(out, cloud);
-    std::string kept;
-    for (const auto& f : cloud.fields)
-      if (f.name != "x" && f.name != "y" && f.name != "z" && f.name != "_") kept += " " + f.name;
-    std::printf("superres: kept from the input point each new point was made from:%s\n", kept.c_str());
+    std::printf("superres: kept from the input point each new point was made from:%s\n", otherFields(cloud).c_str());
   } else {
     pcl::PointCloud<pcl::PointXYZ> xyz;
     writePositions(out, xyz);

@@ -71,12 +71,6 @@ const char* kRecoverUsage =
     "                           in [0, 1) (default 0: every facet kept, a closed mesh stays closed)\n"
     "  --quiet, --timings       no progress bar / wall time of each stage\n";
 
-std::string lowerExtension(const std::string& path) {
-  std::string e = std::filesystem::path(path).extension().string();
-  for (auto& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return e;
-}
-
 // An ASCII point list: one point a line, x y z first (separated by spaces, tabs or commas),
 // further columns ignored; empty lines and lines starting with '#' skipped.
 Positions loadXyz(const std::string& path) {
@@ -108,17 +102,10 @@ Positions loadPoints(const std::string& path) {
   return p;
 }
 
-// The output must be a .ply in an existing folder: checked before any work.
-void checkMeshOutput(const std::string& path) {
-  checkOutputPath(path);
-  if (lowerExtension(path) != ".ply")
-    throw InvalidParameter("OUT", path, "a .ply file (the mesh is written as binary PLY)");
-}
-
 // Writes the mesh as binary PLY to a temporary file beside `path`, then renames it: the target
 // is complete or untouched, and no temporary is left behind (not even on Ctrl-C).
 void saveMeshAtomic(const std::string& path, const TriangleMesh& mesh) {
-  checkMeshOutput(path);
+  checkFileOutput(path, ".ply");  // the mesh is written as binary PLY
   const std::filesystem::path target(path);
   const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
   const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + ".ply")).string();
@@ -144,7 +131,7 @@ int runReconstruct(int argc, char** argv) {
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
                "dangling-support", "bins-per-area", "max-bins", "bins-per-point", "quiet", "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
-  a.requireOutputApart();
+  a.requireFileOutput(".ply");  // checked before any work
   const std::string in_path = a.positional[0], out_path = a.positional[1];
   // Parameters and the output path are checked before the points are read.
   TransportReconstructionParameters p;
@@ -163,7 +150,6 @@ int runReconstruct(int argc, char** argv) {
                      {"dangling_support", "dangling-support"}, {"bins_per_area", "bins-per-area"},
                      {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}},
                     [&] { p.validate(); });
-  checkMeshOutput(out_path);
   const Positions points = loadPoints(in_path);
   TransportReconstructionReport r;
   const TriangleMesh mesh = transportReconstruct(points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
@@ -184,13 +170,12 @@ int runRecoverFeatures(int argc, char** argv) {
   a.allowOnly({"sweeps", "density-threshold", "quiet", "timings"});
   if (a.positional.size() != 3)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "MESH IN OUT.ply");
-  a.requireOutputApart();
+  a.requireFileOutput(".ply");  // checked before any work
   const std::string mesh_path = a.positional[0], in_path = a.positional[1], out_path = a.positional[2];
   TransportFeatureRecoveryParameters p;
   p.sweeps = a.integer("sweeps", p.sweeps);
   p.density_threshold = a.real("density-threshold", p.density_threshold);
   validateAsOptions({{"density_threshold", "density-threshold"}}, [&] { p.validate(); });
-  checkMeshOutput(out_path);
   const TriangleMesh smooth = loadTriangleMesh(mesh_path);
   std::printf("read %s: %zu vertices, %zu facets\n", mesh_path.c_str(), smooth.vertices.size(), smooth.triangles.size());
   const Positions points = loadPoints(in_path);

@@ -192,18 +192,15 @@ TEST(QuadricSuperResolution, ColouredOutputsKeepTheSourcePointsColour) {
     EXPECT_GT(away, out.size() / 2) << what;
     EXPECT_EQ(right, away) << what;
   };
-  QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZRGB> qsr;
-  qsr.setInputCloud(cloud);
-  qsr.setUpsamplingFactor(2);
-  pcl::PointCloud<pcl::PointXYZRGB> out;
-  qsr.process(out);
-  check(out, "qsr");
-  APSSUpsampling<pcl::PointXYZRGB, pcl::PointXYZRGB> apss;
-  apss.setInputCloud(cloud);
-  apss.setUpsamplingFactor(2);
-  pcl::PointCloud<pcl::PointXYZRGB> out2;
-  apss.process(out2);
-  check(out2, "apss");
+  auto upsample = [&](auto&& stage, const char* what) {
+    stage.setInputCloud(cloud);
+    stage.setUpsamplingFactor(2);
+    pcl::PointCloud<pcl::PointXYZRGB> out;
+    stage.process(out);
+    check(out, what);
+  };
+  upsample(QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZRGB>(), "qsr");
+  upsample(APSSUpsampling<pcl::PointXYZRGB, pcl::PointXYZRGB>(), "apss");
 }
 
 TEST(QuadricSuperResolution, BadInput) {

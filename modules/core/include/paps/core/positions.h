@@ -165,6 +165,15 @@ Positions positionsAt(const pcl::PointCloud<PointT>& input, const pcl::Indices& 
   return out;
 }
 
+/// How many of a cloud's `size` points `indices` leaves out (each counted once, repeats in
+/// `indices` too): the points positionsWithin turns into NaN, which a stage's count of
+/// non-finite inputs must not include.
+inline std::size_t pointsOutside(const pcl::Indices& indices, std::size_t size) {
+  std::vector<std::uint8_t> in(size, 0);
+  for (const auto i : indices) in[static_cast<std::size_t>(i)] = 1;
+  return static_cast<std::size_t>(std::count(in.begin(), in.end(), std::uint8_t(0)));
+}
+
 /// Positions of every point of `input`, those not at `indices` (checked) set to NaN: a stage
 /// that keeps the cloud's size and order and skips the points outside its indices.
 template <typename PointT>

@@ -1,8 +1,4 @@
 #pragma once
-#include <algorithm>
-#include <cstdint>
-#include <vector>
-
 #include <paps/core/error.h>
 #include <paps/fusion/colour_space.h>
 #include <paps/fusion/point_colorization.h>
@@ -32,9 +28,7 @@ void PointColorization<PointT>::applyFilter(PointCloud& output) {
   const std::vector<Eigen::Vector3f> colours = colour::coloursOf(input);
   const std::vector<Eigen::Vector3f> out = colorizePoints(points, colours, photos_, params_, &report_, progress_);
   // The points outside the indices entered as NaN: they are not the input's non-finite points.
-  std::vector<std::uint8_t> indexed(input.size(), 0);
-  for (const auto i : *this->indices_) indexed[static_cast<std::size_t>(i)] = 1;
-  report_.non_finite -= static_cast<std::size_t>(std::count(indexed.begin(), indexed.end(), 0));
+  report_.non_finite -= pointsOutside(*this->indices_, input.size());
   PointCloud result = input;
   colour::setColours(out, result);
   output = std::move(result);

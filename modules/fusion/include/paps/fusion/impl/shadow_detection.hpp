@@ -1,10 +1,6 @@
 #pragma once
 #include <string>
 
-#include <algorithm>
-#include <cstdint>
-#include <vector>
-
 #include <paps/core/error.h>
 #include <paps/fusion/colour_space.h>
 #include <paps/fusion/shadow_detection.h>
@@ -35,9 +31,7 @@ void ShadowDetection<PointT>::detect(ShadowDetectionResult& result) {
   const std::vector<Eigen::Vector3f> colours = colour::coloursOf(input);
   result = detectShadows(points, normals, colours, reflectance_, photos_, params_, progress_);
   // The points outside the indices entered as NaN: they are not the input's non-finite points.
-  std::vector<std::uint8_t> indexed(input.size(), 0);
-  for (const auto i : *this->indices_) indexed[static_cast<std::size_t>(i)] = 1;
-  result.non_finite -= static_cast<std::size_t>(std::count(indexed.begin(), indexed.end(), 0));
+  result.non_finite -= pointsOutside(*this->indices_, input.size());
   this->deinitCompute();
 }
 

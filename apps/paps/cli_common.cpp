@@ -11,6 +11,7 @@
 #include <chrono>
 #include <memory>
 #include <mutex>
+#include <utility>
 
 #include <unistd.h>
 
@@ -22,6 +23,8 @@
 #include <paps/core/cloud_file_layout.h>
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/normal_refresh.h>
+#include <paps/core/view_point_option.h>
 
 namespace paps::cli {
 
@@ -179,7 +182,13 @@ ProgressCallback progressBar(bool quiet, bool timings) {
     };
   }
   if (quiet || !isatty(fileno(stderr))) return {};
-  return [](const std::string& stage, float f) {
+  // The bar never steps back: two parts of a stage that report under one name (passes of
+  // a filter, the two frame orientations) each count from 0; the later one only shows once
+  // it passes the earlier, unless the earlier finished (its line is closed).
+  auto shown = std::make_shared<std::pair<std::string, float>>("", 1.f);
+  return [shown](const std::string& stage, float f) {
+    if (stage == shown->first && shown->second < 1.f && f < shown->second) return true;
+    *shown = {stage, f};
     const int width = 30, filled = static_cast<int>(f * width + 0.5f);
     std::fprintf(stderr, "\r%-18s [%.*s%*s] %3d%%", stage.c_str(), filled,
                  "##############################", width - filled, "", static_cast<int>(f * 100 + 0.5f));
@@ -264,6 +273,44 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<
       const float v = n[i][k];
       std::memcpy(&cloud.data[i * cloud.point_step + off[k]], &v, sizeof(float));
     }
+}
+
+bool blobNormals(const pcl::PCLPointCloud2& c, Normals& out) {
+  int off[3] = {-1, -1, -1};
+  const char* names[3] = {"normal_x", "normal_y", "normal_z"};
+  for (const auto& f : c.fields)
+    for (int k = 0; k < 3; ++k)
+      if (f.name == names[k] && f.datatype == pcl::PCLPointField::FLOAT32) off[k] = static_cast<int>(f.offset);
+  if (off[0] < 0 || off[1] < 0 || off[2] < 0) return false;
+  const std::size_t n = std::size_t(c.width) * c.height;
+  out.resize(n);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k) std::memcpy(&out[i][k], &c.data[i * c.point_step + off[k]], sizeof(float));
+  return true;
+}
+
+void refreshBlobNormals(pcl::PCLPointCloud2& cloud, const Positions& moved, float radius,
+                        const Eigen::Vector3f& origin, bool keep) {
+  Normals previous;
+  if (!blobNormals(cloud, previous)) return;
+  if (keep) {
+    std::printf("normals: the input's kept (--keep-normals)\n");
+    return;
+  }
+  const NormalRefresh r = refreshNormals(moved, radius, previous, {}, knownSensorOrigin(origin));
+  setNormals(cloud, r.normals);
+  for (const auto& f : cloud.fields) {
+    if (f.name != "curvature" || f.datatype != pcl::PCLPointField::FLOAT32) continue;
+    for (std::size_t i = 0; i < r.variation.size(); ++i)
+      std::memcpy(&cloud.data[i * cloud.point_step + f.offset], &r.variation[i], sizeof(float));
+  }
+  cloud.is_dense = cloud.is_dense && r.without_normal == 0;
+  std::printf("normals%s estimated again on the output (radius %g m, at most %d neighbours): %zu\n",
+              hasField(cloud, "curvature") ? " and curvature" : "", double(radius), kRefreshNormalNeighbours,
+              r.refreshed);
+  if (r.without_normal)
+    std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones): normal NaN\n",
+                 r.without_normal);
 }
 
 std::string fmt(const char* format, double value) {

@@ -108,4 +108,16 @@ bool hasField(const pcl::PCLPointCloud2& c, const char* name);
 /// are not float32.
 void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<float>* curvature = nullptr);
 
+/// The float32 normal_x/y/z of every point (whatever their values: PCL writes 0 0 0 where no
+/// normal was computed). False, and `out` untouched, when the cloud has no such fields.
+bool blobNormals(const pcl::PCLPointCloud2& cloud, Normals& out);
+
+/// After a point-moving filter wrote `moved` into `cloud`: when the cloud has float32 normal
+/// fields and `keep` is false, their normals (and a float32 `curvature` field, when present)
+/// are estimated again at `radius` (paps::refreshNormals, oriented as the input's normals, else
+/// towards `origin` when it is known, else by propagation), and a line says so; with `keep`
+/// a line says the input's were kept. Nothing for a cloud without normals.
+void refreshBlobNormals(pcl::PCLPointCloud2& cloud, const Positions& moved, float radius,
+                        const Eigen::Vector3f& origin, bool keep);
+
 }  // namespace paps::cli

@@ -1,4 +1,5 @@
 // paps curvature IN OUT [options]   and   paps enhance IN OUT --alpha0 A | --alpha1 RE[,IM]
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <complex>
@@ -91,22 +92,10 @@ const char* kEnhanceUsage =
 
 namespace {
 
-// Normals stored in the blob (float32 normal_x/y/z), if any.
-bool blobNormals(const pcl::PCLPointCloud2& c, Normals& out) {
-  int off[3] = {-1, -1, -1};
-  const char* names[3] = {"normal_x", "normal_y", "normal_z"};
-  for (const auto& f : c.fields)
-    for (int k = 0; k < 3; ++k)
-      if (f.name == names[k] && f.datatype == pcl::PCLPointField::FLOAT32) off[k] = static_cast<int>(f.offset);
-  if (off[0] < 0 || off[1] < 0 || off[2] < 0) return false;
-  const std::size_t n = std::size_t(c.width) * c.height;
-  out.resize(n);
-  bool any = false;
-  for (std::size_t i = 0; i < n; ++i) {
-    for (int k = 0; k < 3; ++k) std::memcpy(&out[i][k], &c.data[i * c.point_step + off[k]], sizeof(float));
-    any = any || (isFinite(out[i]) && out[i].squaredNorm() > 0);
-  }
-  return any;
+// Normals stored in the blob (float32 normal_x/y/z) with at least one usable.
+bool usableBlobNormals(const pcl::PCLPointCloud2& c, Normals& out) {
+  if (!blobNormals(c, out)) return false;
+  return std::any_of(out.begin(), out.end(), [](const Eigen::Vector3f& n) { return isFinite(n) && n.squaredNorm() > 0; });
 }
 
 // Orientation hints per --orient: input normals, propagated PCA normals, or none (viewpoint).
@@ -116,7 +105,7 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
     throw InvalidParameter("orient", mode, "input, propagate or viewpoint");
   if (mode == "viewpoint") return false;
   if (mode == "input" || mode == "auto") {
-    if (blobNormals(cloud, hints)) { std::printf("orientation: input normals\n"); return true; }
+    if (usableBlobNormals(cloud, hints)) { std::printf("orientation: input normals\n"); return true; }
     if (mode == "input") throw InvalidParameter("orient", "input", "an input with normal_x/y/z fields");
   }
   // On the distinct positions, as the Wavejet stage fits them: in a pile of copies every

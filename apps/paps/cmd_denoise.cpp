@@ -15,7 +15,9 @@ namespace paps::cli {
 
 const char* kDenoiseUsage =
     "usage: paps denoise IN OUT [options]\n"
-    "  IN, OUT                .pcd or .ply; every field of IN is kept, only x y z move\n"
+    "  IN, OUT                .pcd or .ply; every field of IN is kept, x y z move, and normals\n"
+    "                         (normal_x/y/z, curvature) are estimated again on OUT\n"
+    "  --keep-normals         keep IN's normals as they were (they describe the noisy surface)\n"
     "  --method M             similarity (default), bilateral, or lpf (Local Probing Fields:\n"
     "                         surfaces and wires alike, slower; its options below)\n"
     "  --radius R             neighbourhood radius in metres (default: from --neighbours, grown\n"
@@ -70,12 +72,12 @@ std::string adaptedNote(float noise, bool measured, float scale) {
 }  // namespace
 
 int runDenoise(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt", "free-motion", "free-curvature"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refilter", "no-adapt", "free-motion", "free-curvature", "keep-normals"});
   if (a.has("help")) { std::fputs(kDenoiseUsage, stdout); return 0; }
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
                "refilter", "aggregate", "own-weight", "noise", "no-adapt", "step", "atoms", "lambda",
-               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature"});
+               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature", "keep-normals"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireCloudOutput();
   const std::string& in_path = a.positional[0];
@@ -84,7 +86,7 @@ int runDenoise(int argc, char** argv) {
   if (method != "similarity" && method != "bilateral" && method != "lpf")
     throw InvalidParameter("method", method, "similarity, bilateral or lpf");
   // An option of another method would be silently ignored: refused instead.
-  std::vector<std::string> applies = {"method", "radius", "neighbours", "quiet", "timings"};
+  std::vector<std::string> applies = {"method", "radius", "neighbours", "quiet", "timings", "keep-normals"};
   if (method == "similarity")
     applies.insert(applies.end(), {"grid", "sigma", "sigma-scale", "smoothing", "patches", "checks", "guide", "passes",
                                    "refilter", "aggregate", "own-weight", "noise", "no-adapt"});
@@ -101,6 +103,7 @@ int runDenoise(int argc, char** argv) {
   printRead(in_path, in);
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   Positions out;
+  float radius = 0;  // the filter's, for the normals
   if (method == "similarity") {
     SimilarityDenoisingParameters p;
     p.radius = a.real("radius", 0);
@@ -154,6 +157,7 @@ int runDenoise(int argc, char** argv) {
     std::printf("normals oriented %s; moved %zu points; %zu NaN points passed through\n",
                 p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
+    radius = r.radius;
   } else if (method == "lpf") {
     LpfDenoisingParameters p;
     p.probing.radius = a.real("radius", 0);
@@ -189,6 +193,7 @@ int runDenoise(int argc, char** argv) {
       std::printf("representation error per field: %.3g after the first round, %.3g after the last\n",
                   r.round_errors.front(), r.round_errors.back());
     if (r.isolated) std::fprintf(stderr, "warning: %zu points had no field to move them and were left in place\n", r.isolated);
+    radius = r.radius;
   } else {
     PointBilateralParameters p;
     p.radius = a.real("radius", 0);
@@ -200,8 +205,10 @@ int runDenoise(int argc, char** argv) {
     std::printf("bilateral filter: radius %g m%s, %d passes; moved %zu points\n", r.radius,
                 p.radius > 0 ? "" : " (chosen)", p.iterations, r.moved);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
+    radius = r.radius;
   }
   writePositions(out, cloud);
+  refreshBlobNormals(cloud, out, radius, origin, a.has("keep-normals"));
   saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s\n", out_path.c_str());
   return 0;

@@ -81,6 +81,19 @@ int write(const std::string& path, int count, const std::string& format) {
   }
   // "sensor-below": the file says its sensor was 2 m under the surface (PCD VIEWPOINT).
   if (format == "sensor-below") cloud.sensor_origin_ = Eigen::Vector4f(0.3f, 0.3f, -2.f, 0.f);
+  // "stale-normals": normal_x/y/z 30 degrees off the surface's, pointing down, and a curvature
+  // of 0.5, as an estimate made before the points moved would be.
+  if (format == "stale-normals") {
+    pcl::PointCloud<pcl::PointXYZINormal> with;
+    pcl::copyPointCloud(cloud, with);
+    for (auto& q : with) {
+      q.normal_x = 0.5f;
+      q.normal_y = 0.f;
+      q.normal_z = -0.8660254f;
+      q.curvature = 0.5f;
+    }
+    return pcl::io::savePCDFileBinary(path, with) == 0 ? 0 : fail("cannot write " + path);
+  }
   const bool ply = path.size() > 4 && path.compare(path.size() - 4, 4, ".ply") == 0;
   const int rc = ply ? (format == "ascii" ? pcl::io::savePLYFileASCII(path, cloud) : pcl::io::savePLYFileBinary(path, cloud))
                  : format == "compressed" ? pcl::io::savePCDFileBinaryCompressed(path, cloud)

@@ -260,6 +260,70 @@ void expectOnlyIndexedPointsMove(const Positions& p) {
   EXPECT_EQ(f.getReport().moved, indices->size());
 }
 
+/// For a point type with normals (PointNormal): the moved points' normals are estimated again
+/// on the output. Input normals tilted 10 degrees off the unit sphere's (a stale estimate)
+/// come out radial within `mean_degrees` on average, on the input's side, with a small finite
+/// curvature; points outside the indices keep normal and curvature bit for bit; with
+/// setRefreshNormals(false) every point keeps them. `configure(filter)` sets the filter up.
+template <template <typename> class Filter, typename Configure>
+void expectNormalsRefreshed(const Positions& p, double mean_degrees, Configure configure) {
+  auto in = toCloud<pcl::PointNormal>(p);
+  Random rng(3);
+  const float tilt = static_cast<float>(10.0 * M_PI / 180.0);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const Eigen::Vector3f radial = p[i].normalized();
+    const Eigen::Vector3f any(static_cast<float>(rng.gaussian()), static_cast<float>(rng.gaussian()),
+                              static_cast<float>(rng.gaussian()));
+    const Eigen::Vector3f across = (any - any.dot(radial) * radial).normalized();
+    (*in)[i].getNormalVector3fMap() = std::cos(tilt) * radial + std::sin(tilt) * across;
+    (*in)[i].curvature = 0.5f;
+  }
+  auto indices = pcl::make_shared<pcl::Indices>();
+  std::vector<bool> listed(p.size(), false);
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (i % 4 != 0) {
+      indices->push_back(static_cast<int>(i));
+      listed[i] = true;
+    }
+  Filter<pcl::PointNormal> f;
+  configure(f);
+  f.setIndices(indices);
+  const auto out = runFilter(f, in);
+  ASSERT_EQ(out.size(), p.size());
+  double sum = 0, sum_before = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const Eigen::Vector3f n = out[i].getNormalVector3fMap(), before = (*in)[i].getNormalVector3fMap();
+    if (!listed[i]) {
+      ASSERT_TRUE(sameBits(n, before)) << "unlisted point " << i;
+      ASSERT_EQ(out[i].curvature, 0.5f);
+      continue;
+    }
+    ASSERT_NEAR(n.norm(), 1.f, 1e-4f) << "point " << i;
+    const double c = std::min(1.0, static_cast<double>(n.dot(out[i].getVector3fMap().normalized())));
+    ASSERT_GT(c, 0.0) << "point " << i << ": turned inward, unlike its input normal";
+    sum += std::acos(c) * 180.0 / M_PI;
+    sum_before += std::acos(std::min(1.0, static_cast<double>(before.dot(p[i].normalized())))) * 180.0 / M_PI;
+    ASSERT_TRUE(std::isfinite(out[i].curvature));
+    ASSERT_LT(out[i].curvature, 0.05f);  // a sphere's cap: nearly flat
+  }
+  EXPECT_NEAR(sum_before / indices->size(), 10.0, 0.01);
+  EXPECT_LT(sum / indices->size(), mean_degrees);
+  EXPECT_TRUE(out.is_dense);
+  EXPECT_EQ(f.getRefreshedNormals(), indices->size());
+  EXPECT_EQ(f.getPointsWithoutNormal(), 0u);
+
+  Filter<pcl::PointNormal> keep;
+  configure(keep);
+  keep.setRefreshNormals(false);
+  EXPECT_FALSE(keep.getRefreshNormals());
+  const auto kept = runFilter(keep, in);
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    ASSERT_TRUE(sameBits(kept[i].getNormalVector3fMap(), (*in)[i].getNormalVector3fMap())) << "point " << i;
+    ASSERT_EQ(kept[i].curvature, 0.5f);
+  }
+  EXPECT_EQ(keep.getRefreshedNormals(), 0u);
+}
+
 /// An index outside the cloud is a paps::Error (it once wrote outside a vector).
 template <template <typename> class Filter>
 void expectIndexOutOfRangeIsRejected(const Positions& p) {

@@ -191,6 +191,10 @@ TEST(LpfDenoising, DenseStaysDenseAndColoursKept) {
   expectDenseStaysDenseAndColoursKept<LpfDenoising>(smallSphere());
 }
 
+TEST(LpfDenoising, NormalsOfMovedPointsEstimatedAgainOrKeptOnRequest) {
+  expectNormalsRefreshed<LpfDenoising>(smallSphere(), 3.0, [](auto& f) { f.setParameters(quick()); });
+}
+
 TEST(LpfDenoising, OnlyIndexedPointsMove) { expectOnlyIndexedPointsMove<LpfDenoising>(smallSphere()); }
 
 TEST(LpfDenoising, IndexOutOfRangeIsRejected) { expectIndexOutOfRangeIsRejected<LpfDenoising>(smallSphere(500)); }

@@ -124,19 +124,8 @@ TEST(PointBilateralFilter, DenseStaysDenseAndColoursKept) {
   expectDenseStaysDenseAndColoursKept<PointBilateralFilter>(smallSphere());
 }
 
-TEST(PointBilateralFilter, NormalFieldsOfPointNormalKept) {
-  Positions p = smallSphere(1000);
-  auto in = toCloud<pcl::PointNormal>(p);
-  for (std::size_t i = 0; i < in->size(); ++i) {
-    (*in)[i].getNormalVector3fMap() = Eigen::Vector3f(0.f, 0.f, static_cast<float>(i));
-    (*in)[i].curvature = 0.5f;
-  }
-  PointBilateralFilter<pcl::PointNormal> f;
-  const auto out = runFilter(f, in);
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    EXPECT_EQ(out[i].normal_z, static_cast<float>(i));
-    EXPECT_EQ(out[i].curvature, 0.5f);
-  }
+TEST(PointBilateralFilter, NormalsOfMovedPointsEstimatedAgainOrKeptOnRequest) {
+  expectNormalsRefreshed<PointBilateralFilter>(smallSphere(), 3.0, [](auto&) {});
 }
 
 TEST(PointBilateralFilter, OnlyIndexedPointsMove) {

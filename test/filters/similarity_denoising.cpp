@@ -294,6 +294,10 @@ TEST(SimilarityDenoising, OrganisedCloudKeepsItsShape) {
   for (std::size_t i = 0; i < in->size(); i += 97) EXPECT_TRUE(sameBits(out[i].getVector3fMap(), (*in)[i].getVector3fMap()));
 }
 
+TEST(SimilarityDenoising, NormalsOfMovedPointsEstimatedAgainOrKeptOnRequest) {
+  expectNormalsRefreshed<SimilarityDenoising>(noisySphere(3000, 0.0025f, 5), 3.0, [](auto&) {});
+}
+
 TEST(SimilarityDenoising, OnlyIndexedPointsMove) {
   expectOnlyIndexedPointsMove<SimilarityDenoising>(smallNoisyPlane());
 }

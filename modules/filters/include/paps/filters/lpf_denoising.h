@@ -15,6 +15,7 @@
 #include <paps/core/local_probing_field.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
+#include <paps/core/normal_refresh.h>
 #include <paps/core/thread_count.h>
 
 namespace paps {
@@ -95,8 +96,11 @@ Positions lpfDenoisePositions(const Positions& points, const LpfDenoisingParamet
                               LpfDenoisingReport* report = nullptr, const std::vector<std::uint8_t>& movable = {},
                               const ProgressCallback& progress = {});
 
+/// The pcl::Filter stage: the points in the indices move; for a point type with normals their
+/// normals and curvature are estimated again on the output at the filter's radius
+/// (NormalRefreshOption; off: the input's are kept), on a wire any direction across it.
 template <typename PointT>
-class LpfDenoising : public pcl::Filter<PointT>, public ThreadCountOption {
+class LpfDenoising : public pcl::Filter<PointT>, public ThreadCountOption, public NormalRefreshOption {
   using Base = pcl::Filter<PointT>;
   using PointCloud = typename Base::PointCloud;
 

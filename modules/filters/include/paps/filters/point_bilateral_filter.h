@@ -7,6 +7,7 @@
 // w_s = exp(-h^2 / 2 sigma_s^2) (feature preservation).
 #include <pcl/filters/filter.h>
 
+#include <paps/core/normal_refresh.h>
 #include <paps/core/thread_count.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
@@ -40,8 +41,11 @@ Positions bilateralFilterPositions(const Positions& points, const PointBilateral
                                    const std::vector<std::uint8_t>& movable = {},
                                    const ProgressCallback& progress = {});
 
+/// The pcl::Filter stage: the points in the indices move; for a point type with normals their
+/// normals and curvature are estimated again on the output at the filter's radius
+/// (NormalRefreshOption; off: the input's are kept).
 template <typename PointT>
-class PointBilateralFilter : public pcl::Filter<PointT>, public ThreadCountOption {
+class PointBilateralFilter : public pcl::Filter<PointT>, public ThreadCountOption, public NormalRefreshOption {
   using Base = pcl::Filter<PointT>;
   using PointCloud = typename Base::PointCloud;
 

@@ -11,6 +11,7 @@
 
 #include <pcl/filters/filter.h>
 
+#include <paps/core/normal_refresh.h>
 #include <paps/core/thread_count.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
@@ -121,11 +122,12 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
                               const ProgressCallback& progress = {});
 
 /// The pcl::Filter stage. The output has the input's size and fields; only the positions of
-/// the points in the indices move. NaN points pass through; is_dense is kept honest. When the
-/// cloud's sensor_origin_ is set (non-zero) and no viewpoint was given, normals are oriented
-/// towards it.
+/// the points in the indices move, and, for a point type with normals, their normals and
+/// curvature are estimated again on the output (NormalRefreshOption; off: the input's are
+/// kept). NaN points pass through; is_dense is kept honest. When the cloud's sensor_origin_ is
+/// set (non-zero) and no viewpoint was given, normals are oriented towards it.
 template <typename PointT>
-class SimilarityDenoising : public pcl::Filter<PointT>, public ThreadCountOption {
+class SimilarityDenoising : public pcl::Filter<PointT>, public ThreadCountOption, public NormalRefreshOption {
   using Base = pcl::Filter<PointT>;
   using PointCloud = typename Base::PointCloud;
 

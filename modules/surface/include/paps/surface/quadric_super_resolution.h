@@ -46,7 +46,8 @@ struct QuadricSuperResolutionParameters {
   /// Super-resolution bins per side (0: round(grid_lr x sqrt(K)), K the mean summed
   /// similarity weight, at most 4 x grid_lr).
   int grid_sr = 0;
-  /// Similar patches kept per patch at most (0 to 256).
+  /// Similar patches kept per patch at most (0 to 256; 0: none, each SR patch is built from its
+  /// own data alone: a local interpolation).
   int similar_patches = 16;
   /// Kd-tree candidates per orientation before the exact masked re-ranking (1 to 1024).
   int candidates = 24;

@@ -12,6 +12,7 @@ void LpfDenoising<PointT>::applyFilter(PointCloud& output) {
                       [&](const Positions& in, const std::vector<std::uint8_t>& movable) {
                         return lpfDenoisePositions(in, params_, &report_, movable, progress_);
                       });
+  refreshOutputNormals(*this->input_, *this->indices_, output, report_.radius);
 }
 
 }  // namespace paps

@@ -12,6 +12,7 @@ void PointBilateralFilter<PointT>::applyFilter(PointCloud& output) {
                       [&](const Positions& in, const std::vector<std::uint8_t>& movable) {
                         return bilateralFilterPositions(in, params_, &report_, movable, progress_);
                       });
+  refreshOutputNormals(*this->input_, *this->indices_, output, report_.radius);
 }
 
 }  // namespace paps

@@ -46,6 +46,7 @@ void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {
                       [&](const Positions& in, const std::vector<std::uint8_t>& movable) {
                         return denoiseBySimilarity(in, params, &report_, movable, progress_);
                       });
+  refreshOutputNormals(*this->input_, *this->indices_, output, report_.radius);
 }
 
 }  // namespace paps

@@ -1,0 +1,98 @@
+#pragma once
+// Normals of a filtered cloud. A filter that moves points (denoising, bilateral, LPF) changes
+// the surface the points describe; the normals a PointNormal cloud carried describe the old
+// one (noise included). PCL's MovingLeastSquares recomputes them (setComputeNormals); our
+// point-moving filters do too, by default, for every point type with normal_x/y/z.
+#include <cstddef>
+#include <cstdint>
+#include <optional>
+#include <vector>
+
+#include <paps/core/positions.h>
+#include <paps/core/view_point_option.h>
+
+namespace paps {
+
+/// Normals of moved points, and what the refresh met.
+struct NormalRefresh {
+  Normals normals;                ///< one per point: the new normal where moved, else the previous
+  std::vector<float> variation;   ///< surface variation (PCL's `curvature`) where moved, else NaN
+  std::size_t refreshed = 0;      ///< moved points that got a normal
+  std::size_t without_normal = 0; ///< moved finite points with fewer than 3 neighbours or collinear ones: NaN
+};
+
+/// At most this many nearest neighbours within the radius enter a refreshed normal: enough for
+/// a PCA normal, and the denoiser's noise-grown radius (up to ~190 neighbours) would otherwise
+/// make the graph of a 1M-point cloud weigh 0.8 GB.
+constexpr int kRefreshNormalNeighbours = 64;
+
+/// Normals of `points` (a filter's output) for the points with moved[i] set (all when empty):
+/// PCA over the finite points within `radius` (at most kRefreshNormalNeighbours nearest),
+/// each turned to the side of the sum of the previous normals in that ball that are usable
+/// (finite, length over 0.5: PCL's default-constructed 0 0 0 is not), otherwise, where the
+/// ball holds none, towards `viewpoint` when given, otherwise by propagation over the
+/// neighbour graph (orientNormalsByPropagation). The result
+/// does not depend on the order of the points nor on the thread count. Throws InvalidParameter
+/// for radius <= 0 or sizes that differ from `points`.
+NormalRefresh refreshNormals(const Positions& points, float radius, const Normals& previous,
+                             const std::vector<std::uint8_t>& moved,
+                             const std::optional<Eigen::Vector3f>& viewpoint = std::nullopt);
+
+/// The setRefreshNormals() of a point-moving PAPS filter (on by default). Point types
+/// without normals are not affected.
+class NormalRefreshOption {
+ public:
+  /// true (default): the normals (and PCL's `curvature`, the surface variation) of the moved
+  /// points are estimated again on the output; false: they keep the input's values.
+  void setRefreshNormals(bool on) { refresh_normals_ = on; }
+  bool getRefreshNormals() const { return refresh_normals_; }
+  /// Of the last run: moved points that got a new normal, and moved finite points that got
+  /// NaN (fewer than 3 neighbours, or collinear ones, as pcl::NormalEstimation).
+  std::size_t getRefreshedNormals() const { return refreshed_normals_; }
+  std::size_t getPointsWithoutNormal() const { return points_without_normal_; }
+
+ protected:
+  /// Runs refreshCloudNormals with this option's setting and keeps its counts.
+  template <typename PointT>
+  void refreshOutputNormals(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices,
+                            pcl::PointCloud<PointT>& output, float radius);
+
+  bool refresh_normals_ = true;
+  std::size_t refreshed_normals_ = 0, points_without_normal_ = 0;
+};
+
+/// For a point type with normals, when `on`: refreshNormals on `output` (the filtered copy of
+/// `input`) for the points at `indices`, the previous normals read from `input`, and the new
+/// ones written with their curvature; is_dense turns false when a moved point gets a NaN
+/// normal. Returns the refresh's report (empty for other point types or when off).
+template <typename PointT>
+NormalRefresh refreshCloudNormals(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices,
+                                  pcl::PointCloud<PointT>& output, float radius, bool on) {
+  NormalRefresh r;
+  if constexpr (detail::HasNormal<PointT>::value) {
+    if (!on || output.size() != input.size()) return r;
+    std::vector<std::uint8_t> moved(input.size(), 0);
+    for (const auto i : indices) moved[static_cast<std::size_t>(i)] = 1;
+    Normals previous(input.size());
+    for (std::size_t i = 0; i < input.size(); ++i) previous[i] = input[i].getNormalVector3fMap();
+    r = refreshNormals(positionsOf(output), radius, previous, moved,
+                       knownSensorOrigin(input.sensor_origin_.template head<3>()));
+    for (std::size_t i = 0; i < output.size(); ++i) {
+      if (!moved[i]) continue;
+      output[i].getNormalVector3fMap() = r.normals[i];
+      if constexpr (detail::HasCurvature<PointT>::value) output[i].curvature = r.variation[i];
+      if (!isFinite(r.normals[i])) output.is_dense = false;
+    }
+  }
+  return r;
+}
+
+template <typename PointT>
+void NormalRefreshOption::refreshOutputNormals(const pcl::PointCloud<PointT>& input, const pcl::Indices& indices,
+                                               pcl::PointCloud<PointT>& output, float radius) {
+  const NormalRefresh r = refreshCloudNormals(input, indices, output, radius, refresh_normals_);
+  refreshed_normals_ = r.refreshed;
+  points_without_normal_ = r.without_normal;
+}
+
+}  // namespace paps

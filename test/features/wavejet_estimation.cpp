@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 #include <omp.h>
 #include <pcl/common/io.h>
+#include <pcl/features/normal_3d.h>
 #include <pcl/point_types.h>
 #include <pcl/search/kdtree.h>
 
@@ -311,6 +312,111 @@ TEST(WavejetEstimation, KSearchAndOtherPointTypes) {
   EXPECT_TRUE(out.is_dense);
   EXPECT_NEAR(out[0].k1, 1.0, 0.01);
   EXPECT_NEAR(out[0].k2, -1.0, 0.01);
+}
+
+// PCL's output types, as drop-ins for pcl::PrincipalCurvaturesEstimation: magnitudes of the
+// principal curvatures in 1/m, largest first, and the direction of the largest.
+TEST(WavejetEstimation, PclPrincipalCurvaturesOnASphereAndACylinder) {
+  paps::Random rng(8);
+  Positions sphere, cylinder;
+  while (sphere.size() < 6000) {
+    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    sphere.push_back((0.5 * v.normalized()).cast<float>());  // radius 0.5: |k| = 2
+  }
+  while (cylinder.size() < 8000) {  // radius 0.25 (|k1| = 4, k2 = 0), axis z, height 1
+    const double a = rng.uniform(0, 2 * kPi), z = rng.uniform(-0.5, 0.5);
+    cylinder.emplace_back(float(0.25 * std::cos(a)), float(0.25 * std::sin(a)), float(z));
+  }
+  auto run = [](const Positions& p) {
+    paps::WavejetEstimation<pcl::PointXYZ, pcl::PrincipalCurvatures> wj;
+    wj.setInputCloud(toCloud(p));
+    wj.setRadiusSearch(0.1);
+    pcl::PointCloud<pcl::PrincipalCurvatures> out;
+    wj.compute(out);
+    EXPECT_EQ(out.size(), p.size());
+    EXPECT_EQ(wj.getReport().fitted, p.size());
+    return out;
+  };
+  const auto s = run(sphere);
+  for (const auto& q : s) {
+    ASSERT_NEAR(q.pc1, 2.f, 0.04f);
+    ASSERT_NEAR(q.pc2, 2.f, 0.04f);
+    ASSERT_GE(q.pc1, q.pc2);
+  }
+  const auto c = run(cylinder);
+  std::size_t checked = 0;
+  for (std::size_t i = 0; i < cylinder.size(); ++i) {
+    if (std::abs(cylinder[i].z()) > 0.35f) continue;  // away from the open ends
+    ++checked;
+    ASSERT_NEAR(c[i].pc1, 4.f, 0.08f) << i;
+    ASSERT_LT(c[i].pc2, 0.08f) << i;
+    const Eigen::Vector3f d(c[i].principal_curvature_x, c[i].principal_curvature_y, c[i].principal_curvature_z);
+    ASSERT_NEAR(d.norm(), 1.f, 1e-4f);
+    ASSERT_LT(std::abs(d.z()), 0.03f) << "the curved direction is around the axis";
+  }
+  EXPECT_GT(checked, 5000u);
+
+  // The same fit as the PointWavejet output, only written the PCL way.
+  paps::WavejetEstimation<pcl::PointXYZ> wj;
+  wj.setInputCloud(toCloud(cylinder));
+  wj.setRadiusSearch(0.1);
+  pcl::PointCloud<paps::PointWavejet> full;
+  wj.compute(full);
+  for (std::size_t i = 0; i < cylinder.size(); ++i) {
+    ASSERT_EQ(c[i].pc1, std::max(std::abs(full[i].k1), std::abs(full[i].k2)));
+    ASSERT_EQ(c[i].pc2, std::min(std::abs(full[i].k1), std::abs(full[i].k2)));
+  }
+}
+
+// As a drop-in for pcl::NormalEstimation: the corrected normal, and PCL's own `curvature`
+// (the surface variation of the same ball) so that PCL stages reading it (region growing,
+// keypoints) see what they expect; with PointNormal output, x y z are left as they are.
+TEST(WavejetEstimation, PclNormalOutputCarriesPclsCurvature) {
+  Positions p = heightFieldSamples([](double x, double y) { return 0.25 * (x * x + y * y); }, 3000, 1.0, 5);
+  p.emplace_back(50.f, 50.f, 50.f);  // isolated: NaN, as PCL's
+  auto cloud = toCloud(p);
+  paps::WavejetEstimation<pcl::PointXYZ, pcl::Normal> wj;
+  wj.setInputCloud(cloud);
+  wj.setRadiusSearch(0.15);
+  wj.setViewPoint(0, 0, 10);
+  pcl::PointCloud<pcl::Normal> ours;
+  wj.compute(ours);
+  pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+  ne.setInputCloud(cloud);
+  ne.setRadiusSearch(0.15);
+  ne.setViewPoint(0, 0, 10);
+  pcl::PointCloud<pcl::Normal> pcl_normals;
+  ne.compute(pcl_normals);
+  ASSERT_EQ(ours.size(), p.size());
+  EXPECT_FALSE(ours.is_dense);
+  EXPECT_TRUE(std::isnan(ours.back().normal_x));
+  EXPECT_TRUE(std::isnan(ours.back().curvature));
+  std::size_t compared = 0;
+  for (std::size_t i = 0; i + 1 < p.size(); ++i) {
+    if (!std::isfinite(pcl_normals[i].curvature)) continue;
+    ++compared;
+    ASSERT_NEAR(ours[i].curvature, pcl_normals[i].curvature, 2e-5f + 1e-3f * pcl_normals[i].curvature) << i;
+    const Eigen::Vector3f n = ours[i].getNormalVector3fMap();
+    ASSERT_NEAR(n.norm(), 1.f, 1e-4f);
+    ASSERT_GT(n.z(), 0.f) << "towards the viewpoint";
+    // The exact normal of z = (x^2 + y^2) / 4.
+    const Eigen::Vector3f exact = Eigen::Vector3f(-p[i].x() / 2, -p[i].y() / 2, 1.f).normalized();
+    ASSERT_LT(angleDeg(n, exact), 0.5) << i;
+  }
+  EXPECT_GT(compared, 2900u);
+
+  paps::WavejetEstimation<pcl::PointXYZ, pcl::PointNormal> with_xyz;
+  with_xyz.setInputCloud(cloud);
+  with_xyz.setRadiusSearch(0.15);
+  with_xyz.setViewPoint(0, 0, 10);
+  pcl::PointCloud<pcl::PointNormal> pn;
+  pcl::copyPointCloud(*cloud, pn);
+  with_xyz.compute(pn);
+  for (std::size_t i = 0; i + 1 < p.size(); ++i) {
+    ASSERT_EQ(pn[i].getVector3fMap(), p[i]);
+    ASSERT_EQ(pn[i].getNormalVector3fMap(), ours[i].getNormalVector3fMap());
+    ASSERT_EQ(pn[i].curvature, ours[i].curvature);
+  }
 }
 
 TEST(WavejetEstimation, BadParametersThrow) {

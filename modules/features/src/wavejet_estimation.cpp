@@ -19,10 +19,26 @@ void toPoint(const WavejetResult& r, PointWavejet& out) {
   out.order = r.order;
 }
 
+void toPoint(const WavejetResult& r, pcl::PrincipalCurvatures& out) {
+  const bool first = !(std::abs(r.k2) > std::abs(r.k1));  // NaN: the first, all NaN anyway
+  const Eigen::Vector3f d = first ? r.direction1 : Eigen::Vector3f(r.normal.cross(r.direction1));
+  out.principal_curvature_x = d.x();
+  out.principal_curvature_y = d.y();
+  out.principal_curvature_z = d.z();
+  out.pc1 = std::max(std::abs(r.k1), std::abs(r.k2));
+  out.pc2 = std::min(std::abs(r.k1), std::abs(r.k2));
+  if (!r.valid()) out.pc1 = out.pc2 = NAN;
+}
+
 template class WavejetEstimation<pcl::PointXYZ>;
 template class WavejetEstimation<pcl::PointXYZI>;
 template class WavejetEstimation<pcl::PointNormal>;
 template class WavejetEstimation<pcl::PointXYZRGB>;
 template class WavejetEstimation<pcl::PointXYZRGBNormal>;
+// PCL's output types, for the input types most pipelines hold (others: PAPS_NO_PRECOMPILE).
+template class WavejetEstimation<pcl::PointXYZ, pcl::PrincipalCurvatures>;
+template class WavejetEstimation<pcl::PointXYZ, pcl::Normal>;
+template class WavejetEstimation<pcl::PointXYZ, pcl::PointNormal>;
+template class WavejetEstimation<pcl::PointNormal, pcl::PrincipalCurvatures>;
 
 }  // namespace paps

@@ -12,6 +12,15 @@
 //   pcl::PointCloud<paps::PointWavejet> out;
 //   wj.compute(out);               // NaN outputs (is_dense false) where too few neighbours
 //
+// PCL's own output types work too, as drop-ins for PCL's estimators in a pipeline:
+//  - pcl::PrincipalCurvatures (as pcl::PrincipalCurvaturesEstimation): principal_curvature =
+//    the unit direction of the curvature of largest magnitude, pc1 >= pc2 >= 0 the magnitudes
+//    |k| of the two principal curvatures in 1/metres (PCL's are eigenvalues of the projected
+//    normals' covariance, without units; the signs are in PointWavejet's k1, k2);
+//  - pcl::Normal, pcl::PointNormal (as pcl::NormalEstimation): the corrected normal, and in
+//    `curvature` PCL's surface variation lambda0 / (lambda0 + lambda1 + lambda2) of the same
+//    ball (the other fields of the output, x y z for PointNormal, are left as they are).
+//
 // Bad parameters throw paps::InvalidParameter (naming the parameter and the value), an empty
 // input paps::InvalidInput: no silent empty output.
 #include <memory>
@@ -100,6 +109,9 @@ class WavejetEstimation : public pcl::Feature<PointInT, PointOutT>, public Threa
 
 /// Writes one result into a PointWavejet (all NaN, order -1, when invalid).
 void toPoint(const WavejetResult& r, PointWavejet& out);
+/// Into a pcl::PrincipalCurvatures: the direction of the curvature of largest magnitude,
+/// pc1 >= pc2 >= 0 the magnitudes (1/m); all NaN when invalid.
+void toPoint(const WavejetResult& r, pcl::PrincipalCurvatures& out);
 
 }  // namespace paps
 

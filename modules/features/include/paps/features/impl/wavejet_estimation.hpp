@@ -2,14 +2,24 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <type_traits>
 
 #include <paps/core/error.h>
 #include <paps/core/positions.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/features/wavejet_estimation.h>
 #include <paps/features/wavejet_noise.h>
 
 namespace paps {
+
+namespace detail {
+// Output types written by toPoint; the others (pcl::Normal, pcl::PointNormal, ...) get the
+// normal and PCL's surface variation.
+template <typename PointOutT>
+constexpr bool kWavejetToPoint =
+    std::is_same_v<PointOutT, PointWavejet> || std::is_same_v<PointOutT, pcl::PrincipalCurvatures>;
+}  // namespace detail
 
 template <typename PointInT, typename PointOutT>
 bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
@@ -41,6 +51,9 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
 
 template <typename PointInT, typename PointOutT>
 void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& output) {
+  static_assert(detail::kWavejetToPoint<PointOutT> || detail::HasNormal<PointOutT>::value,
+                "WavejetEstimation writes paps::PointWavejet, pcl::PrincipalCurvatures, or a type with normals");
+  constexpr bool variation_out = !detail::kWavejetToPoint<PointOutT> && detail::HasCurvature<PointOutT>::value;
   const ScopedThreadCount threads(this->threads_);
   const Positions surface = positionsOf(*this->surface_);
   const pcl::Indices& indices = *this->indices_;
@@ -49,6 +62,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   if (keep_coefficients_) coefficients_.resize(indices.size());
   std::vector<WavejetResult> results(indices.size());
   std::vector<int> neighbour_count(indices.size(), 0);
+  std::vector<float> variation(variation_out ? indices.size() : 0, NAN);  // as pcl::NormalEstimation's curvature
   const bool by_radius = this->k_ == 0;
   // The order policy: automatic runs the pilot over the search surface at the search radius
   // (for a k search, the radius holding k on average), no support growth.
@@ -127,6 +141,9 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
                                 initial_normals_ ? (*initial_normals_)[idx] : nan3,
                                 orientation_ ? (*orientation_)[idx] : nan3,
                                 keep_coefficients_ ? &coefficients_[i] : nullptr);
+        if constexpr (variation_out)
+          if (results[i].valid())
+            pcaNormal(surface, nn_int.data(), static_cast<int>(nn_int.size()), nullptr, &variation[i]);
       }
       reporter.advance();
     }
@@ -143,7 +160,12 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   double sum = 0;
   bool dense = true;
   for (std::int64_t i = 0; i < count; ++i) {
-    toPoint(results[i], output[i]);
+    if constexpr (detail::kWavejetToPoint<PointOutT>) {
+      toPoint(results[i], output[i]);
+    } else {
+      output[i].getNormalVector3fMap() = results[i].normal;
+      if constexpr (variation_out) output[i].curvature = variation[i];
+    }
     if (!isFinite((*this->input_)[indices[i]].getVector3fMap())) { ++report_.non_finite; dense = false; continue; }
     if (!results[i].valid()) {
       ++(neighbour_count[i] >= run.beta * wavejetUnknowns(2) ? report_.failed_fits : report_.too_few_neighbours);

@@ -301,13 +301,16 @@ void refreshBlobNormals(pcl::PCLPointCloud2& cloud, const Positions& moved, floa
   setNormals(cloud, r.normals);
   for (const auto& f : cloud.fields) {
     if (f.name != "curvature" || f.datatype != pcl::PCLPointField::FLOAT32) continue;
-    for (std::size_t i = 0; i < r.variation.size(); ++i)
-      std::memcpy(&cloud.data[i * cloud.point_step + f.offset], &r.variation[i], sizeof(float));
+    for (std::size_t i = 0; i < r.variation.size(); ++i)  // where refreshed, or NaN with the normal
+      if (std::isfinite(r.variation[i]) || !isFinite(r.normals[i]))
+        std::memcpy(&cloud.data[i * cloud.point_step + f.offset], &r.variation[i], sizeof(float));
   }
   cloud.is_dense = cloud.is_dense && r.without_normal == 0;
   std::printf("normals%s estimated again on the output (radius %g m, at most %d neighbours): %zu\n",
               hasField(cloud, "curvature") ? " and curvature" : "", double(radius), kRefreshNormalNeighbours,
               r.refreshed);
+  if (r.kept_previous)
+    std::printf("normals: %zu points with too few neighbours for a new one kept the input's\n", r.kept_previous);
   if (r.without_normal)
     std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones): normal NaN\n",
                  r.without_normal);

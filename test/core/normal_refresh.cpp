@@ -121,22 +121,42 @@ TEST(NormalRefresh, SameNormalsWhateverTheOrderOfThePoints) {
   for (std::size_t i = 0; i < p.size(); ++i) ASSERT_EQ(b.normals[i], a.normals[perm[i]]) << "point " << i;
 }
 
-TEST(NormalRefresh, IsolatedAndNonFinitePointsGetNaN) {
+TEST(NormalRefresh, IsolatedPointsGetNaNAndNonFiniteOnesPassThrough) {
   Positions p = flatGrid();
   p.emplace_back(5.f, 5.f, 5.f);           // alone: no normal
   p.emplace_back(kNaN, kNaN, kNaN);        // not a point
   const Normals none(p.size(), Eigen::Vector3f::Zero());
   const paps::NormalRefresh r = paps::refreshNormals(p, 0.025f, none, {});
   EXPECT_TRUE(std::isnan(r.normals[p.size() - 2].x()));
-  EXPECT_TRUE(std::isnan(r.normals[p.size() - 1].x()));
+  EXPECT_EQ(r.normals[p.size() - 1], Eigen::Vector3f::Zero());  // as it was, as the filters pass it
   EXPECT_EQ(r.without_normal, 1u);  // the NaN point is not counted: it has no position
   EXPECT_EQ(r.refreshed, p.size() - 2);
+  // With an input normal, the isolated point keeps it (and NaN variation: nothing new).
+  Normals given(p.size(), Eigen::Vector3f::UnitZ());
+  given[p.size() - 2] = Eigen::Vector3f(0.6f, 0.f, 0.8f);
+  const paps::NormalRefresh k = paps::refreshNormals(p, 0.025f, given, {});
+  EXPECT_EQ(k.normals[p.size() - 2], given[p.size() - 2]);
+  EXPECT_TRUE(std::isnan(k.variation[p.size() - 2]));
+  EXPECT_EQ(k.kept_previous, 1u);
+  EXPECT_EQ(k.without_normal, 0u);
+}
+
+TEST(NormalRefresh, RadiusZeroMeansNoNeighbourhood) {
+  // What a filter reports when it found none (one point, every point at one position).
+  const Positions p(5, Eigen::Vector3f(1.f, 2.f, 3.f));
+  Normals previous(p.size(), Eigen::Vector3f::Zero());
+  previous[2] = Eigen::Vector3f::UnitY();
+  const paps::NormalRefresh r = paps::refreshNormals(p, 0.f, previous, {});
+  EXPECT_EQ(r.normals[2], Eigen::Vector3f::UnitY());
+  EXPECT_EQ(r.kept_previous, 1u);
+  EXPECT_EQ(r.without_normal, 4u);
+  EXPECT_EQ(r.refreshed, 0u);
 }
 
 TEST(NormalRefresh, BadParametersAreNamed) {
   const Positions p = flatGrid();
   const Normals n(p.size(), Eigen::Vector3f::UnitZ());
-  EXPECT_THROW(paps::refreshNormals(p, 0.f, n, {}), paps::InvalidParameter);
+  EXPECT_THROW(paps::refreshNormals(p, -0.01f, n, {}), paps::InvalidParameter);
   EXPECT_THROW(paps::refreshNormals(p, kNaN, n, {}), paps::InvalidParameter);
   EXPECT_THROW(paps::refreshNormals(p, 0.02f, Normals(3), {}), paps::InvalidParameter);
   EXPECT_THROW(paps::refreshNormals(p, 0.02f, n, std::vector<std::uint8_t>(3, 1)), paps::InvalidParameter);

@@ -181,8 +181,13 @@ void expectAllIdenticalPointsDoNotCrash(FilterFn filter) {
   const Positions out = filter(same, params, &report);
   for (std::size_t i = 0; i < out.size(); ++i) EXPECT_TRUE(sameBits(out[i], same[i])) << i;
   EXPECT_EQ(report.isolated, same.size());
+  // No radius can be chosen, and none is needed: left as they are, as one point alone is.
   params.radius = 0.f;
-  EXPECT_THROW(filter(same, params, nullptr), InvalidInput);
+  Report automatic;
+  const Positions out2 = filter(same, params, &automatic);
+  for (std::size_t i = 0; i < out2.size(); ++i) EXPECT_TRUE(sameBits(out2[i], same[i])) << i;
+  EXPECT_EQ(automatic.isolated, same.size());
+  EXPECT_EQ(automatic.moved, 0u);
 }
 
 /// NaN and infinite points pass through bit for bit and are counted, the other fields

@@ -223,9 +223,13 @@ TEST(LpfDenoising, TinyCloudsGiveFiniteOutput) {
 }
 
 TEST(LpfDenoising, AllIdenticalPointsStayPut) {
-  // No scale to choose: a clear error; with a given radius the points stay where they are.
+  // No scale to choose and none needed: the points stay where they are, with or without a
+  // given radius, as one point alone does.
   const Positions same(200, Eigen::Vector3f(1.f, 2.f, 3.f));
-  EXPECT_THROW(paps::lpfDenoisePositions(same, {}), paps::InvalidInput);
+  LpfDenoisingReport automatic;
+  const Positions kept = paps::lpfDenoisePositions(same, {}, &automatic);
+  for (std::size_t i = 0; i < kept.size(); ++i) EXPECT_TRUE(sameBits(kept[i], same[i])) << i;
+  EXPECT_EQ(automatic.isolated, same.size());
   LpfDenoisingParameters p;
   p.probing.radius = 0.1f;
   LpfDenoisingReport r;

@@ -16,8 +16,8 @@ bool usable(const Eigen::Vector3f& n) { return isFinite(n) && n.squaredNorm() > 
 NormalRefresh refreshNormals(const Positions& points, float radius, const Normals& previous,
                              const std::vector<std::uint8_t>& moved,
                              const std::optional<Eigen::Vector3f>& viewpoint) {
-  if (!(radius > 0) || !std::isfinite(radius))
-    throw InvalidParameter("radius", detail::toString(radius), "a finite value > 0");
+  if (!(radius >= 0) || !std::isfinite(radius))
+    throw InvalidParameter("radius", detail::toString(radius), "a finite value >= 0 (0: no neighbourhood)");
   if (previous.size() != points.size())
     throw InvalidParameter("previous normals", detail::toString(previous.size()), "one per point");
   if (!moved.empty() && moved.size() != points.size())
@@ -33,8 +33,11 @@ NormalRefresh refreshNormals(const Positions& points, float radius, const Normal
   // the order of the input.
   const std::vector<int> order = spatialOrderAll(points);
   const Positions sorted = gathered(points, order);
-  const SpatialIndex index(sorted);
-  const NeighbourGraph graph = NeighbourGraph::byRadius(sorted, index, radius, kRefreshNormalNeighbours);
+  // Radius 0 (a filter that found no neighbourhood, e.g. one point, or every point at one
+  // position): no new estimate anywhere.
+  const NeighbourGraph graph =
+      radius > 0 ? NeighbourGraph::byRadius(sorted, SpatialIndex(sorted), radius, kRefreshNormalNeighbours)
+                 : NeighbourGraph::fromRows(std::vector<std::int64_t>(sorted.size() + 1, 0), {});
   std::vector<float> variation;
   Normals fresh = estimateNormals(sorted, graph, &variation);
 
@@ -59,11 +62,18 @@ NormalRefresh refreshNormals(const Positions& points, float radius, const Normal
     const auto i = static_cast<std::size_t>(order[k]);
     if (!is_moved(i)) continue;
     Eigen::Vector3f n = fresh[k];
-    if (isFinite(n) && n.dot(hint[k]) < 0) n = -n;
+    if (!isFinite(n)) {
+      // No estimate (too few neighbours, collinear or coincident ones): the input's normal,
+      // when it had one, is still the best there is; otherwise NaN, as PCL's.
+      if (!isFinite(points[i])) continue;  // not a point: passed through as it was
+      if (usable(previous[i])) ++r.kept_previous;
+      else r.normals[i] = n, ++r.without_normal;
+      continue;
+    }
+    if (n.dot(hint[k]) < 0) n = -n;
     r.normals[i] = n;
     r.variation[i] = variation[k];
-    if (isFinite(n)) ++r.refreshed;
-    else if (isFinite(points[i])) ++r.without_normal;
+    ++r.refreshed;
   }
   return r;
 }

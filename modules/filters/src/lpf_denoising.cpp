@@ -213,6 +213,8 @@ Positions lpfDenoisePositions(const Positions& points, const LpfDenoisingParamet
                               LpfDenoisingReport* report, const std::vector<std::uint8_t>& movable,
                               const ProgressCallback& progress) {
   params.validate();
+  checkMovableInput(points, movable);
+  if (leaveOnePositionAsItIs(points, report)) return points;
   return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
     return denoiseInSpatialOrder(p, params, report, m, progress);
   });

@@ -91,6 +91,8 @@ Positions bilateralFilterPositions(const Positions& points, const PointBilateral
                                    const std::vector<std::uint8_t>& movable,
                                    const ProgressCallback& progress) {
   params.validate();
+  checkMovableInput(points, movable);
+  if (leaveOnePositionAsItIs(points, report_out)) return points;
   // In Z order, as the similarity denoiser (1M shuffled points: 2.05 s in input order,
   // 1.40 s sorted); the output then does not depend on the input order.
   return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {

@@ -3,6 +3,7 @@
 // the surface the points describe; the normals a PointNormal cloud carried describe the old
 // one (noise included). PCL's MovingLeastSquares recomputes them (setComputeNormals); our
 // point-moving filters do too, by default, for every point type with normal_x/y/z.
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <optional>
@@ -16,9 +17,12 @@ namespace paps {
 /// Normals of moved points, and what the refresh met.
 struct NormalRefresh {
   Normals normals;                ///< one per point: the new normal where moved, else the previous
-  std::vector<float> variation;   ///< surface variation (PCL's `curvature`) where moved, else NaN
-  std::size_t refreshed = 0;      ///< moved points that got a normal
-  std::size_t without_normal = 0; ///< moved finite points with fewer than 3 neighbours or collinear ones: NaN
+  std::vector<float> variation;   ///< surface variation (PCL's `curvature`) where refreshed, else NaN
+  std::size_t refreshed = 0;      ///< moved points that got a new normal
+  /// Moved finite points with no new estimate (fewer than 3 neighbours, or only collinear or
+  /// coincident ones) that kept their usable previous normal (and curvature).
+  std::size_t kept_previous = 0;
+  std::size_t without_normal = 0; ///< the same without a usable previous normal: NaN, as PCL's
 };
 
 /// At most this many nearest neighbours within the radius enter a refreshed normal: enough for
@@ -32,8 +36,10 @@ constexpr int kRefreshNormalNeighbours = 64;
 /// (finite, length over 0.5: PCL's default-constructed 0 0 0 is not), otherwise, where the
 /// ball holds none, towards `viewpoint` when given, otherwise by propagation over the
 /// neighbour graph (orientNormalsByPropagation). The result
-/// does not depend on the order of the points nor on the thread count. Throws InvalidParameter
-/// for radius <= 0 or sizes that differ from `points`.
+/// A moved point with no new estimate keeps its previous normal when that is usable, else gets
+/// NaN. Radius 0 means no neighbourhood (no new estimate anywhere). The result does not depend
+/// on the order of the points nor on the thread count. Throws InvalidParameter for a negative
+/// or non-finite radius, or sizes that differ from `points`.
 NormalRefresh refreshNormals(const Positions& points, float radius, const Normals& previous,
                              const std::vector<std::uint8_t>& moved,
                              const std::optional<Eigen::Vector3f>& viewpoint = std::nullopt);
@@ -47,8 +53,10 @@ class NormalRefreshOption {
   void setRefreshNormals(bool on) { refresh_normals_ = on; }
   bool getRefreshNormals() const { return refresh_normals_; }
   /// Of the last run: moved points that got a new normal, and moved finite points that got
-  /// NaN (fewer than 3 neighbours, or collinear ones, as pcl::NormalEstimation).
+  /// NaN (no new estimate and no input normal, as pcl::NormalEstimation).
   std::size_t getRefreshedNormals() const { return refreshed_normals_; }
+  /// Moved points with no new estimate that kept their input normal (NormalRefresh::kept_previous).
+  std::size_t getKeptNormals() const { return kept_normals_; }
   std::size_t getPointsWithoutNormal() const { return points_without_normal_; }
 
  protected:
@@ -58,7 +66,7 @@ class NormalRefreshOption {
                             pcl::PointCloud<PointT>& output, float radius);
 
   bool refresh_normals_ = true;
-  std::size_t refreshed_normals_ = 0, points_without_normal_ = 0;
+  std::size_t refreshed_normals_ = 0, kept_normals_ = 0, points_without_normal_ = 0;
 };
 
 /// For a point type with normals, when `on`: refreshNormals on `output` (the filtered copy of
@@ -78,10 +86,12 @@ NormalRefresh refreshCloudNormals(const pcl::PointCloud<PointT>& input, const pc
     r = refreshNormals(positionsOf(output), radius, previous, moved,
                        knownSensorOrigin(input.sensor_origin_.template head<3>()));
     for (std::size_t i = 0; i < output.size(); ++i) {
-      if (!moved[i]) continue;
+      // Refreshed (a finite variation comes with each new normal) or NaN; else kept as it was.
+      const bool refreshed = std::isfinite(r.variation[i]), none = !isFinite(r.normals[i]);
+      if (!moved[i] || !(refreshed || none)) continue;
       output[i].getNormalVector3fMap() = r.normals[i];
       if constexpr (detail::HasCurvature<PointT>::value) output[i].curvature = r.variation[i];
-      if (!isFinite(r.normals[i])) output.is_dense = false;
+      if (none) output.is_dense = false;
     }
   }
   return r;
@@ -92,6 +102,7 @@ void NormalRefreshOption::refreshOutputNormals(const pcl::PointCloud<PointT>& in
                                                pcl::PointCloud<PointT>& output, float radius) {
   const NormalRefresh r = refreshCloudNormals(input, indices, output, radius, refresh_normals_);
   refreshed_normals_ = r.refreshed;
+  kept_normals_ = r.kept_previous;
   points_without_normal_ = r.without_normal;
 }
 

@@ -139,6 +139,30 @@ inline std::size_t checkMovableInput(const Positions& points, const std::vector<
   return finite;
 }
 
+/// A cloud whose finite points all stand at one position has no scale and no surface: a
+/// point-moving filter leaves it as it is, every finite point counted as isolated (as one
+/// point alone is), rather than failing on the radius it cannot choose. Returns true in that
+/// case, with `report` (moved, isolated, non_finite; may be null) filled. Call after
+/// checkMovableInput.
+template <typename Report>
+bool leaveOnePositionAsItIs(const Positions& points, Report* report) {
+  const Eigen::Vector3f* first = nullptr;
+  std::size_t finite = 0;
+  for (const auto& p : points) {
+    if (!isFinite(p)) continue;
+    if (first && p != *first) return false;
+    if (!first) first = &p;
+    ++finite;
+  }
+  if (!first || finite < 2) return false;  // none, or one point: the stages' own paths
+  if (report) {
+    *report = Report();
+    report->isolated = finite;
+    report->non_finite = points.size() - finite;
+  }
+  return true;
+}
+
 /// Throws InvalidInput when a PCL-style stage runs before setInputCloud: pcl::Filter::filter
 /// only prints a message then (leaving the output as it was), and
 /// pcl::CloudSurfaceProcessing::process reads the missing cloud.

@@ -275,6 +275,17 @@ void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<
     }
 }
 
+void setCurvatureField(pcl::PCLPointCloud2& cloud, const std::vector<float>& values,
+                       const std::function<bool(std::size_t)>& write) {
+  for (const auto& f : cloud.fields) {
+    if (f.name != "curvature" || f.datatype != pcl::PCLPointField::FLOAT32) continue;
+    if (values.size() != std::size_t(cloud.width) * cloud.height)
+      throw InvalidParameter("curvature", std::to_string(values.size()), "one value per point");
+    for (std::size_t i = 0; i < values.size(); ++i)
+      if (!write || write(i)) std::memcpy(&cloud.data[i * cloud.point_step + f.offset], &values[i], sizeof(float));
+  }
+}
+
 bool blobNormals(const pcl::PCLPointCloud2& c, Normals& out) {
   int off[3] = {-1, -1, -1};
   const char* names[3] = {"normal_x", "normal_y", "normal_z"};
@@ -299,12 +310,9 @@ void refreshBlobNormals(pcl::PCLPointCloud2& cloud, const Positions& moved, floa
   }
   const NormalRefresh r = refreshNormals(moved, radius, previous, {}, knownSensorOrigin(origin));
   setNormals(cloud, r.normals);
-  for (const auto& f : cloud.fields) {
-    if (f.name != "curvature" || f.datatype != pcl::PCLPointField::FLOAT32) continue;
-    for (std::size_t i = 0; i < r.variation.size(); ++i)  // where refreshed, or NaN with the normal
-      if (std::isfinite(r.variation[i]) || !isFinite(r.normals[i]))
-        std::memcpy(&cloud.data[i * cloud.point_step + f.offset], &r.variation[i], sizeof(float));
-  }
+  // Curvature where refreshed, or NaN with the normal; kept where the normal was kept.
+  setCurvatureField(cloud, r.variation,
+                    [&](std::size_t i) { return std::isfinite(r.variation[i]) || !isFinite(r.normals[i]); });
   cloud.is_dense = cloud.is_dense && r.without_normal == 0;
   std::printf("normals%s estimated again on the output (radius %g m, at most %d neighbours): %zu\n",
               hasField(cloud, "curvature") ? " and curvature" : "", double(radius), kRefreshNormalNeighbours,

@@ -1,6 +1,7 @@
 #pragma once
 // Small shared pieces of the `paps` command line: argument parsing and a progress bar.
 #include <cstddef>
+#include <functional>
 #include <map>
 #include <string>
 #include <vector>
@@ -107,6 +108,11 @@ bool hasField(const pcl::PCLPointCloud2& c, const char* name);
 /// given (only for a cloud without normal fields). Throws InvalidInput when its normal fields
 /// are not float32.
 void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<float>* curvature = nullptr);
+
+/// Writes one value per point into the cloud's float32 `curvature` field, where `write(i)`
+/// holds (all when not given); nothing when the cloud has no such field.
+void setCurvatureField(pcl::PCLPointCloud2& cloud, const std::vector<float>& values,
+                       const std::function<bool(std::size_t)>& write = {});
 
 /// The float32 normal_x/y/z of every point (whatever their values: PCL writes 0 0 0 where no
 /// normal was computed). False, and `out` untouched, when the cloud has no such fields.

@@ -5,6 +5,7 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/cloud_io.h>
+#include <paps/core/normal_refresh.h>
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/surface/lpf_resampling.h>
@@ -25,9 +26,12 @@ const char* kSuperresUsage =
     "                         finite points of IN\n"
     "  --normals              also write the normal of the fitted surface at each output point\n"
     "                         (QSR: the SR surface's; APSS/RIMLS: the gradient of their fit),\n"
-    "                         oriented as the input's normals propagated over the scan, and\n"
+    "                         on the side of IN's own normals nearby when it has some, else\n"
+    "                         oriented by propagation over the scan, and\n"
     "                         PCL's curvature field (the surface variation of the input ball\n"
-    "                         each point was made from, as PCL's MLS)\n"
+    "                         each point was made from, as PCL's MLS); on by default when IN\n"
+    "                         has normal fields (they are then replaced, curvature too)\n"
+    "  --keep-normals         IN has normals: each new point carries its source point's instead\n"
     "  --orient M             with --normals: propagate (default) or viewpoint (each normal\n"
     "                         towards IN's sensor origin, a .pcd's VIEWPOINT, else the origin,\n"
     "                         where a range scan in its own frame has its sensor: right where\n"
@@ -74,11 +78,11 @@ const char* kSuperresUsage =
 }  // namespace
 
 int runSuperres(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt", "normals"});
+  const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "refit", "adapt", "normals", "keep-normals"});
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals", "orient"});
+               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals", "orient", "keep-normals"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   a.requireCloudOutput();
@@ -90,9 +94,10 @@ int runSuperres(int argc, char** argv) {
   std::vector<std::string> applies = {"factor", "method", "radius", "neighbours", "quiet", "timings"};
   if (method == "qsr")
     applies.insert(applies.end(), {"count", "similarity", "grid-lr", "grid-sr", "patches", "kernel", "similarity-scale",
-                                   "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient"});
+                                   "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient",
+                                   "keep-normals"});
   else if (method != "lpf")
-    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient"});
+    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals"});
   requireOptionsOf(a, applies, "--method " + method);
   const std::string out_path = a.positional.back();
   // Parameters are checked before the scans are read, so a bad value fails at once.
@@ -122,10 +127,23 @@ int runSuperres(int argc, char** argv) {
   Positions out;
   Normals normals;
   std::vector<float> curvature;  // PCL's curvature field, with --normals
-  Normals* const normals_out = a.has("normals") ? &normals : nullptr;
+  // Normals of the fitted surface: asked for, or the input has normal fields, which a new
+  // point's source point would otherwise lend it (the fit's are the surface's at the point).
+  if (a.has("normals") && a.has("keep-normals"))
+    throw InvalidParameter("keep-normals", "with --normals", "one of the two");
+  Normals* normals_out = a.has("normals") ? &normals : nullptr;
+  auto normalsFromInput = [&] {
+    if (!normals_out && !a.has("keep-normals") && hasField(first, "normal_x")) {
+      normals_out = &normals;
+      std::printf("normals: IN has normal fields: each new point gets the fitted surface's (--keep-normals: its "
+                  "source point's)\n");
+    }
+    if (a.has("orient") && !normals_out)
+      throw InvalidParameter("orient", a.text("orient", ""), "with --normals (it orients them)");
+  };
   const std::string orient = a.text("orient", "propagate");
   if (orient != "propagate" && orient != "viewpoint") throw InvalidParameter("orient", orient, "propagate or viewpoint");
-  if (a.has("orient") && !normals_out) throw InvalidParameter("orient", orient, "with --normals (it orients them)");
+
   if (method == "lpf") {
     LpfResamplingParameters p;
     p.factor = a.real("factor", p.factor);
@@ -162,6 +180,7 @@ int runSuperres(int argc, char** argv) {
     p.adapt_to_noise = a.has("adapt") || a.has("noise");
     p.validate();
     readScans();
+    normalsFromInput();
     QuadricSuperResolutionReport r;
     out = superResolveQuadric(scans, p, &r, progress, normals_out, normals_out ? &curvature : nullptr,
                               carries() ? &source : nullptr);
@@ -222,6 +241,7 @@ int runSuperres(int argc, char** argv) {
     }
     p.validate();
     readScans();
+    normalsFromInput();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     MlsUpsamplingReport r;
     out = upsampleMls(scans[0], method == "apss" ? MlsSurface::Apss : MlsSurface::Rimls, p, &r, progress, normals_out,
@@ -245,11 +265,22 @@ int runSuperres(int argc, char** argv) {
     pcl::toPCLPointCloud2(xyz, cloud);
   }
   if (normals_out) {
-    if (orient == "viewpoint") orientNormalsTowards(out, normals, origin);
+    Normals given;
+    if (orient == "viewpoint") {
+      orientNormalsTowards(out, normals, origin);
+    } else if (blobNormals(first, given) && anyUsableNormal(given)) {
+      // The side of the input's own normals nearby, over the propagated orientation.
+      orientNormalsByNearbyHints(out, normals, scans[0], given);
+      std::printf("normals: oriented as IN's normals nearby\n");
+    }
     // PCL's `curvature` beside the normals, as its MLS writes it: the surface variation of
-    // the input ball each output point was made from (an input with normals keeps its own
-    // curvature field, carried from that point).
-    setNormals(cloud, normals, hasField(cloud, "normal_x") ? nullptr : &curvature);
+    // the input ball each output point was made from.
+    if (hasField(cloud, "normal_x")) {  // carried from the source points: replaced, curvature too
+      setNormals(cloud, normals);
+      setCurvatureField(cloud, curvature);
+    } else {
+      setNormals(cloud, normals, &curvature);
+    }
   }
   saveCloudAtomic(out_path, cloud, origin);
   std::printf("wrote %s: %zu points\n", out_path.c_str(), out.size());

@@ -309,6 +309,19 @@ int sources(const std::string& in_path, const std::string& out_path, float reach
   return 0;
 }
 
+// Every point of OUT carries the normal and curvature the "stale-normals" input was written
+// with (a run told to keep the input's normals).
+int stale(const std::string& path) {
+  pcl::PointCloud<pcl::PointXYZINormal> cloud;
+  if (pcl::io::loadPCDFile(path, cloud) != 0 || cloud.empty()) return fail("cannot read " + path);
+  for (std::size_t i = 0; i < cloud.size(); ++i)
+    if (cloud[i].normal_x != 0.5f || cloud[i].normal_y != 0.f || cloud[i].normal_z != -0.8660254f ||
+        cloud[i].curvature != 0.5f)
+      return fail("point " + std::to_string(i) + " does not carry the input's normal and curvature");
+  std::printf("%zu points carry the input's normal and curvature\n", cloud.size());
+  return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -322,6 +335,7 @@ int main(int argc, char** argv) {
   if (mode == "halves" && argc == 4) return halves(argv[2], argv[3]);
   if (mode == "normals" && (argc == 4 || argc == 5)) return normals(argv[2], std::atof(argv[3]), argc == 5 ? argv[4] : "");
   if (mode == "sources" && argc == 5) return sources(argv[2], argv[3], static_cast<float>(std::atof(argv[4])));
+  if (mode == "stale" && argc == 3) return stale(argv[2]);
   if (mode == "keeps" && argc >= 4) return keeps(argv[2], argv[3], std::vector<std::string>(argv + 4, argv + argc));
   return fail("usage: paps_test_cloud_tool write OUT COUNT [binary|compressed|ascii] | check IN OUT");
 }

@@ -878,4 +878,22 @@ TEST(QuadricSuperResolution, NormalsFollowTheRelief) {
       ASSERT_GT(cloud_out[i].normal_z * z, 0.f) << i << " seen from z = " << z;
     }
   }
+  // An input with normals of its own: the output takes their side (here down, although the
+  // sensor origin is above), a given viewpoint still wins; positions unchanged.
+  auto with_normals = pcl::make_shared<pcl::PointCloud<pcl::PointNormal>>();
+  writePositions(c.sparse, *with_normals);
+  for (auto& q : *with_normals) q.getNormalVector3fMap() = Eigen::Vector3f(0.3f, 0.f, -0.95f).normalized();
+  with_normals->sensor_origin_ = Eigen::Vector4f(0.f, 0.f, 1.f, 0.f);
+  QuadricSuperResolution<pcl::PointNormal, pcl::PointNormal> hinted;
+  hinted.setInputCloud(with_normals);
+  hinted.setParameters(p);
+  hinted.process(cloud_out);
+  ASSERT_EQ(cloud_out.size(), out.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    ASSERT_EQ(Eigen::Vector3f(cloud_out[i].getVector3fMap()), out[i]) << i;
+    ASSERT_LT(cloud_out[i].normal_z, 0.f) << i << ": not on the input normals' side";
+  }
+  hinted.setViewPoint(0.f, 0.f, 1.f);
+  hinted.process(cloud_out);
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_GT(cloud_out[i].normal_z, 0.f) << i;
 }

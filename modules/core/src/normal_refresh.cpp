@@ -78,4 +78,40 @@ NormalRefresh refreshNormals(const Positions& points, float radius, const Normal
   return r;
 }
 
+bool anyUsableNormal(const Normals& normals) {
+  for (const auto& n : normals)
+    if (usable(n)) return true;
+  return false;
+}
+
+std::size_t orientNormalsByNearbyHints(const Positions& points, Normals& normals, const Positions& hint_points,
+                                       const Normals& hint_normals) {
+  if (normals.size() != points.size())
+    throw InvalidParameter("normals", detail::toString(normals.size()), "one per point");
+  if (hint_normals.size() != hint_points.size())
+    throw InvalidParameter("hint normals", detail::toString(hint_normals.size()), "one per hint point");
+  if (!anyUsableNormal(hint_normals)) return 0;
+  const SpatialIndex index(hint_points);
+  std::size_t turned = 0;
+#pragma omp parallel reduction(+ : turned)
+  {
+    std::vector<int> nn;
+    std::vector<float> d2;
+#pragma omp for schedule(static)
+    for (std::int64_t i = 0; i < static_cast<std::int64_t>(points.size()); ++i) {
+      Eigen::Vector3f& n = normals[static_cast<std::size_t>(i)];
+      if (!isFinite(n) || !isFinite(points[static_cast<std::size_t>(i)])) continue;
+      index.nearestK(points[static_cast<std::size_t>(i)], 16, nn, d2);
+      Eigen::Vector3f sum = Eigen::Vector3f::Zero();
+      for (const int j : nn)
+        if (usable(hint_normals[static_cast<std::size_t>(j)])) sum += hint_normals[static_cast<std::size_t>(j)].normalized();
+      if (n.dot(sum) < 0) {
+        n = -n;
+        ++turned;
+      }
+    }
+  }
+  return turned;
+}
+
 }  // namespace paps

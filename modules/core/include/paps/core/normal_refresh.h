@@ -44,6 +44,43 @@ NormalRefresh refreshNormals(const Positions& points, float radius, const Normal
                              const std::vector<std::uint8_t>& moved,
                              const std::optional<Eigen::Vector3f>& viewpoint = std::nullopt);
 
+/// Turns each of `normals` (one per point of `points`) to the side of the usable normals
+/// `hint_normals` (finite, length over 0.5; one per point of `hint_points`) of its 16 nearest
+/// hint points, summed: how new points (an upsampler's) take the side of the input's normals.
+/// A normal with no usable hint among them is left as it is. Returns how many were turned.
+/// Throws InvalidParameter when the sizes differ.
+std::size_t orientNormalsByNearbyHints(const Positions& points, Normals& normals, const Positions& hint_points,
+                                       const Normals& hint_normals);
+
+/// Whether any of `normals` is usable as an orientation (finite, length over 0.5).
+bool anyUsableNormal(const Normals& normals);
+
+/// The output normals of an upsampler (QSR, APSS, RIMLS), in this order: towards the explicit
+/// viewpoint when one is set; else, for an input type with normals that holds usable ones, to
+/// their side nearby (orientNormalsByNearbyHints); else towards the input's sensor origin when
+/// it has one; else as the stage propagated them.
+template <typename PointIn>
+void orientUpsampledNormals(const ViewPointOption& option, const pcl::PointCloud<PointIn>& input,
+                            const pcl::Indices& indices, const Positions& out, Normals& normals) {
+  if (option.hasViewPoint()) {
+    orientNormalsTowards(out, normals, option.getViewPoint());
+    return;
+  }
+  if constexpr (detail::HasNormal<PointIn>::value) {
+    Positions at;
+    Normals given;
+    for (const auto i : indices) {
+      at.push_back(input[static_cast<std::size_t>(i)].getVector3fMap());
+      given.push_back(input[static_cast<std::size_t>(i)].getNormalVector3fMap());
+    }
+    if (anyUsableNormal(given)) {
+      orientNormalsByNearbyHints(out, normals, at, given);
+      return;
+    }
+  }
+  if (const auto o = knownSensorOrigin(input.sensor_origin_.template head<3>())) orientNormalsTowards(out, normals, *o);
+}
+
 /// The setRefreshNormals() of a point-moving PAPS filter (on by default). Point types
 /// without normals are not affected.
 class NormalRefreshOption {

@@ -1,8 +1,9 @@
 #pragma once
 // The viewpoint of an output's normals, for a PAPS stage that writes normals (the upsamplers):
-// the setViewPoint() of pcl::NormalEstimation. By default the normals are oriented by
-// propagation over the scan, which can cross a fold between two scan pieces with the wrong
-// sign; a range scan in its sensor's frame is better served by its sensor's position.
+// the setViewPoint() of pcl::NormalEstimation. Without it the normals take the side of the
+// input's own normals when it has some, else face the input's sensor origin when it has one,
+// else keep the orientation propagated over the scan (orientUpsampledNormals), which can
+// cross a fold between two scan pieces with the wrong sign.
 #include <optional>
 
 #include <Eigen/Core>
@@ -32,19 +33,10 @@ class ViewPointOption {
     view_point_ = v;
     use_view_point_ = true;
   }
-  /// Back to the default: normals oriented by propagation over the scan.
+  /// Back to the default: the input normals' side, else the sensor origin, else propagation.
   void useNoViewPoint() { use_view_point_ = false; }
   bool hasViewPoint() const { return use_view_point_; }
   const Eigen::Vector3f& getViewPoint() const { return view_point_; }
-
- protected:
-  /// Orients `normals` (one per point of `points`) towards the viewpoint when one is set,
-  /// else towards the input's sensor origin when it has one (as pcl::NormalEstimation does);
-  /// otherwise they keep the orientation the stage propagated.
-  void orientTowardsViewPoint(const Positions& points, Normals& normals, const Eigen::Vector4f& sensor_origin) const {
-    if (use_view_point_) orientNormalsTowards(points, normals, view_point_);
-    else if (const auto o = knownSensorOrigin(sensor_origin.head<3>())) orientNormalsTowards(points, normals, *o);
-  }
 
  private:
   Eigen::Vector3f view_point_ = Eigen::Vector3f::Zero();

@@ -4,6 +4,7 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/normal_refresh.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/positions.h>
 #include <paps/core/source_fields.h>
@@ -33,7 +34,7 @@ void QuadricSuperResolution<PointIn, PointOut>::performProcessing(pcl::PointClou
   constexpr bool with_fields = !std::is_same_v<PointOut, pcl::PointXYZ>;
   const Positions out = superResolveQuadric(scans, params_, &report_, progress_, with_normals ? &normals : nullptr,
                                             with_curvature ? &curvature : nullptr, with_fields ? &source : nullptr);
-  if (with_normals) this->orientTowardsViewPoint(out, normals, this->input_->sensor_origin_);
+  if (with_normals) orientUpsampledNormals(*this, *this->input_, *this->indices_, out, normals);
   if (with_fields && source.size() == out.size()) copySourceFields(*this->input_, *this->indices_, source, output);
   writePositionsAndNormals(out, normals, output);
   writeCurvatures(curvature, output);

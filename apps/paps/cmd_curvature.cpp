@@ -158,6 +158,11 @@ WavejetParameters wavejetParameters(const Arguments& a, const char* default_poli
   // The cap of narrowing (0: 4 x --neighbours).
   w.narrowed_neighbours = a.integer("max-neighbours", w.narrowed_neighbours);
   validateAsOptions(kWavejetOptions, [&] { w.validate(); });
+  // A cap below the count every ball is widened to would be raised to it without a word.
+  const int count = a.integer("neighbours", 50);
+  if (w.narrowed_neighbours > 0 && w.narrowed_neighbours < count)
+    throw InvalidParameter("max-neighbours", std::to_string(w.narrowed_neighbours),
+                           "at least the neighbour count (--neighbours, " + std::to_string(count) + "), or 0: 4 x it");
   return w;
 }
 

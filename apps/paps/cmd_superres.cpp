@@ -178,7 +178,12 @@ int runSuperres(int argc, char** argv) {
     else if (denoise == "off") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
     else throw InvalidParameter("denoise", denoise, "auto, on or off");
     p.adapt_to_noise = a.has("adapt") || a.has("noise");
-    p.validate();
+    validateAsOptions({{"target_neighbours", "neighbours"}, {"similarity_scale", "similarity-scale"},
+                       {"grid_lr", "grid-lr"}, {"grid_sr", "grid-sr"}, {"similar_patches", "patches"},
+                       {"irls_iterations", "irls"}, {"seed_disc", "seed-disc"}, {"noise_sigma", "noise"},
+                       {"patch_radius", "radius"}, {"similarity_radius", "similarity"}, {"kernel_scale", "kernel"},
+                       {"thin_disc", "thin-disc"}},
+                      [&] { p.validate(); });
     readScans();
     normalsFromInput();
     QuadricSuperResolutionReport r;
@@ -239,7 +244,8 @@ int runSuperres(int argc, char** argv) {
       requireInRange("seed-disc", disc, 0.1, 10.0);
       p.disc_scale = static_cast<float>(disc / kMlsDiscSpacingsAtScaleOne);
     }
-    p.validate();
+    validateAsOptions({{"target_neighbours", "neighbours"}, {"max_neighbours", "max-neighbours"}},
+                      [&] { p.validate(); });
     readScans();
     normalsFromInput();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include <gtest/gtest.h>
+#include <omp.h>
 
 #include <paps/core/error.h>
 #include <paps/core/normal_refresh.h>
@@ -119,6 +120,19 @@ TEST(NormalRefresh, SameNormalsWhateverTheOrderOfThePoints) {
   const paps::NormalRefresh a = paps::refreshNormals(p, 0.15f, zero, {});
   const paps::NormalRefresh b = paps::refreshNormals(q, 0.15f, zero, {});
   for (std::size_t i = 0; i < p.size(); ++i) ASSERT_EQ(b.normals[i], a.normals[perm[i]]) << "point " << i;
+}
+
+TEST(NormalRefresh, SameNormalsWithOneOrTwoThreads) {
+  const Positions p = unitSphere(9000);
+  const Normals zero(p.size(), Eigen::Vector3f::Zero());
+  omp_set_num_threads(1);
+  const paps::NormalRefresh one = paps::refreshNormals(p, 0.15f, zero, {});
+  omp_set_num_threads(2);
+  const paps::NormalRefresh two = paps::refreshNormals(p, 0.15f, zero, {});
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    ASSERT_EQ(one.normals[i], two.normals[i]) << i;
+    ASSERT_EQ(one.variation[i], two.variation[i]) << i;
+  }
 }
 
 TEST(NormalRefresh, IsolatedPointsGetNaNAndNonFiniteOnesPassThrough) {

@@ -2,6 +2,7 @@
 // run, each at its default and at the best setting of a small sweep. Prints a table, writes a
 // CSV and PNG renders.
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -14,7 +15,16 @@
 #include <paps/core/metrics.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/normal_refresh.h>
+#include <paps/core/random.h>
 #include <paps/core/synthetic.h>
+#include <paps/filters/similarity_denoising.h>
+
+#include <pcl/common/common.h>
+#include <pcl/console/print.h>
+#include <pcl/features/normal_3d_omp.h>
+#include <pcl/io/ply_io.h>
+#include <pcl/search/kdtree.h>
+#include <pcl/surface/mls.h>
 
 #include "bench_worker.h"
 #include "cli_common.h"
@@ -38,7 +48,9 @@ const char* kBenchUsage =
     "                   noise), engraved-cylinder (3 cm, 2 mm, as engraved-plane), fandisk\n"
     "Columns: RMSE and p95 of the distance to the true surface; 'normal' the mean angle in\n"
     "degrees between each output point's PCA normal (at the input's 30-neighbour radius) and\n"
-    "the normal of the true surface's nearest triangle.\n";
+    "the normal of the true surface's nearest triangle. With rs1-scan-mesh, a table of the normals\n"
+    "a PointNormal cloud comes out with (rs1's vertices, mesh normals as the truth): the input's\n"
+    "PCL normals, ours estimated again on the output, PCL MLS's own (setComputeNormals).\n";
 
 struct Row {
   std::string dataset, noise, method, setting;
@@ -70,6 +82,92 @@ double normalError(const Positions& points, float radius, const TriangleMesh& me
     ++n;
   }
   return n ? sum / double(n) : NAN;
+}
+
+// The normals a PointNormal cloud comes out with: rs1's vertices with their mesh normals as
+// the truth, Gaussian noise of `noise` x the diagonal. A PCL user's normals of the noisy scan
+// (NormalEstimationOMP, k = 30, turned to the truth's side) are what a filter that keeps the
+// input's normals returns; ours are estimated again on the denoised output; PCL's MLS computes
+// its own (setComputeNormals) at our radius, on the points it keeps. Mean and median angle to
+// the truth, orientation-blind, and the share on the truth's other side.
+void normalRows(const std::string& rs1, const std::vector<double>& noises, std::vector<Row>& rows) {
+  using Cloud = pcl::PointCloud<pcl::PointNormal>;
+  Cloud truth;
+  {
+    const auto level = pcl::console::getVerbosityLevel();  // "no field 'curvature'": none is expected
+    pcl::console::setVerbosityLevel(pcl::console::L_ERROR);
+    const int rc = pcl::io::loadPLYFile(rs1, truth);
+    pcl::console::setVerbosityLevel(level);
+    if (rc < 0 || truth.empty()) throw IoError("cannot read the vertices of " + rs1);
+  }
+  Eigen::Vector4f lo, hi;
+  pcl::getMinMax3D(truth, lo, hi);
+  const float diagonal = (hi - lo).head<3>().norm();
+  std::printf("\nnormals of the output: rs1's %zu vertices, mesh normals as the truth; angle to it in degrees\n",
+              truth.size());
+  std::printf("%-6s %-44s %8s %8s %10s %9s\n", "noise", "normals", "mean", "median", "other side", "time(s)");
+  for (const double noise : noises) {
+    Cloud::Ptr noisy(new Cloud(truth));
+    Random rng(21);
+    for (auto& p : *noisy)
+      p.getVector3fMap() += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) *
+                            float(noise * diagonal);
+    auto report = [&](const std::string& what, const Cloud& c, const pcl::Indices& at, double seconds) {
+      std::vector<double> angle;
+      std::size_t other = 0;
+      for (std::size_t k = 0; k < c.size(); ++k) {
+        const Eigen::Vector3f n = c[k].getNormalVector3fMap(), t = truth[at[k]].getNormalVector3fMap().normalized();
+        if (!isFinite(n) || n.norm() < 0.5f) { angle.push_back(90); continue; }
+        other += n.dot(t) < 0;
+        angle.push_back(std::acos(std::min(1.0, std::abs(double(n.normalized().dot(t))))) * 180.0 / M_PI);
+      }
+      const ErrorStats e = summarize(angle);
+      std::vector<double> sorted = angle;
+      std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+      const double median = sorted[sorted.size() / 2];
+      std::printf("%-6s %-44s %8.2f %8.2f %9.2f%% %9.2f\n", fmt("%.2f%%", noise * 100).c_str(), what.c_str(), e.mean,
+                  median, 100.0 * other / c.size(), seconds);
+      Row row{"rs1-vertices", fmt("%.2f%%", noise * 100), what, "normals (mean angle)", false, {}, {}};
+      row.run.ok = true;
+      row.run.seconds = seconds;
+      row.normal_deg = e.mean;
+      rows.push_back(row);
+    };
+    pcl::Indices all(truth.size());
+    for (std::size_t i = 0; i < all.size(); ++i) all[i] = static_cast<int>(i);
+    auto t0 = std::chrono::steady_clock::now();
+    auto since = [&] { return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); };
+    pcl::NormalEstimationOMP<pcl::PointNormal, pcl::PointNormal> ne;
+    ne.setInputCloud(noisy);
+    ne.setKSearch(30);
+    ne.compute(*noisy);
+    for (std::size_t i = 0; i < noisy->size(); ++i)
+      if ((*noisy)[i].getNormalVector3fMap().dot(truth[i].getNormalVector3fMap()) < 0)
+        (*noisy)[i].getNormalVector3fMap() *= -1.f;
+    report("input: PCL NormalEstimation k=30 (kept before)", *noisy, all, since());
+    SimilarityDenoising<pcl::PointNormal> ours;
+    ours.setInputCloud(noisy);
+    Cloud denoised;
+    t0 = std::chrono::steady_clock::now();
+    ours.filter(denoised);
+    report("ours: denoised, normals estimated again", denoised, all, since());
+    pcl::MovingLeastSquares<pcl::PointNormal, pcl::PointNormal> mls;
+    mls.setInputCloud(noisy);
+    mls.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointNormal>>());
+    mls.setSearchRadius(ours.getReport().radius);
+    mls.setPolynomialOrder(2);
+    mls.setComputeNormals(true);
+    mls.setNumberOfThreads(2);
+    Cloud smoothed;
+    t0 = std::chrono::steady_clock::now();
+    mls.process(smoothed);
+    const double t_mls = since();
+    const pcl::Indices kept = mls.getCorrespondingIndices()->indices;
+    report("PCL MLS order 2, radius of ours, its normals", smoothed, kept, t_mls);
+    Cloud ours_at;
+    for (const int i : kept) ours_at.push_back(denoised[static_cast<std::size_t>(i)]);
+    report("ours on the points MLS kept", ours_at, kept, 0.0);
+  }
 }
 
 struct Method {
@@ -118,6 +216,7 @@ int runBenchDenoise(int argc, char** argv) {
   const std::string out_dir = a.text("out", "bench_out");
   const std::string samples = a.text("samples", samplesDir());
   const bool quick = a.has("quick");
+  bool rs1_normals = false;  // the normals rows, on rs1's vertices
   const std::size_t n_points = a.count("points", quick ? 50000 : 200000);
   const std::size_t n_large = a.count("large", quick ? 0 : 1000000);
   std::filesystem::create_directories(out_dir);
@@ -137,6 +236,7 @@ int runBenchDenoise(int argc, char** argv) {
     } else if (shape == "fandisk") {
       datasets.push_back({shape, synthetic::fandiskBlock(128)});
     } else if (shape == "rs1-scan-mesh") {
+      rs1_normals = true;
       if (std::filesystem::exists(rs1)) datasets.push_back({shape, loadTriangleMesh(rs1)});
       else std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): real-scan rows skipped\n", rs1.c_str());
     } else {
@@ -274,6 +374,8 @@ int runBenchDenoise(int argc, char** argv) {
     }
     if (t_mls > 0) std::printf("  -> ours / MLS time = %.2f\n", t_ours / t_mls);
   };
+  if (rs1_normals && std::filesystem::exists(rs1)) normalRows(rs1, noises, rows);
+
   if (std::filesystem::exists(table)) speed("table_scene_lms400", loadPositions(table), true);
   else std::fprintf(stderr, "warning: %s missing: real-scan speed rows skipped\n", table.c_str());
   const auto rs1_ds = std::find_if(datasets.begin(), datasets.end(), [](const Dataset& d) { return d.name == "rs1-scan-mesh"; });

@@ -25,7 +25,7 @@ namespace paps::cli {
 
 const char* kCompressUsage =
     "usage: paps compress IN OUT.paps [options]\n"
-    "  IN                      .pcd or .ply (only x y z are coded; NaN points are dropped)\n"
+    "  IN                      .pcd or .ply (only x y z are coded; NaN and Inf points are dropped)\n"
     "  --preset P              compact, balanced (default) or fine\n"
     "  --radius R              patch radius R in metres (default: from --patch-points)\n"
     "  --patch-points N        mean input points per patch when R is automatic (default 256)\n"

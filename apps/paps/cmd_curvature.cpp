@@ -1,5 +1,4 @@
 // paps curvature IN OUT [options]   and   paps enhance IN OUT --alpha0 A | --alpha1 RE[,IM]
-#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <complex>
@@ -13,6 +12,7 @@
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/normal_refresh.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
@@ -92,12 +92,6 @@ const char* kEnhanceUsage =
 
 namespace {
 
-// Normals stored in the blob (float32 normal_x/y/z) with at least one usable.
-bool usableBlobNormals(const pcl::PCLPointCloud2& c, Normals& out) {
-  if (!blobNormals(c, out)) return false;
-  return std::any_of(out.begin(), out.end(), [](const Eigen::Vector3f& n) { return isFinite(n) && n.squaredNorm() > 0; });
-}
-
 // Orientation hints per --orient: input normals, propagated PCA normals, or none (viewpoint).
 bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, const std::string& mode,
                       Normals& hints) {
@@ -105,7 +99,7 @@ bool orientationHints(const pcl::PCLPointCloud2& cloud, const Positions& p, cons
     throw InvalidParameter("orient", mode, "input, propagate or viewpoint");
   if (mode == "viewpoint") return false;
   if (mode == "input" || mode == "auto") {
-    if (usableBlobNormals(cloud, hints)) { std::printf("orientation: input normals\n"); return true; }
+    if (blobNormals(cloud, hints) && anyUsableNormal(hints)) { std::printf("orientation: input normals\n"); return true; }
     if (mode == "input") throw InvalidParameter("orient", "input", "an input with normal_x/y/z fields");
   }
   // On the distinct positions, as the Wavejet stage fits them: in a pile of copies every

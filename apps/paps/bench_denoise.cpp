@@ -341,6 +341,8 @@ int runBenchDenoise(int argc, char** argv) {
     }
   }
 
+  if (rs1_normals && std::filesystem::exists(rs1)) normalRows(rs1, noises, rows);
+
   // Speed on the real scan, at the radius ours chooses, and on a large input.
   std::printf("\nspeed (wall time; ours at its default, the peers at the radius ours chose)\n");
   std::printf("%-28s %-10s %10s %9s %9s\n", "input", "method", "points", "time(s)", "peak MB");
@@ -374,8 +376,6 @@ int runBenchDenoise(int argc, char** argv) {
     }
     if (t_mls > 0) std::printf("  -> ours / MLS time = %.2f\n", t_ours / t_mls);
   };
-  if (rs1_normals && std::filesystem::exists(rs1)) normalRows(rs1, noises, rows);
-
   if (std::filesystem::exists(table)) speed("table_scene_lms400", loadPositions(table), true);
   else std::fprintf(stderr, "warning: %s missing: real-scan speed rows skipped\n", table.c_str());
   const auto rs1_ds = std::find_if(datasets.begin(), datasets.end(), [](const Dataset& d) { return d.name == "rs1-scan-mesh"; });

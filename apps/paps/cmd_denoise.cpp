@@ -41,6 +41,9 @@ const char* kDenoiseUsage =
     "                         (default 0: the largest of their weights)\n"
     "  --patches K            similar patches averaged (default 32)\n"
     "  --checks N             descriptors compared per similarity query (default 48, 0 = exact)\n"
+    "  --tile-points N        a cloud of more finite points is denoised in tiles of at most N\n"
+    "                         points, one at a time (memory: about 1 KB a point of a tile;\n"
+    "                         default 2000000; 0: one piece whatever the size)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "LPF options (--method lpf; --radius is the pattern radius, --neighbours defaults to 100,\n"
     "--passes to 5):\n"
@@ -77,7 +80,7 @@ int runDenoise(int argc, char** argv) {
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
                "refilter", "aggregate", "own-weight", "noise", "no-adapt", "step", "atoms", "lambda",
-               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature", "keep-normals"});
+               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature", "keep-normals", "tile-points"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireCloudOutput();
   const std::string& in_path = a.positional[0];
@@ -89,7 +92,7 @@ int runDenoise(int argc, char** argv) {
   std::vector<std::string> applies = {"method", "radius", "neighbours", "quiet", "timings", "keep-normals"};
   if (method == "similarity")
     applies.insert(applies.end(), {"grid", "sigma", "sigma-scale", "smoothing", "patches", "checks", "guide", "passes",
-                                   "refilter", "aggregate", "own-weight", "noise", "no-adapt"});
+                                   "refilter", "aggregate", "own-weight", "noise", "no-adapt", "tile-points"});
   else if (method == "lpf")
     applies.insert(applies.end(), {"step", "atoms", "lambda", "rounds", "seed-spacing", "passes", "free-motion",
                                    "free-curvature", "bend-threshold"});
@@ -127,10 +130,11 @@ int runDenoise(int argc, char** argv) {
     }
     p.noise_sigma = a.real("noise", 0);
     p.adapt_to_noise = !a.has("no-adapt");
+    p.max_tile_points = a.count("tile-points", p.max_tile_points);
     validateAsOptions({{"target_neighbours", "neighbours"}, {"grid_size", "grid"}, {"sigma_scale", "sigma-scale"},
                        {"smoothing_iterations", "smoothing"}, {"descriptor_smoothing", "guide"},
                        {"similar_patches", "patches"}, {"search_checks", "checks"}, {"own_weight", "own-weight"},
-                       {"noise_sigma", "noise"}},
+                       {"noise_sigma", "noise"}, {"max_tile_points", "tile-points"}},
                       [&] { p.validate(); });
     // Schedule options given on the command line go over the noise rule's choice.
     SimilarityDenoisingReport choice, r;
@@ -154,6 +158,9 @@ int runDenoise(int argc, char** argv) {
                 r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches,
                 r.passes, r.passes > 1 ? "es" : "", r.passes > 1 ? (r.guided_passes ? " (guided)" : " (refiltered)") : "",
                 r.own_weight);
+    if (r.tiles > 1)
+      std::printf("in %zu tiles (at most %zu points each, %zu with the halo of %g radii)\n", r.tiles,
+                  p.max_tile_points, r.largest_tile, p.tile_margin);
     std::printf("normals oriented %s; moved %zu points; %zu NaN or Inf points passed through\n",
                 p.use_viewpoint ? "towards the file's sensor origin" : "by propagation", r.moved, r.non_finite);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);

@@ -467,6 +467,9 @@ TEST(SimilarityDenoising, BadParametersAreNamed) {
   expectInvalidParameter([&] {
     with([nan](auto& p) { p.use_viewpoint = true; p.viewpoint.x() = nan; });
   }, "viewpoint");
+  expectInvalidParameter([&] { with([](auto& p) { p.tile_margin = 0.5f; }); }, "tile_margin");
+  expectInvalidParameter([&] { with([nan](auto& p) { p.tile_margin = nan; }); }, "tile_margin");
+  expectInvalidParameter([&] { with([](auto& p) { p.max_tile_points = std::size_t(1) << 31; }); }, "max_tile_points");
   // A rejected value leaves the filter as it was.
   EXPECT_EQ(f.getParameters().radius, 0.f);
   EXPECT_EQ(f.getParameters().grid_size, SimilarityDenoisingParameters().grid_size);
@@ -477,6 +480,100 @@ TEST(SimilarityDenoising, BadParametersAreNamed) {
   expectInvalidParameter([&] {
     paps::denoiseBySimilarity(smallNoisyPlane(100), {}, nullptr, std::vector<std::uint8_t>(5, 1));
   }, "movable");
+}
+
+// ----------------------------------------------------------------------------- tiles
+
+// A cloud larger than max_tile_points is denoised a tile at a time. The noise, radius and
+// passes are chosen once, on the whole cloud; the similar patches come from the tile only, so
+// the output differs from the one-piece run, but not its accuracy, near the cuts included.
+TEST(SimilarityDenoising, TilesKeepTheAccuracyAndTheChoicesOfTheWholeCloud) {
+  const NoisyShape s = engravedPlane(24000, 0.0025f, 200);
+  const paps::PointToMeshDistance truth(s.mesh);
+  SimilarityDenoisingParameters whole_p, tiled_p;
+  whole_p.max_tile_points = 0;
+  tiled_p.max_tile_points = 7000;
+  SimilarityDenoisingReport whole_r, tiled_r;
+  const Positions whole = paps::denoiseBySimilarity(s.noisy, whole_p, &whole_r);
+  const Positions tiled = paps::denoiseBySimilarity(s.noisy, tiled_p, &tiled_r);
+  EXPECT_EQ(whole_r.tiles, 1u);
+  EXPECT_EQ(tiled_r.tiles, 4u);  // 24,000 halved twice
+  EXPECT_GT(tiled_r.largest_tile, 6000u + 300u) << "a tile's halo";
+  EXPECT_LT(tiled_r.largest_tile, 12000u);
+  EXPECT_EQ(tiled_r.radius, whole_r.radius);
+  EXPECT_EQ(tiled_r.noise_sigma, whole_r.noise_sigma);
+  EXPECT_EQ(tiled_r.passes, whole_r.passes);
+  EXPECT_NEAR(tiled_r.sigma, whole_r.sigma, 0.1 * whole_r.sigma);
+  EXPECT_EQ(tiled_r.moved + tiled_r.isolated, s.noisy.size());
+  EXPECT_LT(tiled_r.isolated, 30u);
+  // Accuracy over all points and over those near the two cuts (x = 0.5, y = 0.5: within two
+  // radii), against the one-piece run on the same points.
+  Positions near_cut_whole, near_cut_tiled, near_cut_truth;
+  for (std::size_t i = 0; i < s.noisy.size(); ++i) {
+    const auto& q = s.noisy[i];
+    if (std::min(std::abs(q.x() - 0.5f), std::abs(q.y() - 0.5f)) > 2 * whole_r.radius) continue;
+    near_cut_whole.push_back(whole[i]);
+    near_cut_tiled.push_back(tiled[i]);
+  }
+  ASSERT_GT(near_cut_whole.size(), 1500u);
+  const double e_whole = paps::pointToMeshError(whole, truth).rmse, e_tiled = paps::pointToMeshError(tiled, truth).rmse;
+  const double c_whole = paps::pointToMeshError(near_cut_whole, truth).rmse,
+               c_tiled = paps::pointToMeshError(near_cut_tiled, truth).rmse;
+  std::printf("tiles: RMSE %.4g in one piece, %.4g in 4 tiles; near the cuts %.4g and %.4g\n", e_whole, e_tiled,
+              c_whole, c_tiled);
+  EXPECT_LT(e_tiled, 1.03 * e_whole);
+  EXPECT_LT(c_tiled, 1.05 * c_whole);
+  // A limit the cloud does not reach is one piece: the same bits as max_tile_points = 0.
+  SimilarityDenoisingParameters large;
+  large.max_tile_points = s.noisy.size();
+  const Positions same = paps::denoiseBySimilarity(s.noisy, large);
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < same.size(); ++i) differ += !sameBits(same[i], whole[i]);
+  EXPECT_EQ(differ, 0u);
+}
+
+// Tiles depend on the positions only: the same output with 1 or 2 threads and in any input
+// order; NaN points pass through and only the movable points move.
+TEST(SimilarityDenoising, TiledOutputIsDeterministic) {
+  Positions p = smallNoisyPlane(8000);
+  p[10] = Eigen::Vector3f::Constant(payloadNaN());
+  SimilarityDenoisingParameters params;
+  params.max_tile_points = 2500;
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  SimilarityDenoisingReport r1;
+  const Positions a = paps::denoiseBySimilarity(p, params, &r1);
+  omp_set_num_threads(2);
+  const Positions b = paps::denoiseBySimilarity(p, params);
+  omp_set_num_threads(saved);
+  EXPECT_EQ(r1.tiles, 4u);
+  const std::vector<int> perm = shuffledOrder(p.size(), 9);
+  const Positions c = paps::denoiseBySimilarity(paps::gathered(p, perm), params);
+  std::size_t threads_differ = 0, order_differ = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) threads_differ += !sameBits(a[i], b[i]);
+  for (std::size_t k = 0; k < p.size(); ++k) order_differ += !sameBits(c[k], a[perm[k]]);
+  EXPECT_EQ(threads_differ, 0u);
+  EXPECT_EQ(order_differ, 0u);
+  EXPECT_TRUE(sameBits(a[10], p[10]));
+  // The pcl::Filter stage tiles the same way.
+  SimilarityDenoising<pcl::PointXYZ> f;
+  f.setMaxTilePoints(2500);
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  EXPECT_EQ(f.getReport().tiles, 4u);
+  std::size_t class_differ = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) class_differ += !sameBits(out[i].getVector3fMap(), a[i]);
+  EXPECT_EQ(class_differ, 0u);
+  expectInvalidParameter([&] { f.setMaxTilePoints(std::size_t(1) << 31); }, "max_tile_points");
+  std::vector<std::uint8_t> movable(p.size(), 0);
+  for (std::size_t i = 0; i < p.size(); i += 3) movable[i] = 1;
+  const Positions m = paps::denoiseBySimilarity(p, params, nullptr, movable);
+  std::size_t still_moved = 0, moved = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    if (!paps::isFinite(p[i])) continue;
+    (movable[i] ? moved : still_moved) += m[i] != p[i];
+  }
+  EXPECT_EQ(still_moved, 0u);
+  EXPECT_GT(moved, p.size() / 4);
 }
 
 // ----------------------------------------------------------------- threads, progress

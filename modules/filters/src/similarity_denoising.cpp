@@ -16,6 +16,7 @@
 #include <paps/core/noise_estimation.h>
 #include <paps/core/plane_height_patch.h>
 #include <paps/core/spatial_order.h>
+#include <paps/core/tiling.h>
 
 namespace paps {
 
@@ -36,6 +37,10 @@ void SimilarityDenoisingParameters::validate() const {
   if (!(own_weight >= 0) || !std::isfinite(own_weight))
     throw InvalidParameter("own_weight", detail::toString(own_weight), "0 (automatic) or a finite value > 0");
   requireInRange("search_checks", search_checks, 0, 1000000);
+  if (max_tile_points >= (std::size_t(1) << 31))
+    throw InvalidParameter("max_tile_points", std::to_string(max_tile_points), "0 (one piece) or a count below 2^31");
+  if (!(tile_margin >= 1) || !std::isfinite(tile_margin))
+    throw InvalidParameter("tile_margin", detail::toString(tile_margin), "a finite number of radii >= 1");
   if (use_viewpoint && !isFinite(viewpoint))
     throw InvalidParameter("viewpoint", "non-finite", "finite coordinates");
 }
@@ -543,6 +548,61 @@ Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisi
 }
 }  // namespace
 
+namespace {
+// The tiled run (SimilarityDenoisingParameters::max_tile_points): every choice that reads the
+// whole cloud (noise, radius, passes) is made once, then each tile runs with it.
+Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParameters& params,
+                         SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
+                         const ProgressCallback& progress) {
+  SimilarityDenoisingReport report;
+  SimilarityDenoisingParameters run;
+  {
+    // On the points in spatial order, as the one-piece run measures them: the samples of the
+    // noise and radius are drawn along the array, and so do not depend on the input order.
+    const Positions sorted = gathered(points, spatialOrderAll(points));
+    std::unique_ptr<SpatialIndex> index;
+    run = resolveNoise(sorted, params, &report, &index, progress);
+    if (!(run.radius > 0)) {
+      if (!index) index = std::make_unique<SpatialIndex>(sorted);
+      run.radius = radiusForNeighbourCount(sorted, *index, run.target_neighbours);
+    }
+  }
+  run.max_tile_points = 0;
+  const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, run.tile_margin * run.radius);
+  double sigma = 0, neighbours = 0;
+  std::size_t cores = 0;
+  report.tiles = tiles.size();
+  const Positions out = runInTiles(points, movable, tiles, [&](const Positions& p, const std::vector<std::uint8_t>& m, std::size_t t) {
+    const std::string prefix = "tile " + std::to_string(t + 1) + "/" + std::to_string(tiles.size()) + ": ";
+    const ProgressCallback sub = progress ? ProgressCallback([&](const std::string& stage, float f) { return progress(prefix + stage, f); })
+                                          : ProgressCallback();
+    SimilarityDenoisingReport r;
+    Positions o = runInSpatialOrder(p, m, [&](const Positions& q, const std::vector<std::uint8_t>& qm) {
+      return denoiseInSpatialOrder(q, run, &r, qm, sub);
+    });
+    const double w = static_cast<double>(tiles[t].core.size());
+    sigma += w * r.sigma;
+    neighbours += w * r.mean_neighbours;
+    cores += tiles[t].core.size();
+    report.largest_tile = std::max(report.largest_tile, p.size());
+    report.passes = r.passes;
+    report.guided_passes = r.guided_passes;
+    report.own_weight = r.own_weight;
+    return o;
+  });
+  report.radius = run.radius;
+  report.sigma = cores ? static_cast<float>(sigma / cores) : 0.f;
+  report.mean_neighbours = cores ? neighbours / cores : 0.0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(points[i])) { ++report.non_finite; continue; }
+    if (!movable.empty() && !movable[i]) continue;
+    (out[i] != points[i] ? report.moved : report.isolated) += 1;
+  }
+  if (report_out) *report_out = report;
+  return out;
+}
+}  // namespace
+
 Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoisingParameters& params,
                               SimilarityDenoisingReport* report_out,
                               const std::vector<std::uint8_t>& movable,
@@ -550,6 +610,8 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   params.validate();
   checkMovableInput(points, movable);
   if (leaveOnePositionAsItIs(points, report_out)) return points;
+  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points)
+    return denoiseInTiles(points, params, report_out, movable, progress);
   // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory
   // (1M points: 60 s in input order, 33 s in Z order). The filter runs in Z order, non-finite
   // points last, so its output no longer depends on the order of the input either.

@@ -73,6 +73,15 @@ struct SimilarityDenoisingParameters {
   float own_weight = 0.f;
   /// Index both frame orientations of every patch (manuscript 2.1.2).
   bool both_orientations = true;
+  /// Clouds with more finite points than this are denoised in tiles of at most this many
+  /// points, one after the other, so the working memory is one tile's (about 1 KB a point)
+  /// instead of the whole cloud's (0: never). The noise, radius and passes are chosen once on
+  /// the whole cloud; each tile also carries the points within `tile_margin` radii of it, so
+  /// its border points have whole neighbourhoods; similar patches are searched within the
+  /// tile. In [0, 2^31). Default 2M points: about 2.5 GB at the noise-adapted defaults.
+  std::size_t max_tile_points = 2000000;
+  /// Width of a tile's halo in radii (>= 1). Measured in docs/denoising.md ("Tiles").
+  float tile_margin = 3.f;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.
   bool use_viewpoint = false;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();
@@ -94,6 +103,10 @@ struct SimilarityDenoisingReport {
   std::size_t moved = 0;           ///< points denoised
   std::size_t isolated = 0;        ///< finite points left in place: fewer than 4 neighbours, or collinear ones (no normal)
   std::size_t non_finite = 0;      ///< NaN/Inf points passed through
+  /// Tiles the cloud was denoised in (1: one piece), and their largest point count, halo
+  /// included. With tiles, sigma and mean_neighbours are means over the tiles weighted by
+  /// their core points, and `isolated` counts the finite movable points left in place.
+  std::size_t tiles = 1, largest_tile = 0;
 };
 
 /// The noise-adaptive rule (measured on the engraved plane and the rs1 scan at 0.05% to 0.5%
@@ -151,6 +164,9 @@ class SimilarityDenoising : public pcl::Filter<PointT>, public ThreadCountOption
   void setSigma(float s);
   void setSmoothingIterations(int n);
   void setSimilarPatches(int k);
+  /// Tiles of at most n points for clouds larger than that (0: one piece); see
+  /// SimilarityDenoisingParameters::max_tile_points.
+  void setMaxTilePoints(std::size_t n);
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   /// What the last run chose (radius, sigma) and how many points it could not move.
   const SimilarityDenoisingReport& getReport() const { return report_; }

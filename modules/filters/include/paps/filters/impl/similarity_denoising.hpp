@@ -29,6 +29,9 @@ template <typename PointT> void SimilarityDenoising<PointT>::setSmoothingIterati
 template <typename PointT> void SimilarityDenoising<PointT>::setSimilarPatches(int k) {
   auto p = params_; p.similar_patches = k; setParameters(p);
 }
+template <typename PointT> void SimilarityDenoising<PointT>::setMaxTilePoints(std::size_t n) {
+  auto p = params_; p.max_tile_points = n; setParameters(p);
+}
 
 template <typename PointT>
 void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {

@@ -1,0 +1,39 @@
+#pragma once
+// Tiles: a cloud too large for a stage's working memory, processed a piece at a time. Each
+// tile answers for its core points and also carries the points within a margin of them (its
+// halo), so that the neighbourhoods of the core points near its border are whole.
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include <paps/core/positions.h>
+
+namespace paps {
+
+/// A piece of a cloud: the points it answers for and the extra points its core's
+/// neighbourhoods reach, as indices into the cloud, each list in increasing order.
+struct Tile {
+  std::vector<int> core;
+  std::vector<int> halo;
+};
+
+/// Splits the finite points into tiles of at most `max_core` core points (>= 1): the point set
+/// is halved at its median along the longest side of its bounding box, recursively. Points at
+/// exactly the same position always land in the same tile, and the split depends on the
+/// positions only (not on their order nor on the thread count), so a tile can hold more than
+/// `max_core` points when copies of one position outnumber it. The halo of a tile is every
+/// other finite point inside the bounding box of its core grown by `margin` (>= 0, metres) on
+/// each side. Non-finite points are in no tile. Throws InvalidParameter for max_core == 0 or
+/// a negative or non-finite margin.
+std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, float margin);
+
+/// A point-moving stage run tile by tile (one after the other: the working memory is one
+/// tile's): `stage(points, movable, tile_number)` gets a tile's core then halo positions and
+/// their movable flags, and returns one position per point; the outputs of the core points
+/// are kept, non-finite points pass through. `movable` empty means all.
+using TileStage = std::function<Positions(const Positions&, const std::vector<std::uint8_t>&, std::size_t)>;
+Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
+                     const std::vector<Tile>& tiles, const TileStage& stage);
+
+}  // namespace paps

@@ -1,0 +1,113 @@
+#include <paps/core/tiling.h>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include <paps/core/error.h>
+#include <paps/core/spatial_order.h>
+
+namespace paps {
+
+namespace {
+struct Box {
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = Eigen::Vector3f::Constant(-INFINITY);
+  void add(const Eigen::Vector3f& p) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
+};
+
+Box boxOf(const Positions& points, const std::vector<int>& ids) {
+  Box b;
+  for (const int i : ids) b.add(points[i]);
+  return b;
+}
+
+// Halves `ids` at the median of the longest side until each part holds at most max_core
+// points. The order key is the coordinate along that side, then the position (x, y, z), and
+// every point whose key equals the median's goes left: copies of a position stay together and
+// the parts depend on the positions only.
+void split(const Positions& points, std::vector<int> ids, std::size_t max_core, std::vector<std::vector<int>>& out) {
+  if (ids.size() <= max_core) {
+    out.push_back(std::move(ids));
+    return;
+  }
+  const Box b = boxOf(points, ids);
+  int axis = 0;
+  (b.hi - b.lo).maxCoeff(&axis);
+  auto before = [&](int i, int j) {
+    const Eigen::Vector3f &p = points[i], &q = points[j];
+    if (p[axis] != q[axis]) return p[axis] < q[axis];
+    return coordinatesBefore(p, q);
+  };
+  const auto mid = ids.begin() + static_cast<std::ptrdiff_t>((ids.size() - 1) / 2);  // left: ceil(n / 2)
+  std::nth_element(ids.begin(), mid, ids.end(), before);
+  const int median = *mid;
+  std::vector<int> left, right;
+  for (const int i : ids) (before(median, i) ? right : left).push_back(i);
+  if (right.empty()) {  // all copies of one position: cannot be halved
+    out.push_back(std::move(left));
+    return;
+  }
+  std::vector<int>().swap(ids);
+  split(points, std::move(left), max_core, out);
+  split(points, std::move(right), max_core, out);
+}
+}  // namespace
+
+std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, float margin) {
+  if (max_core == 0) throw InvalidParameter("max_core", "0", "at least 1");
+  if (!(margin >= 0) || !std::isfinite(margin))
+    throw InvalidParameter("margin", std::to_string(margin), "a finite distance >= 0");
+  std::vector<int> finite;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (isFinite(points[i])) finite.push_back(static_cast<int>(i));
+  std::vector<std::vector<int>> cores;
+  if (!finite.empty()) split(points, std::move(finite), max_core, cores);
+  // Tiles in the order of their first point along the Z curve of the core centres would do as
+  // well; the split order (left before right) already depends on the positions only.
+  std::vector<Tile> tiles(cores.size());
+  std::vector<int> owner(points.size(), -1);
+  for (std::size_t t = 0; t < cores.size(); ++t) {
+    std::sort(cores[t].begin(), cores[t].end());
+    for (const int i : cores[t]) owner[i] = static_cast<int>(t);
+    tiles[t].core = std::move(cores[t]);
+  }
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    Box b = boxOf(points, tiles[t].core);
+    b.lo.array() -= margin;
+    b.hi.array() += margin;
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (owner[i] < 0 || owner[i] == static_cast<int>(t)) continue;
+      const Eigen::Vector3f& p = points[i];
+      if ((p.array() >= b.lo.array()).all() && (p.array() <= b.hi.array()).all())
+        tiles[t].halo.push_back(static_cast<int>(i));
+    }
+  }
+  return tiles;
+}
+
+Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
+                     const std::vector<Tile>& tiles, const TileStage& stage) {
+  if (!movable.empty() && movable.size() != points.size())
+    throw InvalidParameter("movable", std::to_string(movable.size()) + " flags",
+                           "one per point (" + std::to_string(points.size()) + ")");
+  Positions out = points;
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    const Tile& tile = tiles[t];
+    Positions local;
+    std::vector<std::uint8_t> local_movable;
+    local.reserve(tile.core.size() + tile.halo.size());
+    for (const auto* list : {&tile.core, &tile.halo})
+      for (const int i : *list) {
+        local.push_back(points[i]);
+        if (!movable.empty()) local_movable.push_back(movable[i]);
+      }
+    const Positions moved = stage(local, local_movable, t);
+    if (moved.size() != local.size())
+      throw InvalidInput("tile " + std::to_string(t) + ": the stage returned " + std::to_string(moved.size()) +
+                         " positions for " + std::to_string(local.size()) + " points");
+    for (std::size_t k = 0; k < tile.core.size(); ++k) out[tile.core[k]] = moved[k];
+  }
+  return out;
+}
+
+}  // namespace paps

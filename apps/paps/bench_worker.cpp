@@ -147,6 +147,7 @@ int runBenchWorker(int argc, char** argv) {
       q.guided_passes = get("guided", 1) != 0;
       q.own_weight = static_cast<float>(get("own", q.own_weight));
       q.adapt_to_noise = get("adapt", 1) != 0;
+      q.max_tile_points = static_cast<std::size_t>(get("tile", static_cast<double>(q.max_tile_points)));
       if (get("centre", 0) != 0) q.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
       SimilarityDenoisingReport report;
       output = denoiseBySimilarity(input, q, &report);
@@ -156,7 +157,7 @@ int runBenchWorker(int argc, char** argv) {
         std::snprintf(b, sizeof b, "noise %.3g, radius x%.2f, own %g, %d pass%s", report.noise_sigma,
                       report.radius_scale, report.own_weight, report.passes,
                       report.passes > 1 ? (report.guided_passes ? "es guided" : "es refiltered") : "");
-        lf << "chosen " << b << "\n";
+        lf << "chosen " << b << (report.tiles > 1 ? ", " + std::to_string(report.tiles) + " tiles" : std::string()) << "\n";
       }
     } else if (method == "lpf") {
       LpfDenoisingParameters q;

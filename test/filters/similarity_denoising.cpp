@@ -564,6 +564,20 @@ TEST(SimilarityDenoising, TiledOutputIsDeterministic) {
   for (std::size_t i = 0; i < p.size(); ++i) class_differ += !sameBits(out[i].getVector3fMap(), a[i]);
   EXPECT_EQ(class_differ, 0u);
   expectInvalidParameter([&] { f.setMaxTilePoints(std::size_t(1) << 31); }, "max_tile_points");
+  // A pile of copies larger than a tile (it cannot be cut) stays as it is, as in one piece,
+  // and the rest is still denoised.
+  Positions piled = p;
+  piled.insert(piled.end(), 3000, Eigen::Vector3f(5.f, 5.f, 5.f));
+  SimilarityDenoisingReport pr;
+  const Positions po = paps::denoiseBySimilarity(piled, params, &pr);
+  EXPECT_GE(pr.tiles, 4u);
+  std::size_t pile_moved = 0, plane_moved = 0;
+  for (std::size_t i = 0; i < piled.size(); ++i) {
+    if (!paps::isFinite(piled[i])) continue;
+    (i >= p.size() ? pile_moved : plane_moved) += po[i] != piled[i];
+  }
+  EXPECT_EQ(pile_moved, 0u);
+  EXPECT_GT(plane_moved, p.size() / 2);
   std::vector<std::uint8_t> movable(p.size(), 0);
   for (std::size_t i = 0; i < p.size(); i += 3) movable[i] = 1;
   const Positions m = paps::denoiseBySimilarity(p, params, nullptr, movable);

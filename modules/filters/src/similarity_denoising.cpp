@@ -570,29 +570,35 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
   run.max_tile_points = 0;
   const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, run.tile_margin * run.radius);
   double sigma = 0, neighbours = 0;
-  std::size_t cores = 0;
+  std::size_t weighed = 0;  // core points of the tiles that ran the filter
   report.tiles = tiles.size();
   const Positions out = runInTiles(points, movable, tiles, [&](const Positions& p, const std::vector<std::uint8_t>& m, std::size_t t) {
     const std::string prefix = "tile " + std::to_string(t + 1) + "/" + std::to_string(tiles.size()) + ": ";
     const ProgressCallback sub = progress ? ProgressCallback([&](const std::string& stage, float f) { return progress(prefix + stage, f); })
                                           : ProgressCallback();
+    const std::size_t core = tiles[t].core.size();
+    report.largest_tile = std::max(report.largest_tile, p.size());
+    // Nothing of the core to move, or one position many times over (a pile of copies): as the
+    // one-piece run, the tile is left as it is.
     SimilarityDenoisingReport r;
+    const bool none_movable =
+        !m.empty() && std::none_of(m.begin(), m.begin() + static_cast<std::ptrdiff_t>(core), [](std::uint8_t v) { return v != 0; });
+    if (none_movable || leaveOnePositionAsItIs(p, &r)) return p;
     Positions o = runInSpatialOrder(p, m, [&](const Positions& q, const std::vector<std::uint8_t>& qm) {
       return denoiseInSpatialOrder(q, run, &r, qm, sub);
     });
-    const double w = static_cast<double>(tiles[t].core.size());
+    const double w = static_cast<double>(core);
     sigma += w * r.sigma;
     neighbours += w * r.mean_neighbours;
-    cores += tiles[t].core.size();
-    report.largest_tile = std::max(report.largest_tile, p.size());
-    report.passes = r.passes;
-    report.guided_passes = r.guided_passes;
-    report.own_weight = r.own_weight;
+    weighed += core;
     return o;
   });
   report.radius = run.radius;
-  report.sigma = cores ? static_cast<float>(sigma / cores) : 0.f;
-  report.mean_neighbours = cores ? neighbours / cores : 0.0;
+  report.passes = run.passes;
+  report.guided_passes = run.guided_passes;
+  report.own_weight = run.own_weight;
+  report.sigma = weighed ? static_cast<float>(sigma / weighed) : 0.f;
+  report.mean_neighbours = weighed ? neighbours / weighed : 0.0;
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) { ++report.non_finite; continue; }
     if (!movable.empty() && !movable[i]) continue;

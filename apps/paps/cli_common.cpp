@@ -241,6 +241,23 @@ bool hasField(const pcl::PCLPointCloud2& c, const char* name) {
   return false;
 }
 
+bool fileMayHaveNormals(const std::string& path) {
+  try {
+    const std::string ext = std::filesystem::path(path).extension().string();
+    if (ext == ".pcd") return readPcdLayout(path).field("normal_x") >= 0;
+    if (ext == ".ply") {
+      const PlyLayout layout = readPlyLayout(path);
+      const int v = layout.element("vertex");
+      if (v < 0) return true;  // the reader will say what is wrong
+      for (const auto& prop : layout.elements[static_cast<std::size_t>(v)].properties)
+        if (prop.name == "nx" || prop.name == "normal_x") return true;
+      return false;
+    }
+  } catch (const Error&) {
+  }
+  return true;  // unreadable here: the reader's own error comes later
+}
+
 void setNormals(pcl::PCLPointCloud2& cloud, const Normals& n, const std::vector<float>* curvature) {
   pcl::PointCloud<pcl::Normal> nc;
   nc.resize(n.size());

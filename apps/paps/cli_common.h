@@ -102,6 +102,10 @@ void takeThreadsOption(int& argc, char** argv);
 
 /// Whether the cloud has a field of that name.
 bool hasField(const pcl::PCLPointCloud2& c, const char* name);
+/// From the header alone: whether the .pcd or .ply at `path` has normal fields (PCL reads a
+/// PLY's nx ny nz as normal_x ...). True when the header cannot be read, so that the reader
+/// reports what is wrong with the file.
+bool fileMayHaveNormals(const std::string& path);
 
 /// Writes one normal per point into float32 normal_x/y/z, appending the three fields when the
 /// cloud has none, with PCL's `curvature` field after them when `curvature` (one per point) is

@@ -141,6 +141,10 @@ int runSuperres(int argc, char** argv) {
     if (a.has("orient") && !normals_out)
       throw InvalidParameter("orient", a.text("orient", ""), "with --normals (it orients them)");
   };
+  // --orient needs output normals: asked for, or written because IN has normal fields (known
+  // from its header, before any work).
+  if (a.has("orient") && !a.has("normals") && (a.has("keep-normals") || !fileMayHaveNormals(a.positional[0])))
+    throw InvalidParameter("orient", a.text("orient", ""), "with --normals (it orients them)");
   const std::string orient = a.text("orient", "propagate");
   if (orient != "propagate" && orient != "viewpoint") throw InvalidParameter("orient", orient, "propagate or viewpoint");
 

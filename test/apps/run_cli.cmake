@@ -835,6 +835,12 @@ elseif(CASE STREQUAL "checked_before_work")
   expect_one_error_line("'radius' = 1e300 (expected a number of magnitude at most 3.4e38")
   run_paps(denoise ${input} ${output} --radius 1e-300 --quiet)
   expect_one_error_line("'radius' = 1e-300 (expected 0 or a number of magnitude at least")
+  # --orient without output normals (none asked for, none in IN's header).
+  run_paps(superres ${input} ${output} --orient viewpoint --quiet)
+  expect_one_error_line("'orient' = viewpoint (expected with --normals")
+  if(out MATCHES "read ")
+    message(FATAL_ERROR "the input was read before --orient was refused: ${out}")
+  endif()
   # Library fields named by their options.
   run_paps(denoise ${input} ${output} --patches 0 --quiet)
   expect_one_error_line("'patches' = 0")

@@ -505,6 +505,8 @@ TEST(SimilarityDenoising, TilesKeepTheAccuracyAndTheChoicesOfTheWholeCloud) {
   EXPECT_EQ(tiled_r.passes, whole_r.passes);
   EXPECT_NEAR(tiled_r.sigma, whole_r.sigma, 0.1 * whole_r.sigma);
   EXPECT_EQ(tiled_r.moved + tiled_r.isolated, s.noisy.size());
+  // Isolation is decided on whole neighbourhoods: the halo makes the same points isolated.
+  EXPECT_EQ(tiled_r.isolated, whole_r.isolated);
   EXPECT_LT(tiled_r.isolated, 30u);
   // Accuracy over all points and over those near the two cuts (x = 0.5, y = 0.5: within two
   // radii), against the one-piece run on the same points.

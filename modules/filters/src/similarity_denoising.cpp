@@ -49,6 +49,8 @@ namespace {
 
 // Fewer neighbours than this (self included) and a point has no usable frame.
 constexpr int kMinNeighbours = 4;
+// What the last pass did to a point (denoiseOnce's status): the counts of the report, per point.
+constexpr std::uint8_t kUpdated = 1, kIsolated = 2;
 
 // Iterated mean-curvature motion: each point moves along its normal to the plane through
 // the centroid of its neighbours. Moving along the normal only keeps the one-to-one
@@ -201,13 +203,18 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
                       const SimilarityDenoisingParameters& params,
                       SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
                       const ProgressCallback& progress, const Positions* estimate = nullptr,
-                      std::unique_ptr<SpatialIndex> spatial_index = nullptr) {
+                      std::unique_ptr<SpatialIndex> spatial_index = nullptr,
+                      std::vector<std::uint8_t>* status = nullptr) {
   SimilarityDenoisingReport report;
   const std::size_t n = points.size();
+  // Per point, when asked: kUpdated (counted in `moved`), kIsolated (in `isolated`), else 0.
+  if (status) status->assign(n, 0);
   const std::size_t finite = checkMovableInput(points, movable);
   report.non_finite = n - finite;
   if (finite == 1) {
     report.isolated = 1;
+    if (status)
+      for (std::size_t i = 0; i < n; ++i) (*status)[i] = isFinite(points[i]) ? kIsolated : 0;
     if (report_out) *report_out = report;
     return points;
   }
@@ -230,7 +237,10 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   std::vector<std::uint8_t> usable(n, 0);
   for (std::size_t i = 0; i < n; ++i) {
     usable[i] = isFinite(points[i]) && graph.count(i) >= kMinNeighbours && isFinite(normals[i]);
-    if (isFinite(points[i]) && !usable[i]) ++report.isolated;
+    if (isFinite(points[i]) && !usable[i]) {
+      ++report.isolated;
+      if (status) (*status)[i] = kIsolated;
+    }
   }
   Normals smooth_normals = normals;
   const Positions smooth = meanCurvatureMotion(points, graph, smooth_normals, usable,
@@ -440,6 +450,7 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
         out[i] = smooth[i] + frames[i].toWorld((residual / (w_sum + w_self)).cast<float>());
       }
       ++moved;
+      if (status) (*status)[i] = kUpdated;
     }
   }
   search_rep.throwIfCancelled();
@@ -523,7 +534,7 @@ std::vector<std::uint8_t> halvesOf(const Positions& points) {
 
 Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisingParameters& params,
                                 SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
-                                const ProgressCallback& progress) {
+                                const ProgressCallback& progress, std::vector<std::uint8_t>* status = nullptr) {
   SimilarityDenoisingReport choice;
   std::unique_ptr<SpatialIndex> index;  // built on `points` by the noise measurement, reused by pass 1
   const SimilarityDenoisingParameters run = resolveNoise(points, params, &choice, &index, progress);
@@ -534,8 +545,8 @@ Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisi
     // Later passes keep the radius of the first, so the scale does not drift.
     SimilarityDenoisingParameters p = run;
     if (pass > 0) p.radius = report.radius;
-    if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, side, p, &report, movable, progress, &cur);
-    else cur = denoiseOnce(cur, side, p, &report, movable, progress, nullptr, pass == 0 ? std::move(index) : nullptr);
+    if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, side, p, &report, movable, progress, &cur, nullptr, status);
+    else cur = denoiseOnce(cur, side, p, &report, movable, progress, nullptr, pass == 0 ? std::move(index) : nullptr, status);
   }
   report.noise_sigma = choice.noise_sigma;
   report.noise_estimated = choice.noise_estimated;
@@ -583,10 +594,24 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
     SimilarityDenoisingReport r;
     const bool none_movable =
         !m.empty() && std::none_of(m.begin(), m.begin() + static_cast<std::ptrdiff_t>(core), [](std::uint8_t v) { return v != 0; });
-    if (none_movable || leaveOnePositionAsItIs(p, &r)) return p;
-    Positions o = runInSpatialOrder(p, m, [&](const Positions& q, const std::vector<std::uint8_t>& qm) {
-      return denoiseInSpatialOrder(q, run, &r, qm, sub);
-    });
+    if (none_movable) return p;
+    if (leaveOnePositionAsItIs(p, &r)) {
+      report.isolated += core;  // as the one-piece run counts a pile
+      return p;
+    }
+    // runInSpatialOrder by hand, to read back what happened to each core point.
+    const std::vector<int> order = spatialOrderAll(p);
+    std::vector<std::uint8_t> sorted_status;
+    const Positions sorted_out = denoiseInSpatialOrder(gathered(p, order), run, &r, m.empty() ? m : gathered(m, order),
+                                                       sub, &sorted_status);
+    Positions o(p.size());
+    for (std::size_t k = 0; k < order.size(); ++k) {
+      o[order[k]] = sorted_out[k];
+      if (static_cast<std::size_t>(order[k]) < core) {
+        report.moved += sorted_status[k] == kUpdated;
+        report.isolated += sorted_status[k] == kIsolated;
+      }
+    }
     const double w = static_cast<double>(core);
     sigma += w * r.sigma;
     neighbours += w * r.mean_neighbours;
@@ -599,11 +624,7 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
   report.own_weight = run.own_weight;
   report.sigma = weighed ? static_cast<float>(sigma / weighed) : 0.f;
   report.mean_neighbours = weighed ? neighbours / weighed : 0.0;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    if (!isFinite(points[i])) { ++report.non_finite; continue; }
-    if (!movable.empty() && !movable[i]) continue;
-    (out[i] != points[i] ? report.moved : report.isolated) += 1;
-  }
+  report.non_finite = points.size() - countFinite(points);
   if (report_out) *report_out = report;
   return out;
 }

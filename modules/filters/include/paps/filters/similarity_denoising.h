@@ -105,7 +105,7 @@ struct SimilarityDenoisingReport {
   std::size_t non_finite = 0;      ///< NaN/Inf points passed through
   /// Tiles the cloud was denoised in (1: one piece), and their largest point count, halo
   /// included. With tiles, sigma and mean_neighbours are means over the tiles weighted by
-  /// their core points, and `isolated` counts the finite movable points left in place.
+  /// their core points; moved and isolated count each core point as one piece would.
   std::size_t tiles = 1, largest_tile = 0;
 };
 

@@ -62,8 +62,7 @@ std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, 
     if (isFinite(points[i])) finite.push_back(static_cast<int>(i));
   std::vector<std::vector<int>> cores;
   if (!finite.empty()) split(points, std::move(finite), max_core, cores);
-  // Tiles in the order of their first point along the Z curve of the core centres would do as
-  // well; the split order (left before right) already depends on the positions only.
+  // The tiles come in split order (left before right), which depends on the positions only.
   std::vector<Tile> tiles(cores.size());
   std::vector<int> owner(points.size(), -1);
   for (std::size_t t = 0; t < cores.size(); ++t) {

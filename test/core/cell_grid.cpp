@@ -370,3 +370,34 @@ TEST(CellGrid, DeterministicAcrossThreadCounts) {
 }
 
 }  // namespace
+
+// A graph built a block of slots at a time (the normal refresh of a large cloud): each block's
+// rows are exactly those of the whole graph, capped or not, piles included; the other rows are
+// empty; blocks that cover every slot give every row.
+TEST(CellGrid, BlocksOfSlotsGiveTheRowsOfTheWholeGraph) {
+  Positions p = randomCloud(6000, 31);
+  p.insert(p.end(), 200, Eigen::Vector3f(0.5f, 0.5f, 0.5f));  // a pile above the cap
+  const float r = 0.08f;
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, r));
+  for (const int cap : {0, 10, 64}) {
+    const NeighbourGraph whole = grid.radiusGraph(p.size(), r, true, {}, cap);
+    std::vector<int> seen(p.size(), 0);
+    for (std::size_t b = 0; b < grid.size(); b += 1000) {
+      const std::size_t e = std::min(grid.size(), b + 1000);
+      const NeighbourGraph block = grid.radiusGraph(p.size(), r, true, {}, cap, {}, b, e);
+      std::vector<int> in_block(p.size(), 0);
+      for (std::size_t s = b; s < e; ++s) in_block[grid.original()[s]] = 1;
+      for (std::size_t i = 0; i < p.size(); ++i) {
+        if (in_block[i]) {
+          ++seen[i];
+          ASSERT_EQ(std::vector<int>(block.begin(i), block.end(i)), std::vector<int>(whole.begin(i), whole.end(i)))
+              << "cap " << cap << ", point " << i;
+        } else {
+          ASSERT_EQ(block.count(i), 0) << "cap " << cap << ", point " << i << " outside the block";
+        }
+      }
+    }
+    for (std::size_t i = 0; i < p.size(); ++i) EXPECT_EQ(seen[i], paps::isFinite(p[i]) ? 1 : 0) << i;
+  }
+}

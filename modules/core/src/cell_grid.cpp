@@ -187,13 +187,23 @@ int CellGrid::radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<i
 NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_ball,
                                      const ProgressCallback& progress, int max_count,
                                      const Overflow& overflow) const {
+  return radiusGraph(total, radius, open_ball, progress, max_count, overflow, 0, sorted_.size());
+}
+
+NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_ball,
+                                     const ProgressCallback& progress, int max_count,
+                                     const Overflow& overflow, std::size_t slot_begin,
+                                     std::size_t slot_end) const {
   requirePositive("radius", radius);
+  slot_end = std::min(slot_end, sorted_.size());
+  slot_begin = std::min(slot_begin, slot_end);
   // Largest float below r^2 for the open ball; never below 0, so a point always finds itself.
   float max_d2 = radius * radius;
   if (open_ball) max_d2 = std::max(0.f, std::nextafter(max_d2, -1.f));
-  const std::int64_t m = static_cast<std::int64_t>(sorted_.size());
+  // Slots [first, m) are queried: all of them, or a block.
+  const std::int64_t first = static_cast<std::int64_t>(slot_begin), m = static_cast<std::int64_t>(slot_end);
   // Queries in cell order (memory locality), by chunks whose lists are then put in place.
-  const std::int64_t chunk = 256, chunks = (m + chunk - 1) / chunk;
+  const std::int64_t chunk = 256, chunks = (m - first + chunk - 1) / chunk;
   std::vector<std::vector<int>> found(static_cast<std::size_t>(chunks));
   std::vector<int> cnt(total, 0);
   ProgressReporter report(progress, "neighbours", total);
@@ -224,7 +234,7 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
   std::vector<int> pile_of;               // per slot: its pile, or -1
   std::vector<std::vector<int>> pile_low;  // per pile: its max_count lowest indices, ascending
   if (max_count > 0 && !overflow && largest_cell >= max_count) {
-    pile_of.assign(static_cast<std::size_t>(m), -1);
+    pile_of.assign(sorted_.size(), -1);
     // A cell's slots by position (compared by value, as exactDuplicateRepresentatives: -0
     // equals +0), then by index: each pile is a run, its lowest indices first. Only the cells
     // that can hold a pile are sorted.
@@ -266,8 +276,8 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
 #pragma omp for schedule(dynamic, 1)
     for (std::int64_t c = 0; c < chunks; ++c) {
       if (report.cancelled()) continue;
-      const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
-      for (std::int64_t t = c * chunk; t < end; ++t) {
+      const std::int64_t begin = first + c * chunk, end = std::min<std::int64_t>(m, begin + chunk);
+      for (std::int64_t t = begin; t < end; ++t) {
         auto collect = [&](float reach, float reach_d2) {
           buf.clear();
           forEachWithin(sorted_[t], reach, reach_d2, cursor, [&](int s, float d2) {
@@ -338,7 +348,7 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
         cnt[original_[t]] = static_cast<int>(buf.size());
         for (const std::uint64_t e : buf) found[c].push_back(static_cast<int>(e & 0xFFFFFFFFu));
       }
-      report.advance(static_cast<std::size_t>(end - c * chunk));
+      report.advance(static_cast<std::size_t>(end - begin));
     }
   }
   report.throwIfCancelled();
@@ -348,15 +358,15 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
 #pragma omp parallel for schedule(dynamic, 1)
   for (std::int64_t c = 0; c < chunks; ++c) {
     std::size_t pos = 0;
-    const std::int64_t end = std::min<std::int64_t>(m, (c + 1) * chunk);
-    for (std::int64_t t = c * chunk; t < end; ++t) {
+    const std::int64_t begin = first + c * chunk, end = std::min<std::int64_t>(m, begin + chunk);
+    for (std::int64_t t = begin; t < end; ++t) {
       const int i = original_[t];
       std::copy(found[c].begin() + pos, found[c].begin() + pos + cnt[i], indices.begin() + offsets[i]);
       pos += cnt[i];
     }
     std::vector<int>().swap(found[c]);
   }
-  report.advance(total - sorted_.size());
+  report.advance(total - static_cast<std::size_t>(m - first));
   report.finish();
   return NeighbourGraph::fromRows(std::move(offsets), std::move(indices));
 }

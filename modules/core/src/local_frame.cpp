@@ -76,9 +76,6 @@ std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
 
 namespace {
 
-// The nearest few neighbours suffice to connect the graph and cost far less heap traffic than
-// all of them.
-constexpr int kPropagationNeighbours = 10;
 // Points per block of the parallel orientation: inputs up to this size are one block, i.e. the
 // plain sequential propagation.
 constexpr std::size_t kOrientBlock = 4096;

@@ -2,6 +2,7 @@
 
 #include <cmath>
 
+#include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
@@ -33,30 +34,59 @@ NormalRefresh refreshNormals(const Positions& points, float radius, const Normal
   // the order of the input.
   const std::vector<int> order = spatialOrderAll(points);
   const Positions sorted = gathered(points, order);
-  // Radius 0 (a filter that found no neighbourhood, e.g. one point, or every point at one
-  // position): no new estimate anywhere.
-  const NeighbourGraph graph =
-      radius > 0 ? NeighbourGraph::byRadius(sorted, SpatialIndex(sorted), radius, kRefreshNormalNeighbours)
-                 : NeighbourGraph::fromRows(std::vector<std::int64_t>(sorted.size() + 1, 0), {});
-  std::vector<float> variation;
-  Normals fresh = estimateNormals(sorted, graph, &variation);
-
+  const std::size_t n = sorted.size();
+  Normals fresh(n, Eigen::Vector3f::Constant(NAN));
+  std::vector<float> variation(n, NAN);
   // The side each normal takes: the sum of the previous normals over its ball. A noisy
   // previous normal can stand near 90 degrees from the new one, and its sign alone then flips
   // a few percent of them (rs1 at 0.5% noise: 3.8%); the ball's sum is far steadier.
-  Normals hint(sorted.size(), Eigen::Vector3f::Zero());
+  Normals hint(n, Eigen::Vector3f::Zero());
   bool all_hinted = true;
-  for (std::size_t k = 0; k < order.size(); ++k) {
-    if (!is_moved(order[k]) || !isFinite(fresh[k])) continue;
-    for (const int* j = graph.begin(k); j != graph.end(k); ++j) {
-      const Eigen::Vector3f& q = previous[order[*j]];
-      if (usable(q)) hint[k] += q.normalized();
+  // PCA normal and hint of the points at `rows` (indices into sorted) from their lists in `graph`.
+  auto estimate = [&](const NeighbourGraph& graph, const int* rows, std::size_t count) {
+    bool hinted = true;
+#pragma omp parallel for schedule(dynamic, 512) reduction(&& : hinted)
+    for (std::int64_t r = 0; r < static_cast<std::int64_t>(count); ++r) {
+      const int k = rows[r];
+      fresh[k] = pcaNormal(sorted, graph.begin(k), graph.count(k), nullptr, &variation[k]);
+      if (!is_moved(order[k]) || !isFinite(fresh[k])) continue;
+      for (const int* j = graph.begin(k); j != graph.end(k); ++j) {
+        const Eigen::Vector3f& q = previous[order[*j]];
+        if (usable(q)) hint[k] += q.normalized();
+      }
+      hinted = hinted && hint[k].squaredNorm() > 0;
     }
-    all_hinted = all_hinted && hint[k].squaredNorm() > 0;
-  }
-  if (!all_hinted) {
-    if (viewpoint) orientNormalsTowards(sorted, fresh, *viewpoint);
-    else orientNormalsByPropagation(sorted, fresh, graph);
+    all_hinted = all_hinted && hinted;
+  };
+  // Radius 0 (a filter that found no neighbourhood, e.g. one point, or every point at one
+  // position): no new estimate anywhere.
+  CellGrid grid;
+  if (radius > 0 && grid.build(sorted, radius)) {
+    // The lists of up to kRefreshNormalNeighbours points are built a block of cells at a time
+    // (the same lists as in one go): at 64 a point they weighed about 0.26 KB a point, more
+    // than a tiled denoiser (docs/denoising.md, item 8). Propagation reads the nearest
+    // kPropagationNeighbours of each list only: those are built for every point.
+    constexpr std::size_t kBlock = 1 << 20;
+    for (std::size_t b = 0; b < grid.size(); b += kBlock) {
+      const std::size_t e = std::min(grid.size(), b + kBlock);
+      const NeighbourGraph block = grid.radiusGraph(n, radius, true, {}, kRefreshNormalNeighbours, {}, b, e);
+      estimate(block, grid.original().data() + b, e - b);
+    }
+    if (!all_hinted) {
+      if (viewpoint) orientNormalsTowards(sorted, fresh, *viewpoint);
+      else orientNormalsByPropagation(sorted, fresh, grid.radiusGraph(n, radius, true, {}, kPropagationNeighbours));
+    }
+  } else {
+    const NeighbourGraph graph =
+        radius > 0 ? NeighbourGraph::byRadius(sorted, SpatialIndex(sorted), radius, kRefreshNormalNeighbours)
+                   : NeighbourGraph::fromRows(std::vector<std::int64_t>(n + 1, 0), {});
+    std::vector<int> all(n);
+    for (std::size_t k = 0; k < n; ++k) all[k] = static_cast<int>(k);
+    estimate(graph, all.data(), n);
+    if (!all_hinted) {
+      if (viewpoint) orientNormalsTowards(sorted, fresh, *viewpoint);
+      else orientNormalsByPropagation(sorted, fresh, graph);
+    }
   }
   for (std::size_t k = 0; k < order.size(); ++k) {
     const auto i = static_cast<std::size_t>(order[k]);

@@ -79,6 +79,11 @@ class CellGrid {
   NeighbourGraph radiusGraph(std::size_t total, float radius, bool open_ball = false,
                              const ProgressCallback& progress = {}, int max_count = 0,
                              const Overflow& overflow = {}) const;
+  /// The same lists, for the points in slots [slot_begin, slot_end) only (the others get
+  /// empty lists): a graph too large to hold at once, built a block of cells at a time.
+  NeighbourGraph radiusGraph(std::size_t total, float radius, bool open_ball, const ProgressCallback& progress,
+                             int max_count, const Overflow& overflow, std::size_t slot_begin,
+                             std::size_t slot_end) const;
 
  private:
   static constexpr double kMaxCell = double((1 << 21) - 4);  // largest cell coordinate

@@ -42,6 +42,10 @@ Normals estimateNormals(const Positions& points, const NeighbourGraph& graph, st
 std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
                                  const Eigen::Vector3f& viewpoint);
 
+/// orientNormalsByPropagation reads the first this many entries of each neighbour list (the
+/// nearest): they suffice to connect the graph and cost far less heap traffic than all.
+constexpr int kPropagationNeighbours = 10;
+
 /// Consistent orientation without a viewpoint: propagation over the neighbour graph along
 /// the most parallel normals first (Hoppe et al. 1992), one component at a time, each seeded
 /// at its highest point; each connected component is then turned up (+z): a component whose

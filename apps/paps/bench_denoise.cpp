@@ -399,7 +399,8 @@ int runBenchDenoise(int argc, char** argv) {
         if (!w.ok) { std::printf("%-24s failed: %s\n", name.c_str(), w.message.c_str()); continue; }
         const ErrorStats e = pointToMeshError(w.output, truth);
         std::printf("%-24s %9.2f %9.0f %10.4g  %s\n", name.c_str(), w.seconds, w.peak_mb, e.rmse, w.chosen.c_str());
-        Row row{"rs1 " + std::to_string(n_large) + " pts, 0.25%", "0.25%", "ours", name, true, w, e};
+        const bool is_default = tile == SimilarityDenoisingParameters().max_tile_points;
+        Row row{"rs1 " + std::to_string(n_large) + " pts, 0.25%", "0.25%", "ours", name, is_default, w, e};
         row.run.output.clear();
         rows.push_back(row);
       }

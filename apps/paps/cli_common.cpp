@@ -243,7 +243,7 @@ bool hasField(const pcl::PCLPointCloud2& c, const char* name) {
 
 bool fileMayHaveNormals(const std::string& path) {
   try {
-    const std::string ext = std::filesystem::path(path).extension().string();
+    const std::string ext = lowerExtension(path);  // as the reader takes it: scan.PCD is a .pcd
     if (ext == ".pcd") return readPcdLayout(path).field("normal_x") >= 0;
     if (ext == ".ply") {
       const PlyLayout layout = readPlyLayout(path);

@@ -376,7 +376,8 @@ TEST(CellGrid, DeterministicAcrossThreadCounts) {
 // empty; blocks that cover every slot give every row.
 TEST(CellGrid, BlocksOfSlotsGiveTheRowsOfTheWholeGraph) {
   Positions p = randomCloud(6000, 31);
-  p.insert(p.end(), 200, Eigen::Vector3f(0.5f, 0.5f, 0.5f));  // a pile above the cap
+  // A pile above the cap, in a cell crowded enough (over 64 x 10 points) for the kd-tree path.
+  p.insert(p.end(), 700, Eigen::Vector3f(0.5f, 0.5f, 0.5f));
   const float r = 0.08f;
   CellGrid grid;
   ASSERT_TRUE(grid.build(p, r));

@@ -223,8 +223,12 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
   // another rounding of the distances in the tree can change the list), else the scan runs.
   constexpr int kCrowdedCell = 64;  // x max_count: a thread that scanned that many tries the tree
   constexpr int kTreeRest = 64;
+  // The cells that hold queried slots: a block of slots prepares only those (a block-wise
+  // caller would otherwise build the tree and sort the piles of the whole grid for every block).
+  auto queried = [&](std::size_t k) { return start_[k] < m && start_[k + 1] > first; };
   int largest_cell = 0;
-  for (std::size_t k = 0; k + 1 < start_.size(); ++k) largest_cell = std::max(largest_cell, start_[k + 1] - start_[k]);
+  for (std::size_t k = 0; k + 1 < start_.size(); ++k)
+    if (queried(k)) largest_cell = std::max(largest_cell, start_[k + 1] - start_[k]);
   std::unique_ptr<SpatialIndex> tree;
   if (guess_reach && largest_cell > kCrowdedCell * max_count) tree = std::make_unique<SpatialIndex>(sorted_);
   // Piles: a point stored at least max_count times (itself included) has as its capped list
@@ -248,7 +252,7 @@ NeighbourGraph CellGrid::radiusGraph(std::size_t total, float radius, bool open_
     };
     std::vector<int> cell;
     for (std::size_t k = 0; k + 1 < start_.size(); ++k) {
-      if (start_[k + 1] - start_[k] < max_count) continue;
+      if (start_[k + 1] - start_[k] < max_count || !queried(k)) continue;
       cell.resize(static_cast<std::size_t>(start_[k + 1] - start_[k]));
       std::iota(cell.begin(), cell.end(), start_[k]);
       std::sort(cell.begin(), cell.end(), less);

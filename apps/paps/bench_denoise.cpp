@@ -42,8 +42,8 @@ const char* kBenchUsage =
     "                   ~/.cache/paps/samples)\n"
     "  --points N       points sampled on each test shape (default 200000)\n"
     "  --large N        points of the large speed test (default 1000000, 0 to skip)\n"
-    "  --tiles N        also run ours at its default on the large input in one piece and in\n"
-    "                   tiles of N points (time, peak memory, RMSE to the true surface)\n"
+    "  --tiles N        also run ours, the bilateral filter and LPF on the large input in one\n"
+    "                   piece and in tiles of N points (time, peak memory, RMSE to the true surface)\n"
     "  --quick          one noise level, shorter sweeps (a smoke run)\n"
     "  --shapes LIST    comma-separated test shapes (default engraved-plane,rs1-scan-mesh); also\n"
     "                   engraved-plane-1cm (10 cm wavelength, 1 cm relief: detail above the\n"
@@ -387,22 +387,31 @@ int runBenchDenoise(int argc, char** argv) {
     synthetic::addGaussianNoise(big, 0.0025f, 6);
     speed("rs1 " + std::to_string(n_large) + " pts, 0.25%, 30 nb", big, false);
     speed("rs1 " + std::to_string(n_large) + " pts, 0.25%, default", big, true);
-    // Tiles (SimilarityDenoisingParameters::max_tile_points): one piece against tiles, same input.
+    // Tiles (max_tile_points of each method): one piece against tiles, same input. Ours and
+    // LPF at their defaults; the bilateral filter at the radius ours chose, as in the speed rows.
     if (n_tiles > 0) {
       const PointToMeshDistance truth(rs1_ds->mesh);
-      std::printf("\ntiles: rs1 %zu points, 0.25%% noise, ours at its default; RMSE to the true mesh (input %.4g)\n",
-                  n_large, pointToMeshError(big, truth).rmse);
-      std::printf("%-24s %9s %9s %10s\n", "run", "time(s)", "peak MB", "RMSE");
-      for (const std::size_t tile : {std::size_t(0), n_tiles}) {
-        const WorkerResult w = runWorker(out_dir, "ours", big, {{"tile", static_cast<double>(tile)}});
-        const std::string name = tile ? "tiles of " + std::to_string(tile) : "one piece";
-        if (!w.ok) { std::printf("%-24s failed: %s\n", name.c_str(), w.message.c_str()); continue; }
-        const ErrorStats e = pointToMeshError(w.output, truth);
-        std::printf("%-24s %9.2f %9.0f %10.4g  %s\n", name.c_str(), w.seconds, w.peak_mb, e.rmse, w.chosen.c_str());
-        const bool is_default = tile == SimilarityDenoisingParameters().max_tile_points;
-        Row row{"rs1 " + std::to_string(n_large) + " pts, 0.25%", "0.25%", "ours", name, is_default, w, e};
-        row.run.output.clear();
-        rows.push_back(row);
+      std::printf("\ntiles: rs1 %zu points, 0.25%% noise; RMSE to the true mesh (input %.4g)\n", n_large,
+                  pointToMeshError(big, truth).rmse);
+      std::printf("%-10s %-24s %9s %9s %10s\n", "method", "run", "time(s)", "peak MB", "RMSE");
+      double ours_radius = 0;
+      for (const std::string m : {"ours", "bilateral", "lpf"}) {
+        for (const std::size_t tile : {std::size_t(0), n_tiles}) {
+          std::map<std::string, double> p{{"tile", static_cast<double>(tile)}};
+          if (m == "bilateral") p["radius"] = ours_radius;
+          const WorkerResult w = runWorker(out_dir, m, big, p);
+          const std::string name = tile ? "tiles of " + std::to_string(tile) : "one piece";
+          if (!w.ok) { std::printf("%-10s %-24s failed: %s\n", m.c_str(), name.c_str(), w.message.c_str()); continue; }
+          if (m == "ours" && tile == 0) ours_radius = w.radius;
+          const ErrorStats e = pointToMeshError(w.output, truth);
+          std::printf("%-10s %-24s %9.2f %9.0f %10.4g  radius %.4g%s\n", m.c_str(), name.c_str(), w.seconds, w.peak_mb,
+                      e.rmse, w.radius, w.chosen.empty() ? "" : (" (" + w.chosen + ")").c_str());
+          // Every method's default limit is 2M points (the parameters' max_tile_points).
+          const bool is_default = tile == SimilarityDenoisingParameters().max_tile_points && m != "bilateral";
+          Row row{"rs1 " + std::to_string(n_large) + " pts, 0.25%", "0.25%", m, name, is_default, w, e};
+          row.run.output.clear();
+          rows.push_back(row);
+        }
       }
     }
   }

@@ -167,14 +167,20 @@ int runBenchWorker(int argc, char** argv) {
       q.iterations = static_cast<int>(get("passes", q.iterations));
       q.bend_threshold = static_cast<float>(get("bend", q.bend_threshold));
       q.probing.free_curvature = get("free-curvature", 0) != 0;
+      q.max_tile_points = static_cast<std::size_t>(get("tile", static_cast<double>(q.max_tile_points)));
       LpfDenoisingReport report;
       output = lpfDenoisePositions(input, q, &report);
       lf << "radius " << report.radius << "\n";
+      if (report.tiles > 1) lf << "chosen " << report.tiles << " tiles\n";
     } else if (method == "bilateral") {
       PointBilateralParameters q;
       q.radius = static_cast<float>(get("radius", 0));
       q.iterations = static_cast<int>(get("iterations", 1));
-      output = bilateralFilterPositions(input, q);
+      q.max_tile_points = static_cast<std::size_t>(get("tile", static_cast<double>(q.max_tile_points)));
+      PointBilateralReport report;
+      output = bilateralFilterPositions(input, q, &report);
+      lf << "radius " << report.radius << "\n";
+      if (report.tiles > 1) lf << "chosen " << report.tiles << " tiles\n";
     } else if (method == "mls") {
       auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
       writePositions(input, *cloud);

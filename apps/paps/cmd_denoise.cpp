@@ -42,8 +42,8 @@ const char* kDenoiseUsage =
     "  --patches K            similar patches averaged (default 32)\n"
     "  --checks N             descriptors compared per similarity query (default 48, 0 = exact)\n"
     "  --tile-points N        a cloud of more finite points is denoised in tiles of at most N\n"
-    "                         points, one at a time (memory: about 1 KB a point of a tile;\n"
-    "                         default 2000000; 0: one piece whatever the size)\n"
+    "                         points, one at a time (every method; memory: about 1 KB a\n"
+    "                         point of a tile; default 2000000; 0: one piece whatever the size)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "LPF options (--method lpf; --radius is the pattern radius, --neighbours defaults to 100,\n"
     "--passes to 5):\n"
@@ -95,9 +95,9 @@ int runDenoise(int argc, char** argv) {
                                    "refilter", "aggregate", "own-weight", "noise", "no-adapt", "tile-points"});
   else if (method == "lpf")
     applies.insert(applies.end(), {"step", "atoms", "lambda", "rounds", "seed-spacing", "passes", "free-motion",
-                                   "free-curvature", "bend-threshold"});
+                                   "free-curvature", "bend-threshold", "tile-points"});
   else
-    applies.insert(applies.end(), {"iterations"});
+    applies.insert(applies.end(), {"iterations", "tile-points"});
   requireOptionsOf(a, applies, "--method " + method);
 
   Eigen::Vector3f origin;
@@ -178,7 +178,9 @@ int runDenoise(int argc, char** argv) {
     p.normal_motion_on_surfaces = !a.has("free-motion");
     p.probing.free_curvature = a.has("free-curvature");
     p.bend_threshold = a.real("bend-threshold", p.bend_threshold);
-    validateAsOptions({{"seed_spacing", "seed-spacing"}, {"iterations", "passes"}, {"bend_threshold", "bend-threshold"}},
+    p.max_tile_points = a.count("tile-points", p.max_tile_points);
+    validateAsOptions({{"seed_spacing", "seed-spacing"}, {"iterations", "passes"}, {"bend_threshold", "bend-threshold"},
+                       {"max_tile_points", "tile-points"}},
                       [&] { p.validate(); });
     LpfDenoisingReport r;
     out = lpfDenoisePositions(in, p, &r, {}, progress);
@@ -190,6 +192,9 @@ int runDenoise(int argc, char** argv) {
                 "%d passes%s; moved %zu points\n",
                 r.radius, p.probing.radius > 0 ? "" : chosen, r.step, r.pattern_nodes, r.fields, p.probing.atoms,
                 r.lambda, p.iterations, p.probing.free_curvature ? ", free curvature" : "", r.moved);
+    if (r.tiles > 1)
+      std::printf("in %zu tiles (at most %zu points each, %zu with the halo of %g radii; fields and dictionaries per tile)\n",
+                  r.tiles, p.max_tile_points, r.largest_tile, p.tile_margin);
     if (p.bend_threshold > 0 && p.iterations > 1) {
       std::string by_pass;
       for (std::size_t k = 0; k < r.held_after_pass.size(); ++k)
@@ -206,11 +211,15 @@ int runDenoise(int argc, char** argv) {
     p.radius = a.real("radius", 0);
     p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.iterations = a.integer("iterations", p.iterations);
-    validateAsOptions({{"target_neighbours", "neighbours"}}, [&] { p.validate(); });
+    p.max_tile_points = a.count("tile-points", p.max_tile_points);
+    validateAsOptions({{"target_neighbours", "neighbours"}, {"max_tile_points", "tile-points"}}, [&] { p.validate(); });
     PointBilateralReport r;
     out = bilateralFilterPositions(in, p, &r, {}, progress);
     std::printf("bilateral filter: radius %g m%s, %d passes; moved %zu points\n", r.radius,
                 p.radius > 0 ? "" : " (chosen)", p.iterations, r.moved);
+    if (r.tiles > 1)
+      std::printf("in %zu tiles (at most %zu points each, %zu with the halo of %d radii)\n", r.tiles,
+                  p.max_tile_points, r.largest_tile, p.iterations);
     if (r.isolated) std::fprintf(stderr, "warning: %zu points have too few neighbours (or only collinear ones: no normal) and were left in place\n", r.isolated);
     radius = r.radius;
   }

@@ -1,6 +1,7 @@
 // Tests of paps/filters/point_bilateral_filter.h: error to the true surface goes down on a
 // noisy sphere and an engraved plane, the pcl::Filter contract (NaN pass-through, fields
 // kept, indices, is_dense), edge cases, named parameter errors and determinism.
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -18,6 +19,7 @@
 #include <paps/core/random.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/synthetic.h>
+#include <paps/core/tiling.h>
 #include <paps/filters/point_bilateral_filter.h>
 
 #include "filter_test_support.h"
@@ -248,6 +250,119 @@ TEST(PointBilateralFilter, BadParametersAreNamed) {
   const Positions in = smallSphere(500);
   EXPECT_EQ(paps::bilateralFilterPositions(in, narrow, &r), in);
   EXPECT_EQ(r.moved, 0u);
+}
+
+// ------------------------------------------------------------------------------ tiles
+
+// A point's output after k passes reads the points within k radii of it, so tiles with halos
+// of k radii give the one-piece output. Only the order of equal-distance neighbours in a list
+// may differ (ties broken by index), so the sums may differ in the last bits: within 1e-6 of
+// the radius. With halos of one radius for two passes, the check would fail (measured below).
+TEST(PointBilateralFilter, TilesGiveTheOnePieceOutput) {
+  Positions p = noisySphere(12000, 0.01f, 4);
+  p[7] = Eigen::Vector3f::Constant(payloadNaN());
+  for (const int passes : {1, 2}) {
+    PointBilateralParameters whole_p, tiled_p;
+    whole_p.iterations = tiled_p.iterations = passes;
+    whole_p.max_tile_points = 0;
+    tiled_p.max_tile_points = 3500;
+    PointBilateralReport whole_r, tiled_r;
+    const Positions whole = paps::bilateralFilterPositions(p, whole_p, &whole_r);
+    const Positions tiled = paps::bilateralFilterPositions(p, tiled_p, &tiled_r);
+    EXPECT_EQ(whole_r.tiles, 1u);
+    EXPECT_EQ(tiled_r.tiles, 4u);
+    EXPECT_GT(tiled_r.largest_tile, 3000u);
+    EXPECT_LT(tiled_r.largest_tile, 12000u);
+    EXPECT_EQ(tiled_r.radius, whole_r.radius);
+    EXPECT_EQ(tiled_r.moved, whole_r.moved);
+    EXPECT_EQ(tiled_r.isolated, whole_r.isolated);
+    EXPECT_EQ(tiled_r.non_finite, 1u);
+    EXPECT_TRUE(sameBits(tiled[7], p[7]));
+    double worst = 0;
+    for (std::size_t i = 0; i < p.size(); ++i)
+      if (paps::isFinite(p[i])) worst = std::max(worst, static_cast<double>((tiled[i] - whole[i]).norm()));
+    EXPECT_LT(worst, 1e-6 * whole_r.radius) << passes << " passes";
+  }
+  // The halo is what makes it exact: two passes run in tiles whose halo is one radius wide
+  // (one pass's reach) differ near the cuts.
+  PointBilateralParameters two;
+  two.iterations = 2;
+  two.max_tile_points = 0;
+  PointBilateralReport r;
+  const Positions whole = paps::bilateralFilterPositions(p, two, &r);
+  const std::vector<paps::Tile> short_halo = paps::splitIntoTiles(p, 3500, r.radius);
+  two.radius = r.radius;
+  const Positions cut = paps::runInTiles(p, {}, short_halo, [&](const Positions& q, const std::vector<std::uint8_t>&, std::size_t) {
+    return paps::bilateralFilterPositions(q, two);
+  });
+  std::size_t differ = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) differ += paps::isFinite(p[i]) && (cut[i] - whole[i]).norm() > 1e-6 * r.radius;
+  EXPECT_GT(differ, 50u);
+}
+
+// Tiles depend on the positions only (threads, input order); movable flags and a pile of
+// copies larger than a tile are respected; the PCL class tiles the same way.
+TEST(PointBilateralFilter, TiledOutputIsDeterministic) {
+  Positions p = smallSphere(8000);
+  PointBilateralParameters params;
+  params.max_tile_points = 2500;
+  PointBilateralReport r;
+  const Positions a = paps::bilateralFilterPositions(p, params, &r);
+  EXPECT_EQ(r.tiles, 4u);
+  EXPECT_EQ(pointsDifferingBetweenOneAndTwoThreads([&] { return paps::bilateralFilterPositions(p, params); }), 0u);
+  const std::vector<int> perm = shuffledOrder(p.size(), 9);
+  const Positions c = paps::bilateralFilterPositions(paps::gathered(p, perm), params);
+  std::size_t order_differ = 0;
+  for (std::size_t k = 0; k < p.size(); ++k) order_differ += !sameBits(c[k], a[perm[k]]);
+  EXPECT_EQ(order_differ, 0u);
+  PointBilateralFilter<pcl::PointXYZ> f;
+  f.setMaxTilePoints(2500);
+  const auto out = runFilter(f, toCloud<pcl::PointXYZ>(p));
+  EXPECT_EQ(f.getReport().tiles, 4u);
+  std::size_t class_differ = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) class_differ += !sameBits(out[i].getVector3fMap(), a[i]);
+  EXPECT_EQ(class_differ, 0u);
+  expectInvalidParameter([&] { f.setMaxTilePoints(std::size_t(1) << 31); }, "max_tile_points");
+  Positions piled = p;
+  piled.insert(piled.end(), 3000, Eigen::Vector3f(5.f, 5.f, 5.f));
+  PointBilateralReport pr;
+  const Positions po = paps::bilateralFilterPositions(piled, params, &pr);
+  std::size_t pile_moved = 0, sphere_moved = 0;
+  for (std::size_t i = 0; i < piled.size(); ++i) (i >= p.size() ? pile_moved : sphere_moved) += po[i] != piled[i];
+  EXPECT_EQ(pile_moved, 0u);
+  EXPECT_GT(sphere_moved, p.size() / 2);
+  EXPECT_GE(pr.isolated, 3000u);
+  std::vector<std::uint8_t> movable(p.size(), 0);
+  for (std::size_t i = 0; i < p.size(); i += 3) movable[i] = 1;
+  const Positions m = paps::bilateralFilterPositions(p, params, nullptr, movable);
+  std::size_t still_moved = 0, moved = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) (movable[i] ? moved : still_moved) += m[i] != p[i];
+  EXPECT_EQ(still_moved, 0u);
+  EXPECT_GT(moved, p.size() / 4);
+}
+
+// A radius given by the user is checked on the whole cloud; a tile narrower than the radius
+// (a dense blob far from the rest) is still filtered, as in one piece.
+TEST(PointBilateralFilter, TilesNarrowerThanTheRadiusAreFiltered) {
+  Positions p = noisySphere(3000, 0.01f, 8);
+  for (auto& q : p) q *= 0.01f;  // a blob of 2 cm
+  const std::size_t blob = p.size();
+  for (std::size_t i = 0; i < blob; ++i) p.push_back(p[i] + Eigen::Vector3f(1.f, 0.f, 0.f));
+  PointBilateralParameters params;
+  params.radius = 0.025f;  // wider than a blob, narrower than the cloud
+  params.max_tile_points = 0;
+  PointBilateralReport whole_r, tiled_r;
+  const Positions whole = paps::bilateralFilterPositions(p, params, &whole_r);
+  params.max_tile_points = blob;
+  const Positions tiled = paps::bilateralFilterPositions(p, params, &tiled_r);
+  EXPECT_EQ(tiled_r.tiles, 2u);
+  EXPECT_EQ(tiled_r.moved, whole_r.moved);
+  EXPECT_GT(tiled_r.moved, blob);
+  double worst = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) worst = std::max(worst, static_cast<double>((tiled[i] - whole[i]).norm()));
+  EXPECT_LT(worst, 1e-6);
+  params.radius = 2.f;  // wider than the whole cloud: refused, tiled or not
+  expectInvalidParameter([&] { paps::bilateralFilterPositions(p, params); }, "radius");
 }
 
 // ----------------------------------------------------------------- threads, progress

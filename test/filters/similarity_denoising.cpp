@@ -592,6 +592,29 @@ TEST(SimilarityDenoising, TiledOutputIsDeterministic) {
   EXPECT_GT(moved, p.size() / 4);
 }
 
+// A radius given by the user is checked on the whole cloud; a tile narrower than the radius
+// (a dense blob far from the rest) is still denoised, as in one piece (it used to be refused
+// with the tile's extent).
+TEST(SimilarityDenoising, TilesNarrowerThanTheRadiusAreDenoised) {
+  Positions p = smallNoisyPlane(3000);
+  for (auto& q : p) q *= 0.02f;  // a blob of about 2 cm
+  const std::size_t blob = p.size();
+  for (std::size_t i = 0; i < blob; ++i) p.push_back(p[i] + Eigen::Vector3f(1.f, 0.f, 0.f));
+  SimilarityDenoisingParameters params;
+  params.radius = 0.03f;  // wider than a blob, narrower than the cloud
+  params.adapt_to_noise = false;
+  params.max_tile_points = blob;
+  SimilarityDenoisingReport r;
+  const Positions out = paps::denoiseBySimilarity(p, params, &r);
+  EXPECT_EQ(r.tiles, 2u);
+  EXPECT_GT(r.moved, blob);
+  std::size_t finite = 0;
+  for (const auto& q : out) finite += paps::isFinite(q);
+  EXPECT_EQ(finite, p.size());
+  params.radius = 2.f;  // wider than the whole cloud: refused, tiled or not
+  expectInvalidParameter([&] { paps::denoiseBySimilarity(p, params); }, "radius");
+}
+
 // ----------------------------------------------------------------- threads, progress
 
 TEST(SimilarityDenoising, SameOutputWithOneOrTwoThreads) {

@@ -238,28 +238,36 @@ Eigen::Matrix3f randomFrame(std::uint64_t seed, std::size_t j) {
 
 LocalProbingAnalysis::~LocalProbingAnalysis() = default;
 
+float LocalProbingAnalysis::chooseRadius(const Positions& points, const SpatialIndex& index,
+                                         const LocalProbingParameters& parameters, float* noise_sigma) {
+  if (noise_sigma) *noise_sigma = 0.f;
+  float r = parameters.radius;
+  if (r > 0) return r;
+  r = radiusForNeighbourCount(points, index, parameters.neighbours);
+  if (!(r > 0)) throw InvalidInput("the points are all at one position: no pattern radius fits them");
+  if (parameters.noise_sigmas > 0) {
+    float sigma = 0.f;
+    try {
+      sigma = estimateNoiseLevel(points, index, r).sigma;
+    } catch (const InvalidInput&) {
+      sigma = 0.f;  // no ball to fit a surface in (a few points, or wires only)
+    }
+    if (noise_sigma) *noise_sigma = sigma;
+    // Wider for the noise, but never beyond half the cloud.
+    r = std::max(r, std::min(parameters.noise_sigmas * sigma, 0.5f * boundingBoxDiagonal(points)));
+  }
+  return r;
+}
+
 LocalProbingAnalysis::LocalProbingAnalysis(const Positions& points, const LocalProbingParameters& parameters,
-                                           const ProgressCallback& progress)
+                                           const ProgressCallback& progress, bool check_extent)
     : params_(parameters) {
   params_.validate();
   const std::size_t finite = countFinite(points);
   if (finite < 3) throw InvalidInput("Local Probing Fields need at least 3 finite points, got " + std::to_string(finite));
-  requireRadiusWithinExtent("radius", params_.radius, points);
+  if (check_extent) requireRadiusWithinExtent("radius", params_.radius, points);
   SpatialIndex index(points);
-  float r = params_.radius;
-  if (!(r > 0)) {
-    r = radiusForNeighbourCount(points, index, params_.neighbours);
-    if (!(r > 0)) throw InvalidInput("the points are all at one position: no pattern radius fits them");
-    if (params_.noise_sigmas > 0) {
-      try {
-        noise_sigma_ = estimateNoiseLevel(points, index, r).sigma;
-      } catch (const InvalidInput&) {
-        noise_sigma_ = 0.f;  // no ball to fit a surface in (a few points, or wires only)
-      }
-      // Wider for the noise, but never beyond half the cloud.
-      r = std::max(r, std::min(params_.noise_sigmas * noise_sigma_, 0.5f * boundingBoxDiagonal(points)));
-    }
-  }
+  const float r = chooseRadius(points, index, params_, &noise_sigma_);
   float step = params_.step;
   if (!(step > 0)) step = r * std::sqrt(3.14159265f / (params_.neighbours * params_.nodes_per_point));
   if (step > r) throw InvalidParameter("step", detail::toString(step), "at most the pattern radius " + detail::toString(r));

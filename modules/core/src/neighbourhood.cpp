@@ -307,10 +307,10 @@ namespace paps {
 RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
                                              int target_neighbours, int max_count,
                                              const ProgressCallback& progress,
-                                             std::unique_ptr<SpatialIndex> index) {
+                                             std::unique_ptr<SpatialIndex> index, bool check_extent) {
   if (radius < 0 || !std::isfinite(radius))
     throw InvalidParameter("radius", detail::toString(radius), "0 (automatic) or a finite value > 0");
-  requireRadiusWithinExtent("radius", radius, points);
+  if (check_extent) requireRadiusWithinExtent("radius", radius, points);
   RadiusNeighbourhood nb;
   nb.index = index ? std::move(index) : std::make_unique<SpatialIndex>(points);
   if (nb.index->size() == 0) throw InvalidInput("no finite point in the cloud");

@@ -109,4 +109,33 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
   return out;
 }
 
+Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
+                           const std::vector<Tile>& tiles, const SortedTileStage& stage,
+                           const ProgressCallback& progress, std::vector<std::uint8_t>* status) {
+  if (status) status->assign(points.size(), 0);
+  return runInTiles(points, movable, tiles, [&](const Positions& p, const std::vector<std::uint8_t>& m, std::size_t t) {
+    const std::size_t core = tiles[t].core.size();
+    if (!m.empty() && std::none_of(m.begin(), m.begin() + static_cast<std::ptrdiff_t>(core),
+                                   [](std::uint8_t v) { return v != 0; }))
+      return p;
+    const std::string prefix = "tile " + std::to_string(t + 1) + "/" + std::to_string(tiles.size()) + ": ";
+    const ProgressCallback sub =
+        progress ? ProgressCallback([&](const std::string& name, float f) { return progress(prefix + name, f); })
+                 : ProgressCallback();
+    const std::vector<int> order = spatialOrderAll(p);
+    std::vector<std::uint8_t> sorted_status;
+    const Positions sorted_out = stage(gathered(p, order), m.empty() ? m : gathered(m, order), sorted_status, t, sub);
+    if (sorted_out.size() != p.size())
+      throw InvalidInput("tile " + std::to_string(t) + ": the stage returned " + std::to_string(sorted_out.size()) +
+                         " positions for " + std::to_string(p.size()) + " points");
+    Positions o(p.size());
+    for (std::size_t k = 0; k < order.size(); ++k) {
+      o[order[k]] = sorted_out[k];
+      const std::size_t local = static_cast<std::size_t>(order[k]);
+      if (status && local < core && k < sorted_status.size()) (*status)[tiles[t].core[local]] = sorted_status[k];
+    }
+    return o;
+  });
+}
+
 }  // namespace paps

@@ -8,6 +8,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/spatial_order.h>
+#include <paps/core/tiling.h>
 
 namespace paps {
 
@@ -22,6 +23,10 @@ void LpfDenoisingParameters::validate() const {
     throw InvalidParameter("bent_share", detail::toString(bent_share), "a value in (0, 1]");
   if (!(tau_p >= 0) || !std::isfinite(tau_p))
     throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (the pattern step) or a finite value > 0");
+  if (max_tile_points >= (std::size_t(1) << 31))
+    throw InvalidParameter("max_tile_points", std::to_string(max_tile_points), "0 (one piece) or a count below 2^31");
+  if (!(tile_margin >= 1) || !std::isfinite(tile_margin))
+    throw InvalidParameter("tile_margin", detail::toString(tile_margin), "a finite number of radii >= 1");
 }
 
 namespace {
@@ -83,21 +88,32 @@ float fieldBend(const LocalProbingAnalysis& a, std::size_t j) {
   return static_cast<float>(std::sqrt(ss / m) / pattern.radius());
 }
 
+bool holdsCreases(const LpfDenoisingParameters& params) { return params.bend_threshold > 0 && params.iterations > 1; }
+
+// What happened to a point, when asked (the tiled run counts its core points): kMoved or
+// kIsolated by the last pass, and the pass after which it was held (0: never) times kHeldUnit.
+constexpr std::uint8_t kMoved = 1, kIsolated = 2, kHeldUnit = 4;  // passes <= 50 < 64
+
 Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParameters& params,
                                 LpfDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
-                                const ProgressCallback& progress) {
+                                const ProgressCallback& progress, std::vector<std::uint8_t>* status = nullptr,
+                                bool check_extent = true) {
   LpfDenoisingReport report;
   const std::size_t n = points.size();
   const std::size_t finite = countFinite(points);
   report.non_finite = n - finite;
+  if (status) status->assign(n, 0);
   if (finite < 3) {
     // No pattern can be placed on fewer than 3 points: they pass through.
     report.isolated = finite;
+    if (status)
+      for (std::size_t i = 0; i < n; ++i)
+        if (isFinite(points[i])) (*status)[i] = kIsolated;
     if (report_out) *report_out = report;
     return points;
   }
   Positions cur = points;
-  LocalProbingAnalysis analysis(cur, params.probing, progress);
+  LocalProbingAnalysis analysis(cur, params.probing, progress, check_extent);
   const ProbingPattern& pattern = analysis.pattern();
   report.radius = pattern.radius();
   report.step = pattern.step();
@@ -113,7 +129,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   // Creases (bend_threshold): the pass from which each point stays where it is. Tested after
   // every analysis, since the first pass lowers the noise that hides mild creases from the
   // first test.
-  const bool hold_creases = params.bend_threshold > 0 && params.iterations > 1;
+  const bool hold_creases = holdsCreases(params);
   std::vector<int> held_from(hold_creases ? n : 0, params.iterations);
   std::vector<std::uint8_t> ever_bent(hold_creases ? analysis.fieldCount() : 0, 0);
   for (int pass = 0; pass < params.iterations; ++pass) {
@@ -144,6 +160,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
         if (known > 0 && bent_here >= params.bent_share * known && wires < params.bent_share * known) {
           held_from[p] = pass + 1;  // this pass still moves it
           ++newly_held;
+          if (status) (*status)[p] = static_cast<std::uint8_t>(kHeldUnit * (pass + 1));
         }
       }
       for (std::size_t j = 0; j < nf; ++j) ever_bent[j] |= bent[j];
@@ -152,6 +169,7 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
     }
     Positions next = cur;
     std::size_t moved = 0, isolated = 0;
+    const bool last = pass + 1 == params.iterations;
 #pragma omp parallel for schedule(dynamic, 1024) reduction(+ : moved, isolated)
     for (std::int64_t p = 0; p < sn; ++p) {
       rep.advance();
@@ -189,10 +207,15 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
         acc += w * candidate.cast<double>();
         wsum += w;
       }
-      if (!(wsum > 0)) { ++isolated; continue; }
+      if (!(wsum > 0)) {
+        ++isolated;
+        if (status && last) (*status)[p] |= kIsolated;
+        continue;
+      }
       const Eigen::Vector3f consensus = (acc / wsum).cast<float>();
       next[p] = cur[p] + params.rate * (consensus - cur[p]);
       moved += next[p] != cur[p];
+      if (status && last && next[p] != cur[p]) (*status)[p] |= kMoved;
     }
     rep.throwIfCancelled();
     cur.swap(next);
@@ -207,6 +230,65 @@ Positions denoiseInSpatialOrder(const Positions& points, const LpfDenoisingParam
   return cur;
 }
 
+// The tiled run (LpfDenoisingParameters::max_tile_points): the radius is chosen once, on the
+// whole cloud in spatial order as the one-piece analysis chooses it; every tile then runs
+// with that radius (so the same step and lambda).
+Positions denoiseInTiles(const Positions& points, const LpfDenoisingParameters& params,
+                         LpfDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
+                         const ProgressCallback& progress) {
+  LpfDenoisingReport report;
+  LpfDenoisingParameters run = params;
+  run.max_tile_points = 0;
+  {
+    const Positions sorted = gathered(points, spatialOrderAll(points));
+    const SpatialIndex index(sorted);
+    run.probing.radius = LocalProbingAnalysis::chooseRadius(sorted, index, params.probing, &report.noise_sigma);
+  }
+  const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, params.tile_margin * run.probing.radius);
+  report.tiles = tiles.size();
+  std::vector<double> error_sums;  // per round, over the fields of every tile
+  std::size_t fields_with_errors = 0;
+  std::vector<std::uint8_t> status;
+  const Positions out = runSortedInTiles(
+      points, movable, tiles,
+      [&](const Positions& p, const std::vector<std::uint8_t>& m, std::vector<std::uint8_t>& st, std::size_t,
+          const ProgressCallback& sub) {
+        report.largest_tile = std::max(report.largest_tile, p.size());
+        LpfDenoisingReport r;
+        if (leaveOnePositionAsItIs(p, &r)) {
+          st.assign(p.size(), kIsolated);
+          return p;
+        }
+        const Positions o = denoiseInSpatialOrder(p, run, &r, m, sub, &st, /*check_extent=*/false);
+        report.radius = r.radius;
+        report.step = r.step;
+        report.lambda = r.lambda;
+        report.pattern_nodes = r.pattern_nodes;
+        report.fields += r.fields;
+        report.bent_fields += r.bent_fields;
+        if (error_sums.size() < r.round_errors.size()) error_sums.resize(r.round_errors.size(), 0.0);
+        for (std::size_t k = 0; k < r.round_errors.size(); ++k) error_sums[k] += r.round_errors[k] * r.fields;
+        fields_with_errors += r.fields;
+        return o;
+      },
+      progress, &status);
+  if (holdsCreases(params)) report.held_after_pass.assign(static_cast<std::size_t>(params.iterations - 1), 0);
+  for (const std::uint8_t s : status) {
+    report.moved += (s & kMoved) != 0;
+    report.isolated += (s & kIsolated) != 0;
+    const int held = s / kHeldUnit;
+    if (held > 0) {
+      ++report.held_points;
+      ++report.held_after_pass[static_cast<std::size_t>(held - 1)];
+    }
+  }
+  for (const double e : error_sums) report.round_errors.push_back(fields_with_errors ? e / fields_with_errors : 0.0);
+  if (report.radius == 0) report.radius = run.probing.radius;
+  report.non_finite = points.size() - countFinite(points);
+  if (report_out) *report_out = report;
+  return out;
+}
+
 }  // namespace
 
 Positions lpfDenoisePositions(const Positions& points, const LpfDenoisingParameters& params,
@@ -215,6 +297,10 @@ Positions lpfDenoisePositions(const Positions& points, const LpfDenoisingParamet
   params.validate();
   checkMovableInput(points, movable);
   if (leaveOnePositionAsItIs(points, report)) return points;
+  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points) {
+    requireRadiusWithinExtent("radius", params.probing.radius, points);
+    return denoiseInTiles(points, params, report, movable, progress);
+  }
   return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
     return denoiseInSpatialOrder(p, params, report, m, progress);
   });

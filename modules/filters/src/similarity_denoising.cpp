@@ -222,7 +222,8 @@ Positions denoiseOnce(const Positions& points, const std::vector<std::uint8_t>& 
   // 1. Neighbourhoods, capped so that a too large radius cannot explode the cost.
   const int cap = std::max(64, 4 * params.target_neighbours);
   RadiusNeighbourhood nb =
-      buildRadiusNeighbourhood(points, params.radius, params.target_neighbours, cap, progress, std::move(spatial_index));
+      buildRadiusNeighbourhood(points, params.radius, params.target_neighbours, cap, progress, std::move(spatial_index),
+                               /*check_extent=*/false);  // checked on the whole cloud (denoiseBySimilarity)
   report.radius = nb.radius;
   report.mean_neighbours = nb.graph.meanCount();
   const NeighbourGraph& graph = nb.graph;
@@ -583,41 +584,28 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
   double sigma = 0, neighbours = 0;
   std::size_t weighed = 0;  // core points of the tiles that ran the filter
   report.tiles = tiles.size();
-  const Positions out = runInTiles(points, movable, tiles, [&](const Positions& p, const std::vector<std::uint8_t>& m, std::size_t t) {
-    const std::string prefix = "tile " + std::to_string(t + 1) + "/" + std::to_string(tiles.size()) + ": ";
-    const ProgressCallback sub = progress ? ProgressCallback([&](const std::string& stage, float f) { return progress(prefix + stage, f); })
-                                          : ProgressCallback();
-    const std::size_t core = tiles[t].core.size();
+  std::vector<std::uint8_t> status;
+  const SortedTileStage stage = [&](const Positions& p, const std::vector<std::uint8_t>& m,
+                                    std::vector<std::uint8_t>& st, std::size_t t, const ProgressCallback& sub) {
     report.largest_tile = std::max(report.largest_tile, p.size());
-    // Nothing of the core to move, or one position many times over (a pile of copies): as the
-    // one-piece run, the tile is left as it is.
     SimilarityDenoisingReport r;
-    const bool none_movable =
-        !m.empty() && std::none_of(m.begin(), m.begin() + static_cast<std::ptrdiff_t>(core), [](std::uint8_t v) { return v != 0; });
-    if (none_movable) return p;
+    // One position many times over (a pile of copies): left as it is, as in the one-piece run.
     if (leaveOnePositionAsItIs(p, &r)) {
-      report.isolated += core;  // as the one-piece run counts a pile
+      st.assign(p.size(), kIsolated);
       return p;
     }
-    // runInSpatialOrder by hand, to read back what happened to each core point.
-    const std::vector<int> order = spatialOrderAll(p);
-    std::vector<std::uint8_t> sorted_status;
-    const Positions sorted_out = denoiseInSpatialOrder(gathered(p, order), run, &r, m.empty() ? m : gathered(m, order),
-                                                       sub, &sorted_status);
-    Positions o(p.size());
-    for (std::size_t k = 0; k < order.size(); ++k) {
-      o[order[k]] = sorted_out[k];
-      if (static_cast<std::size_t>(order[k]) < core) {
-        report.moved += sorted_status[k] == kUpdated;
-        report.isolated += sorted_status[k] == kIsolated;
-      }
-    }
-    const double w = static_cast<double>(core);
-    sigma += w * r.sigma;
-    neighbours += w * r.mean_neighbours;
+    const Positions o = denoiseInSpatialOrder(p, run, &r, m, sub, &st);
+    const std::size_t core = tiles[t].core.size();
+    sigma += static_cast<double>(core) * r.sigma;
+    neighbours += static_cast<double>(core) * r.mean_neighbours;
     weighed += core;
     return o;
-  });
+  };
+  const Positions out = runSortedInTiles(points, movable, tiles, stage, progress, &status);
+  for (const std::uint8_t s : status) {
+    report.moved += s == kUpdated;
+    report.isolated += s == kIsolated;
+  }
   report.radius = run.radius;
   report.passes = run.passes;
   report.guided_passes = run.guided_passes;
@@ -637,6 +625,7 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   params.validate();
   checkMovableInput(points, movable);
   if (leaveOnePositionAsItIs(points, report_out)) return points;
+  requireRadiusWithinExtent("radius", params.radius, points);
   if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points)
     return denoiseInTiles(points, params, report_out, movable, progress);
   // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory

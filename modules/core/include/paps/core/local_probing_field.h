@@ -124,8 +124,16 @@ class LocalProbingAnalysis {
   /// Throws InvalidInput when fewer than 3 points are finite, InvalidParameter for bad
   /// parameters (also a radius wider than the cloud, or fields that would need more than
   /// 8 GB: 16 bytes a node a field).
+  /// `check_extent` false: a radius wider than the points is accepted (a stage run on a tile,
+  /// whose radius was checked on the whole cloud).
   LocalProbingAnalysis(const Positions& points, const LocalProbingParameters& parameters,
-                       const ProgressCallback& progress = {});
+                       const ProgressCallback& progress = {}, bool check_extent = true);
+  /// The pattern radius the analysis of `points` uses: `parameters.radius`, or the automatic
+  /// one (the ball of `neighbours` points, widened to noise_sigmas x the measured noise);
+  /// `noise_sigma` gets the noise measured (0: none). `index` must be built on `points`.
+  /// Throws InvalidInput when the points are all at one position.
+  static float chooseRadius(const Positions& points, const SpatialIndex& index, const LocalProbingParameters& parameters,
+                            float* noise_sigma);
   ~LocalProbingAnalysis();
 
   /// Runs `rounds` rounds of eq. 3.2 on the current points: dictionary and codes, pose

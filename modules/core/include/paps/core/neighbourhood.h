@@ -152,9 +152,13 @@ struct RadiusNeighbourhood {
 /// `max_count` neighbours per point (0: all).
 /// Throws InvalidInput when fewer than 2 points are finite.
 /// `index`, when given, must have been built on `points`; it is used instead of a new one.
+/// A radius wider than the points' extent throws InvalidParameter (requireRadiusWithinExtent)
+/// unless `check_extent` is false: a stage run on a piece of a cloud (a tile) has checked the
+/// user's radius on the whole cloud, and a dense tile may be narrower than the radius.
 RadiusNeighbourhood buildRadiusNeighbourhood(const Positions& points, float radius,
                                              int target_neighbours, int max_count = 0,
                                              const ProgressCallback& progress = {},
-                                             std::unique_ptr<SpatialIndex> index = nullptr);
+                                             std::unique_ptr<SpatialIndex> index = nullptr,
+                                             bool check_extent = true);
 
 }  // namespace paps

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include <paps/core/positions.h>
+#include <paps/core/progress.h>
 
 namespace paps {
 
@@ -35,5 +36,24 @@ std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, 
 using TileStage = std::function<Positions(const Positions&, const std::vector<std::uint8_t>&, std::size_t)>;
 Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
                      const std::vector<Tile>& tiles, const TileStage& stage);
+
+/// A stage of runSortedInTiles: a tile's points in spatial order (spatialOrderAll, as
+/// runInSpatialOrder gives them) and their movable flags (empty: all), the tile's number and
+/// progress;
+/// returns one position per point and may set `status` to one byte per point (the stage's
+/// own codes: moved, isolated, ...) or leave it empty.
+using SortedTileStage = std::function<Positions(const Positions& sorted, const std::vector<std::uint8_t>& movable,
+                                                std::vector<std::uint8_t>& status, std::size_t tile,
+                                                const ProgressCallback& progress)>;
+
+/// runInTiles for the stages that run in spatial order (every point-moving stage of PAPS):
+/// each tile is put in spatial order, its stage names are prefixed "tile t/n: " in the
+/// progress, and a tile none of whose core points may move is left as it is (its stage is not
+/// run). `status`, when given, gets one byte per point of the cloud: the stage's status of
+/// each core point (0 for a tile left as it is, for non-finite points, and where the stage
+/// set none).
+Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
+                           const std::vector<Tile>& tiles, const SortedTileStage& stage,
+                           const ProgressCallback& progress = {}, std::vector<std::uint8_t>* status = nullptr);
 
 }  // namespace paps

@@ -69,6 +69,15 @@ struct LpfDenoisingParameters {
   /// 0 disables; bend_threshold in [0, 10], bent_share in (0, 1].
   float bend_threshold = 0.08f;
   float bent_share = 0.25f;
+  /// A cloud of more finite points than this is denoised in tiles of at most this many points,
+  /// one after the other (0: one piece whatever the size); the analysis takes about 0.75 KB a
+  /// point (5M points: 3.7 GB in one piece). The radius (and with it the step and lambda) is
+  /// chosen once on the whole cloud; each tile then places its own fields and learns its own
+  /// dictionary, so the output is not the one-piece output bit for bit (docs/lpf.md).
+  std::size_t max_tile_points = 2000000;
+  /// Halo of a tile in pattern radii, >= 1: the points a core point's covering fields
+  /// (centred within 1.1 r of it) probe lie within 2.2 r.
+  float tile_margin = 3.f;
   void validate() const;
 };
 
@@ -88,6 +97,10 @@ struct LpfDenoisingReport {
   /// move was pass k + 1).
   std::size_t bent_fields = 0, held_points = 0;
   std::vector<std::size_t> held_after_pass;
+  /// Tiles the cloud was denoised in (1: one piece) and the most points one held, halo
+  /// included. In tiles, `fields` and `bent_fields` add up every tile's (halos included) and
+  /// `round_errors` are their mean over all fields.
+  std::size_t tiles = 1, largest_tile = 0;
 };
 
 /// LPF denoising of positions; non-finite points pass through; only `movable` points move.
@@ -116,6 +129,8 @@ class LpfDenoising : public pcl::Filter<PointT>, public ThreadCountOption, publi
   void setIterations(int n) { auto p = params_; p.iterations = n; setParameters(p); }
   /// Fields' curvature out of the L1 penalty (LocalProbingParameters::free_curvature).
   void setFreeCurvature(bool on) { auto p = params_; p.probing.free_curvature = on; setParameters(p); }
+  /// Clouds of more finite points are denoised in tiles of at most n points (0: one piece).
+  void setMaxTilePoints(std::size_t n) { auto p = params_; p.max_tile_points = n; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const LpfDenoisingReport& getReport() const { return report_; }
 

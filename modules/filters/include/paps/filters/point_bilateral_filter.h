@@ -25,6 +25,13 @@ struct PointBilateralParameters {
   float sigma_s = 0.f;
   /// Filter passes (1 to 100).
   int iterations = 1;
+  /// A cloud of more finite points than this is filtered in tiles of at most this many points,
+  /// one after the other (0: one piece whatever the size). The neighbour lists of a whole
+  /// cloud take about 4 bytes a neighbour a point (5M points at 120 neighbours: 5.3 GB in
+  /// all). Each tile carries the points within `iterations` radii of its core, which is all
+  /// the filter reads, and the radius is chosen once on the whole cloud: the output is the
+  /// one-piece output (to rounding).
+  std::size_t max_tile_points = 2000000;
   void validate() const;
 };
 
@@ -33,6 +40,9 @@ struct PointBilateralReport {
   /// Points the last pass moved; points left in place (fewer than 4 neighbours, or only
   /// collinear ones: no normal); NaN/Inf.
   std::size_t moved = 0, isolated = 0, non_finite = 0;
+  /// Tiles the cloud was filtered in (1: one piece) and the most points one of them held,
+  /// halo included.
+  std::size_t tiles = 1, largest_tile = 0;
 };
 
 /// Bilateral filter on positions; non-finite points pass through; only `movable` points move.
@@ -56,6 +66,8 @@ class PointBilateralFilter : public pcl::Filter<PointT>, public ThreadCountOptio
   const PointBilateralParameters& getParameters() const { return params_; }
   void setRadius(float r) { auto p = params_; p.radius = r; setParameters(p); }
   void setIterations(int n) { auto p = params_; p.iterations = n; setParameters(p); }
+  /// Clouds of more finite points are filtered in tiles of at most n points (0: one piece).
+  void setMaxTilePoints(std::size_t n) { auto p = params_; p.max_tile_points = n; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const PointBilateralReport& getReport() const { return report_; }
 

@@ -43,7 +43,8 @@ const char* kBenchUsage =
     "  --points N       points sampled on each test shape (default 200000)\n"
     "  --large N        points of the large speed test (default 1000000, 0 to skip)\n"
     "  --tiles N        also run ours, the bilateral filter and LPF on the large input in one\n"
-    "                   piece and in tiles of N points (time, peak memory, RMSE to the true surface)\n"
+    "                   piece and in tiles of N points, and PCL MLS (time, peak memory, RMSE\n"
+    "                   to the true surface)\n"
     "  --quick          one noise level, shorter sweeps (a smoke run)\n"
     "  --shapes LIST    comma-separated test shapes (default engraved-plane,rs1-scan-mesh); also\n"
     "                   engraved-plane-1cm (10 cm wavelength, 1 cm relief: detail above the\n"
@@ -388,17 +389,22 @@ int runBenchDenoise(int argc, char** argv) {
     speed("rs1 " + std::to_string(n_large) + " pts, 0.25%, 30 nb", big, false);
     speed("rs1 " + std::to_string(n_large) + " pts, 0.25%, default", big, true);
     // Tiles (max_tile_points of each method): one piece against tiles, same input. Ours and
-    // LPF at their defaults; the bilateral filter at the radius ours chose, as in the speed rows.
+    // LPF at their defaults; the bilateral filter and PCL MLS at the radius ours chose, as in
+    // the speed rows.
     if (n_tiles > 0) {
       const PointToMeshDistance truth(rs1_ds->mesh);
       std::printf("\ntiles: rs1 %zu points, 0.25%% noise; RMSE to the true mesh (input %.4g)\n", n_large,
                   pointToMeshError(big, truth).rmse);
       std::printf("%-10s %-24s %9s %9s %10s\n", "method", "run", "time(s)", "peak MB", "RMSE");
       double ours_radius = 0;
-      for (const std::string m : {"ours", "bilateral", "lpf"}) {
+      // PCL MLS (order 2, one piece: it has no tiles) at the radius ours chose, for the error
+      // of the peer on the same input.
+      for (const std::string m : {"ours", "mls", "bilateral", "lpf"}) {
         for (const std::size_t tile : {std::size_t(0), n_tiles}) {
+          if (m == "mls" && tile > 0) continue;
           std::map<std::string, double> p{{"tile", static_cast<double>(tile)}};
-          if (m == "bilateral") p["radius"] = ours_radius;
+          if (m == "bilateral" || m == "mls") p["radius"] = ours_radius;
+          if (m == "mls") p = {{"radius", ours_radius}, {"order", 2}, {"threads", 2}};
           const WorkerResult w = runWorker(out_dir, m, big, p);
           const std::string name = tile ? "tiles of " + std::to_string(tile) : "one piece";
           if (!w.ok) { std::printf("%-10s %-24s failed: %s\n", m.c_str(), name.c_str(), w.message.c_str()); continue; }
@@ -407,7 +413,7 @@ int runBenchDenoise(int argc, char** argv) {
           std::printf("%-10s %-24s %9.2f %9.0f %10.4g  radius %.4g%s\n", m.c_str(), name.c_str(), w.seconds, w.peak_mb,
                       e.rmse, w.radius, w.chosen.empty() ? "" : (" (" + w.chosen + ")").c_str());
           // Every method's default limit is 2M points (the parameters' max_tile_points).
-          const bool is_default = tile == SimilarityDenoisingParameters().max_tile_points && m != "bilateral";
+          const bool is_default = tile == SimilarityDenoisingParameters().max_tile_points && (m == "ours" || m == "lpf");
           Row row{"rs1 " + std::to_string(n_large) + " pts, 0.25%", "0.25%", m, name, is_default, w, e};
           row.run.output.clear();
           rows.push_back(row);
@@ -419,7 +425,7 @@ int runBenchDenoise(int argc, char** argv) {
   std::ofstream csv(out_dir + "/denoise.csv");
   csv << "dataset,noise,method,setting,default,ok,seconds,peak_mb,rmse,p95,max,normal_deg\n";
   for (const auto& r : rows)
-    csv << r.dataset << "," << r.noise << "," << r.method << ",\"" << r.setting << "\"," << r.is_default << ","
+    csv << "\"" << r.dataset << "\"," << r.noise << "," << r.method << ",\"" << r.setting << "\"," << r.is_default << ","
         << r.run.ok << "," << r.run.seconds << "," << r.run.peak_mb << "," << r.error.rmse << "," << r.error.p95
         << "," << r.error.max << "," << r.normal_deg << "\n";
   for (const char* scratch : {"worker_in.bin", "worker_out.bin", "worker_log.txt"})

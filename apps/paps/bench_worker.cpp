@@ -194,6 +194,7 @@ int runBenchWorker(int argc, char** argv) {
       pcl::PointCloud<pcl::PointXYZ> result;
       mls.process(result);
       output = positionsOf(result);
+      lf << "radius " << get("radius", 0) << "\n";
     } else {
       throw InvalidParameter("method", method, "ours, lpf, bilateral or mls");
     }

@@ -765,6 +765,42 @@ elseif(CASE STREQUAL "bench_lpf_shapes")
   expect_error_line("shapes")
   run_paps(bench lpf --shapes rs1 --samples ${dir}/no_samples --out ${dir}/bench)
   expect_error_line("rs1_normals.ply")
+elseif(CASE STREQUAL "bench_denoise_tiles")
+  # `paps bench denoise --tiles` end to end on a small "large" input: every method's one-piece
+  # and tiled rows, the bilateral filter's tiles giving its one-piece error (its halo covers
+  # its reach), and a CSV whose dataset names (they hold commas) are quoted. Skipped when
+  # the rs1 mesh is absent.
+  if(DEFINED ENV{PAPS_SAMPLES})
+    set(samples $ENV{PAPS_SAMPLES})
+  else()
+    set(samples $ENV{HOME}/.cache/paps/samples)
+  endif()
+  if(NOT EXISTS ${samples}/rs1_normals.ply)
+    message("PAPS_SKIP: no ${samples}/rs1_normals.ply")
+    return()
+  endif()
+  run_paps(bench denoise --quick --shapes rs1-scan-mesh --points 2000 --large 6000 --tiles 2000
+           --samples ${samples} --out ${dir}/bench)
+  if(NOT rc STREQUAL "0")
+    message(FATAL_ERROR "bench denoise --tiles: exit ${rc}: ${err}")
+  endif()
+  foreach(row "ours +one piece" "ours +tiles of 2000 .*4 tiles" "mls +one piece" "bilateral +one piece"
+              "bilateral +tiles of 2000 .*4 tiles" "lpf +one piece" "lpf +tiles of 2000 .*4 tiles")
+    if(NOT out MATCHES "\n${row}")
+      message(FATAL_ERROR "no row '${row}' in the tiles table: ${out}")
+    endif()
+  endforeach()
+  string(REGEX MATCH "\nbilateral +one piece +[0-9.]+ +[0-9]+ +([0-9.e+-]+)" whole "${out}")
+  set(whole_rmse ${CMAKE_MATCH_1})
+  string(REGEX MATCH "\nbilateral +tiles of 2000 +[0-9.]+ +[0-9]+ +([0-9.e+-]+)" tiled "${out}")
+  if(whole_rmse STREQUAL "" OR NOT whole_rmse STREQUAL CMAKE_MATCH_1)
+    message(FATAL_ERROR "bilateral: one piece RMSE '${whole_rmse}', tiles '${CMAKE_MATCH_1}'")
+  endif()
+  file(STRINGS ${dir}/bench/denoise.csv rows REGEX "^\"rs1 6000 pts, 0.25%\",0.25%,(ours|mls|bilateral|lpf),")
+  list(LENGTH rows n)
+  if(NOT n EQUAL 7)
+    message(FATAL_ERROR "expected 7 quoted tile rows in denoise.csv, got ${n}: ${rows}")
+  endif()
 elseif(CASE STREQUAL "superres_keeps_fields")
   # New points carry the other fields of the input point each was made from (the input's
   # intensity is its index), as PCL's MLS does; with --normals too.

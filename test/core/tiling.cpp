@@ -6,12 +6,14 @@
 #include <cmath>
 #include <map>
 #include <set>
+#include <string>
 #include <vector>
 
 #include <gtest/gtest.h>
 
 #include <paps/core/error.h>
 #include <paps/core/random.h>
+#include <paps/core/spatial_order.h>
 #include <paps/core/tiling.h>
 
 namespace {
@@ -144,6 +146,70 @@ TEST(Tiling, MovableFlagsFollowThePointsAndNonFinitePassThrough) {
     if (i == 3) continue;
     EXPECT_FLOAT_EQ(out[i].z(), p[i].z() + (movable[i] ? 1.f : 0.f)) << i;
   }
+}
+
+// runSortedInTiles: the stage gets each tile in spatial order, its progress prefixed with the
+// tile, and its statuses come back to the core points of the cloud; a tile with no movable
+// core point and a pile of copies larger than a tile are left as they are, without a call.
+// The pile lies at the far end of the cut axis, where the median falls on it: it still gets a
+// tile of its own (the split used to stop there and keep the pile with 125 other points).
+TEST(Tiling, SortedTilesGiveEachCorePointItsStatus) {
+  Positions p = randomSlab(400, 7);
+  const Eigen::Vector3f pile(10.f, 0.f, 0.f);
+  p.insert(p.end(), 150, pile);
+  std::vector<std::uint8_t> movable(p.size(), 1);
+  const auto tiles = paps::splitIntoTiles(p, 100, 0.1f);
+  std::size_t pile_tile = tiles.size(), skipped = tiles.size();
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    const bool all_pile = std::all_of(tiles[t].core.begin(), tiles[t].core.end(), [&](int i) { return p[i] == pile; });
+    if (all_pile) pile_tile = t;
+    else if (skipped == tiles.size()) skipped = t;  // the first tile of the slab may not move
+    if (!all_pile) EXPECT_LE(tiles[t].core.size(), 100u);
+  }
+  ASSERT_LT(pile_tile, tiles.size());
+  EXPECT_EQ(tiles[pile_tile].core.size(), 150u);
+  ASSERT_LT(skipped, tiles.size());
+  for (const int i : tiles[skipped].core) movable[i] = 0;
+  std::vector<std::size_t> calls;
+  std::vector<std::string> stages;
+  const paps::SortedTileStage stage = [&](const Positions& q, const std::vector<std::uint8_t>& m,
+                                          std::vector<std::uint8_t>& st, std::size_t t,
+                                          const paps::ProgressCallback& progress) {
+    calls.push_back(t);
+    EXPECT_EQ(m.size(), q.size());
+    // In spatial order: ordering it again changes nothing.
+    const std::vector<int> again = paps::spatialOrderAll(q);
+    for (std::size_t k = 0; k < again.size(); ++k) EXPECT_EQ(again[k], static_cast<int>(k));
+    progress("work", 1.f);
+    st.assign(q.size(), static_cast<std::uint8_t>(10 + t));
+    Positions o = q;
+    for (auto& x : o) x.z() += 1.f;
+    return o;
+  };
+  std::vector<std::uint8_t> status;
+  std::size_t largest = 0;
+  const Positions out = paps::runSortedInTiles(
+      p, movable, tiles, stage, [&](const std::string& name, float) { stages.push_back(name); return true; }, &status,
+      7, &largest);
+  EXPECT_EQ(calls.size(), tiles.size() - 2);  // less the pile and the tile that may not move
+  ASSERT_FALSE(stages.empty());
+  EXPECT_EQ(stages[0], "tile " + std::to_string(calls[0] + 1) + "/" + std::to_string(tiles.size()) + ": work");
+  std::size_t most = 0;
+  for (const auto& t : tiles) most = std::max(most, t.core.size() + t.halo.size());
+  EXPECT_EQ(largest, most);
+  for (std::size_t t = 0; t < tiles.size(); ++t)
+    for (const int i : tiles[t].core) {
+      if (t == pile_tile) {
+        EXPECT_EQ(status[i], 7) << i;
+        EXPECT_EQ(out[i], p[i]);
+      } else if (t == skipped) {
+        EXPECT_EQ(status[i], 0) << i;
+        EXPECT_EQ(out[i], p[i]);
+      } else {
+        EXPECT_EQ(status[i], 10 + t) << i;
+        EXPECT_FLOAT_EQ(out[i].z(), p[i].z() + 1.f);
+      }
+    }
 }
 
 TEST(Tiling, EdgeCasesAndErrors) {

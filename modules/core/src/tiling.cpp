@@ -43,9 +43,16 @@ void split(const Positions& points, std::vector<int> ids, std::size_t max_core, 
   const int median = *mid;
   std::vector<int> left, right;
   for (const int i : ids) (before(median, i) ? right : left).push_back(i);
-  if (right.empty()) {  // all copies of one position: cannot be halved
-    out.push_back(std::move(left));
-    return;
+  if (right.empty()) {
+    // The median is the last position and has copies: the cut goes before them instead (a
+    // pile of copies at the end of the axis used to stop the split, and stay with up to half
+    // the points). When nothing lies before them, all are copies of one position: one tile.
+    left.clear();
+    for (const int i : ids) (before(i, median) ? left : right).push_back(i);
+    if (left.empty()) {
+      out.push_back(std::move(right));
+      return;
+    }
   }
   std::vector<int>().swap(ids);
   split(points, std::move(left), max_core, out);
@@ -109,15 +116,38 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
   return out;
 }
 
+namespace {
+// Whether the finite points (at least 2) all stand at one position.
+bool onePositionMany(const Positions& points) {
+  const Eigen::Vector3f* first = nullptr;
+  std::size_t finite = 0;
+  for (const auto& q : points) {
+    if (!isFinite(q)) continue;
+    if (first && q != *first) return false;
+    if (!first) first = &q;
+    ++finite;
+  }
+  return finite >= 2;
+}
+}  // namespace
+
 Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
                            const std::vector<Tile>& tiles, const SortedTileStage& stage,
-                           const ProgressCallback& progress, std::vector<std::uint8_t>* status) {
+                           const ProgressCallback& progress, std::vector<std::uint8_t>* status,
+                           std::uint8_t pile_status, std::size_t* largest_tile) {
   if (status) status->assign(points.size(), 0);
+  if (largest_tile) *largest_tile = 0;
   return runInTiles(points, movable, tiles, [&](const Positions& p, const std::vector<std::uint8_t>& m, std::size_t t) {
     const std::size_t core = tiles[t].core.size();
+    if (largest_tile) *largest_tile = std::max(*largest_tile, p.size());
     if (!m.empty() && std::none_of(m.begin(), m.begin() + static_cast<std::ptrdiff_t>(core),
                                    [](std::uint8_t v) { return v != 0; }))
       return p;
+    if (onePositionMany(p)) {
+      if (status)
+        for (const int i : tiles[t].core) (*status)[i] = pile_status;
+      return p;
+    }
     const std::string prefix = "tile " + std::to_string(t + 1) + "/" + std::to_string(tiles.size()) + ": ";
     const ProgressCallback sub =
         progress ? ProgressCallback([&](const std::string& name, float f) { return progress(prefix + name, f); })

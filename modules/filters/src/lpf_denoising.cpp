@@ -253,12 +253,7 @@ Positions denoiseInTiles(const Positions& points, const LpfDenoisingParameters& 
       points, movable, tiles,
       [&](const Positions& p, const std::vector<std::uint8_t>& m, std::vector<std::uint8_t>& st, std::size_t,
           const ProgressCallback& sub) {
-        report.largest_tile = std::max(report.largest_tile, p.size());
         LpfDenoisingReport r;
-        if (leaveOnePositionAsItIs(p, &r)) {
-          st.assign(p.size(), kIsolated);
-          return p;
-        }
         const Positions o = denoiseInSpatialOrder(p, run, &r, m, sub, &st, /*check_extent=*/false);
         report.radius = r.radius;
         report.step = r.step;
@@ -271,7 +266,7 @@ Positions denoiseInTiles(const Positions& points, const LpfDenoisingParameters& 
         fields_with_errors += r.fields;
         return o;
       },
-      progress, &status);
+      progress, &status, kIsolated, &report.largest_tile);
   if (holdsCreases(params)) report.held_after_pass.assign(static_cast<std::size_t>(params.iterations - 1), 0);
   for (const std::uint8_t s : status) {
     report.moved += (s & kMoved) != 0;

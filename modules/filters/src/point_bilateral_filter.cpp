@@ -124,15 +124,9 @@ Positions filterInTiles(const Positions& points, const PointBilateralParameters&
       points, movable, tiles,
       [&](const Positions& p, const std::vector<std::uint8_t>& m, std::vector<std::uint8_t>& st, std::size_t,
           const ProgressCallback& sub) {
-        report.largest_tile = std::max(report.largest_tile, p.size());
-        PointBilateralReport r;
-        if (leaveOnePositionAsItIs(p, &r)) {
-          st.assign(p.size(), kIsolated);
-          return p;
-        }
         return bilateralInSpatialOrder(p, run, nullptr, m, sub, &st);
       },
-      progress, &status);
+      progress, &status, kIsolated, &report.largest_tile);
   for (const std::uint8_t s : status) {
     report.moved += s == kMoved;
     report.isolated += s == kIsolated;

@@ -587,13 +587,7 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
   std::vector<std::uint8_t> status;
   const SortedTileStage stage = [&](const Positions& p, const std::vector<std::uint8_t>& m,
                                     std::vector<std::uint8_t>& st, std::size_t t, const ProgressCallback& sub) {
-    report.largest_tile = std::max(report.largest_tile, p.size());
     SimilarityDenoisingReport r;
-    // One position many times over (a pile of copies): left as it is, as in the one-piece run.
-    if (leaveOnePositionAsItIs(p, &r)) {
-      st.assign(p.size(), kIsolated);
-      return p;
-    }
     const Positions o = denoiseInSpatialOrder(p, run, &r, m, sub, &st);
     const std::size_t core = tiles[t].core.size();
     sigma += static_cast<double>(core) * r.sigma;
@@ -601,7 +595,8 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
     weighed += core;
     return o;
   };
-  const Positions out = runSortedInTiles(points, movable, tiles, stage, progress, &status);
+  // A pile of copies larger than a tile is left as it is and counted isolated, as in one piece.
+  const Positions out = runSortedInTiles(points, movable, tiles, stage, progress, &status, kIsolated, &report.largest_tile);
   for (const std::uint8_t s : status) {
     report.moved += s == kUpdated;
     report.isolated += s == kIsolated;

@@ -48,12 +48,16 @@ using SortedTileStage = std::function<Positions(const Positions& sorted, const s
 
 /// runInTiles for the stages that run in spatial order (every point-moving stage of PAPS):
 /// each tile is put in spatial order, its stage names are prefixed "tile t/n: " in the
-/// progress, and a tile none of whose core points may move is left as it is (its stage is not
-/// run). `status`, when given, gets one byte per point of the cloud: the stage's status of
-/// each core point (0 for a tile left as it is, for non-finite points, and where the stage
-/// set none).
+/// progress, and two kinds of tile are left as they are, their stage not run: one none of
+/// whose core points may move, and one whose finite points all stand at one position (a pile
+/// of copies larger than a tile, which cannot be cut; the stages leave such a cloud as it is
+/// too). `status`, when given, gets one byte per point of the cloud: the stage's status of
+/// each core point, `pile_status` for the core of a pile, 0 for a tile none of whose points may
+/// move, for non-finite points and where the stage set none. `largest_tile`, when given, gets
+/// the most points a tile held, halo included.
 Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
                            const std::vector<Tile>& tiles, const SortedTileStage& stage,
-                           const ProgressCallback& progress = {}, std::vector<std::uint8_t>* status = nullptr);
+                           const ProgressCallback& progress = {}, std::vector<std::uint8_t>* status = nullptr,
+                           std::uint8_t pile_status = 0, std::size_t* largest_tile = nullptr);
 
 }  // namespace paps

@@ -116,21 +116,6 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
   return out;
 }
 
-namespace {
-// Whether the finite points (at least 2) all stand at one position.
-bool onePositionMany(const Positions& points) {
-  const Eigen::Vector3f* first = nullptr;
-  std::size_t finite = 0;
-  for (const auto& q : points) {
-    if (!isFinite(q)) continue;
-    if (first && q != *first) return false;
-    if (!first) first = &q;
-    ++finite;
-  }
-  return finite >= 2;
-}
-}  // namespace
-
 Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
                            const std::vector<Tile>& tiles, const SortedTileStage& stage,
                            const ProgressCallback& progress, std::vector<std::uint8_t>* status,
@@ -143,7 +128,7 @@ Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8
     if (!m.empty() && std::none_of(m.begin(), m.begin() + static_cast<std::ptrdiff_t>(core),
                                    [](std::uint8_t v) { return v != 0; }))
       return p;
-    if (onePositionMany(p)) {
+    if (finiteCountAtOnePosition(p) >= 2) {  // a pile of copies
       if (status)
         for (const int i : tiles[t].core) (*status)[i] = pile_status;
       return p;

@@ -139,6 +139,19 @@ inline std::size_t checkMovableInput(const Positions& points, const std::vector<
   return finite;
 }
 
+/// The number of finite points when they all stand at one position, else 0 (also 0 for none).
+inline std::size_t finiteCountAtOnePosition(const Positions& points) {
+  const Eigen::Vector3f* first = nullptr;
+  std::size_t finite = 0;
+  for (const auto& p : points) {
+    if (!isFinite(p)) continue;
+    if (first && p != *first) return 0;
+    if (!first) first = &p;
+    ++finite;
+  }
+  return finite;
+}
+
 /// A cloud whose finite points all stand at one position has no scale and no surface: a
 /// point-moving filter leaves it as it is, every finite point counted as isolated (as one
 /// point alone is), rather than failing on the radius it cannot choose. Returns true in that
@@ -146,15 +159,8 @@ inline std::size_t checkMovableInput(const Positions& points, const std::vector<
 /// checkMovableInput.
 template <typename Report>
 bool leaveOnePositionAsItIs(const Positions& points, Report* report) {
-  const Eigen::Vector3f* first = nullptr;
-  std::size_t finite = 0;
-  for (const auto& p : points) {
-    if (!isFinite(p)) continue;
-    if (first && p != *first) return false;
-    if (!first) first = &p;
-    ++finite;
-  }
-  if (!first || finite < 2) return false;  // none, or one point: the stages' own paths
+  const std::size_t finite = finiteCountAtOnePosition(points);
+  if (finite < 2) return false;  // none, one point, or several positions: the stages' own paths
   if (report) {
     *report = Report();
     report->isolated = finite;

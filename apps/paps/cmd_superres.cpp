@@ -63,6 +63,9 @@ const char* kSuperresUsage =
     "                         auto also denoises from 0.5% when the surface is smooth at the patch\n"
     "                         scale (scan-line bench: 17% closer to the ground); on denoises always,\n"
     "                         which costs detailed, quiet surfaces their detail\n"
+    "  --tile-points N        QSR: a first scan of more finite points is super-resolved in tiles of\n"
+    "                         at most N points, one at a time (memory: about 1.2 KB a point of a\n"
+    "                         tile at x2; default 2000000; 0: one piece whatever the size)\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
     "  --seed-disc S          radius of the tangent discs the output seeds are spread over, in mean\n"
@@ -82,7 +85,8 @@ int runSuperres(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kSuperresUsage, stdout); return 0; }
   a.allowOnly({"factor", "count", "method", "radius", "neighbours", "similarity", "grid-lr", "grid-sr",
                "patches", "kernel", "similarity-scale", "irls", "noise", "adapt", "denoise", "quiet", "timings",
-               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals", "orient", "keep-normals"});
+               "refit", "max-neighbours", "seed-disc", "thin-disc", "normals", "orient", "keep-normals",
+               "tile-points"});
   if (a.positional.size() < 2)
     throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN [IN2 ...] OUT");
   a.requireCloudOutput();
@@ -95,7 +99,7 @@ int runSuperres(int argc, char** argv) {
   if (method == "qsr")
     applies.insert(applies.end(), {"count", "similarity", "grid-lr", "grid-sr", "patches", "kernel", "similarity-scale",
                                    "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient",
-                                   "keep-normals"});
+                                   "keep-normals", "tile-points"});
   else if (method != "lpf")
     applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals"});
   requireOptionsOf(a, applies, "--method " + method);
@@ -176,6 +180,7 @@ int runSuperres(int argc, char** argv) {
     p.noise_sigma = a.real("noise", 0);
     p.seed_disc = a.real("seed-disc", p.seed_disc);
     p.thin_disc = a.real("thin-disc", p.thin_disc);
+    p.max_tile_points = a.count("tile-points", p.max_tile_points);
     const std::string denoise = a.text("denoise", "auto");
     if (denoise == "auto") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Auto;
     else if (denoise == "on") p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
@@ -186,7 +191,7 @@ int runSuperres(int argc, char** argv) {
                        {"grid_lr", "grid-lr"}, {"grid_sr", "grid-sr"}, {"similar_patches", "patches"},
                        {"irls_iterations", "irls"}, {"seed_disc", "seed-disc"}, {"noise_sigma", "noise"},
                        {"patch_radius", "radius"}, {"similarity_radius", "similarity"}, {"kernel_scale", "kernel"},
-                       {"thin_disc", "thin-disc"}},
+                       {"thin_disc", "thin-disc"}, {"max_tile_points", "tile-points"}},
                       [&] { p.validate(); });
     readScans();
     normalsFromInput();
@@ -196,6 +201,10 @@ int runSuperres(int argc, char** argv) {
     std::printf("QSR: patch radius %g m%s (mean %.1f neighbours), similarity radius %g m%s\n", r.patch_radius,
                 p.patch_radius > 0 ? "" : " (chosen)", r.mean_neighbours, r.similarity_radius,
                 p.similarity_radius > 0 ? "" : " (chosen)");
+    if (r.tiles > 1)
+      std::printf("QSR: in %zu tiles (at most %zu points each, %zu with the halo of %g patch radii); the choices "
+                  "below are means over the tiles\n",
+                  r.tiles, p.max_tile_points, r.largest_tile, p.tile_margin);
     std::printf("QSR: bins %dx%d low resolution%s, %dx%d super-resolution%s (mean similar weight K-1 = %.2f)\n",
                 r.grid_lr, r.grid_lr, p.grid_lr ? "" : " (chosen)", r.grid_sr, r.grid_sr, p.grid_sr ? "" : " (chosen)",
                 r.mean_similar_weight);

@@ -85,6 +85,17 @@ constexpr float kUprightNormal = 0.5f;
 // surface has about 0, a scan seen from above about 1).
 constexpr double kOneSided = 0.2;
 
+// +1 or -1: the sign that points a group's normals up, from their summed z, summed |z| and the
+// z of the normal of its highest upright point (0: none). A piece seen from one side (a scan)
+// has most of its normals on one side of the horizontal: they point up on the whole (summed
+// z). A closed surface has as many down as up: the normal of its highest upright point
+// points up (outward).
+int upwardRule(double z, double a, float top_z) {
+  if (std::abs(z) >= kOneSided * a && z != 0) return z > 0 ? 1 : -1;
+  if (top_z != 0) return top_z > 0 ? 1 : -1;
+  return 1;
+}
+
 // Hoppe-style propagation inside one block: the points `members` (sorted highest first, ties
 // by index), edges to points of the same block only. Each component inside the block is
 // seeded at its highest point with the normal up; comp[i] receives the component's number
@@ -203,18 +214,11 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
       zabs[c] += std::abs(normals[i].z());
       if (top[c] < 0 && std::abs(normals[i].z()) >= kUprightNormal) top[c] = i;
     }
-  // +1 or -1: the sign that points the group's normals up. A piece seen from one side (a scan)
-  // has most of its normals on one side of the horizontal: they point up on the whole (summed
-  // z). A closed surface has as many down as up: the normal of its highest upright point
-  // points up (outward). The seed's own sign (step 1: the highest point's normal up) is kept
+  // upwardRule sets the sign of each group. The seed's own sign (step 1: the highest point's normal up) is kept
   // only when neither tells: that point is often on a rim, where the normal is near horizontal
   // and its sign is noise (on rs1 sampled at 70K points it flipped one of the scan's pieces,
   // 13% of the points).
-  auto upward = [&](double z, double a, float top_z) {
-    if (std::abs(z) >= kOneSided * a && z != 0) return z > 0 ? 1 : -1;
-    if (top_z != 0) return top_z > 0 ? 1 : -1;
-    return 1;
-  };
+  const auto upward = upwardRule;
   if (ncomp == 1) {
     const bool down = upward(zsum[0], zabs[0], top[0] >= 0 ? normals[top[0]].z() : 0.f) < 0;
     std::size_t flips = 0;
@@ -307,6 +311,18 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
     flips += flipped[i];
   }
   return flips;
+}
+
+int upwardSign(const Positions& points, const Normals& normals) {
+  double z = 0, a = 0;
+  int top = -1;
+  for (std::size_t i = 0; i < normals.size(); ++i) {
+    if (!isFinite(normals[i]) || !isFinite(points[i])) continue;
+    z += normals[i].z();
+    a += std::abs(normals[i].z());
+    if (std::abs(normals[i].z()) >= kUprightNormal && (top < 0 || points[i].z() > points[top].z())) top = static_cast<int>(i);
+  }
+  return upwardRule(z, a, top >= 0 ? normals[top].z() : 0.f);
 }
 
 LocalFrames estimatePrincipalFrames(const Normals& normals, const NeighbourGraph& graph) {

@@ -116,6 +116,23 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
   return out;
 }
 
+std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, const Positions& other, float margin) {
+  Box b = boxOf(cloud, tile.core);
+  b.lo.array() -= margin;
+  b.hi.array() += margin;
+  std::vector<int> inside;
+  for (std::size_t i = 0; i < other.size(); ++i)
+    if (isFinite(other[i]) && (other[i].array() >= b.lo.array()).all() && (other[i].array() <= b.hi.array()).all())
+      inside.push_back(static_cast<int>(i));
+  return inside;
+}
+
+ProgressCallback tileProgress(const ProgressCallback& progress, std::size_t tile, std::size_t tiles) {
+  if (!progress) return {};
+  const std::string prefix = "tile " + std::to_string(tile + 1) + "/" + std::to_string(tiles) + ": ";
+  return [progress, prefix](const std::string& name, float f) { return progress(prefix + name, f); };
+}
+
 Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,
                            const std::vector<Tile>& tiles, const SortedTileStage& stage,
                            const ProgressCallback& progress, std::vector<std::uint8_t>* status,
@@ -133,10 +150,7 @@ Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8
         for (const int i : tiles[t].core) (*status)[i] = pile_status;
       return p;
     }
-    const std::string prefix = "tile " + std::to_string(t + 1) + "/" + std::to_string(tiles.size()) + ": ";
-    const ProgressCallback sub =
-        progress ? ProgressCallback([&](const std::string& name, float f) { return progress(prefix + name, f); })
-                 : ProgressCallback();
+    const ProgressCallback sub = tileProgress(progress, t, tiles.size());
     const std::vector<int> order = spatialOrderAll(p);
     std::vector<std::uint8_t> sorted_status;
     const Positions sorted_out = stage(gathered(p, order), m.empty() ? m : gathered(m, order), sorted_status, t, sub);

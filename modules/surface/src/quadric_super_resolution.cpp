@@ -3,6 +3,7 @@
 #include <paps/surface/impl/quadric_super_resolution.hpp>
 
 #include <algorithm>
+#include <map>
 #include <cmath>
 #include <memory>
 #include <numeric>
@@ -17,6 +18,7 @@
 #include <paps/core/neighbourhood.h>
 #include <paps/core/noise_estimation.h>
 #include <paps/core/quadric_height_patch.h>
+#include <paps/core/tiling.h>
 #include <paps/filters/similarity_denoising.h>
 #include <paps/surface/mls_upsampling.h>
 
@@ -42,6 +44,10 @@ void QuadricSuperResolutionParameters::validate() const {
   if (!(kernel_scale >= 0) || !std::isfinite(kernel_scale))
     throw InvalidParameter("kernel_scale", detail::toString(kernel_scale), "0 (automatic) or a finite value > 0");
   requireNonNegative("noise_sigma", noise_sigma, "estimated");
+  if (max_tile_points != 0 && (max_tile_points < 1000 || max_tile_points >= (std::size_t(1) << 31)))
+    throw InvalidParameter("max_tile_points", std::to_string(max_tile_points),
+                           "0 (one piece) or a count from 1000 to below 2^31");
+  requireInRange("tile_margin", tile_margin, 1.f, 10.f);
 }
 
 namespace {
@@ -175,16 +181,124 @@ struct Similar {
 }  // namespace
 
 namespace {
+// The noise of the first scan and whether to denoise the scans first (denoise_input), from
+// the first scan and its index at the patch radius R.
+struct NoiseChoice {
+  float noise = 0.f;       // 0: not measured (nothing follows it) or not measurable
+  bool estimated = false;  // measured, not given
+  float growth = 0.f;      // noise over balls of 2R / over balls of R (0: not measured)
+  bool denoise = false;
+};
+
+NoiseChoice chooseNoiseAndDenoising(const Positions& scan0, const SpatialIndex& index, float R,
+                                    const QuadricSuperResolutionParameters& params) {
+  using Denoise = QuadricSuperResolutionParameters::Denoise;
+  NoiseChoice c;
+  // The noise, measured only when something follows it: the kernel (adapt_to_noise) and the
+  // decision to denoise first.
+  const bool kernel_follows = params.adapt_to_noise && params.kernel_scale == 0;
+  if ((kernel_follows || params.denoise_input == Denoise::Auto) && R > 0) {
+    c.noise = params.noise_sigma;
+    if (c.noise == 0) {
+      try {
+        c.noise = estimateNoiseLevel(scan0, index, R).sigma;
+        c.estimated = true;
+      } catch (const InvalidInput&) {
+        c.noise = 0;  // no ball holds enough points for a fit: nothing to adapt to
+      }
+    }
+  }
+  bool smooth_and_noisy = false;
+  if (params.denoise_input == Denoise::Auto && R > 0 && c.noise >= kSmoothNoise * R && c.noise < kQuietNoise * R) {
+    try {
+      // The noise at R is the one measured above, unless the caller gave it.
+      const float at_r = c.estimated ? c.noise : estimateNoiseLevel(scan0, index, R).sigma;
+      const float at_2r = estimateNoiseLevel(scan0, index, 2 * R).sigma;
+      if (at_r > 0) {
+        c.growth = at_2r / at_r;
+        smooth_and_noisy = c.growth < kSmoothGrowth;
+      }
+    } catch (const InvalidInput&) {
+      // no ball of 2R holds enough points: keep the input as it is
+    }
+  }
+  c.denoise = params.denoise_input == Denoise::On || smooth_and_noisy ||
+              (params.denoise_input == Denoise::Auto && R > 0 && c.noise >= kQuietNoise * R);
+  return c;
+}
+
+// A scan denoised before its patches are built; `noise` is the first scan's (0 for the others:
+// the denoiser measures it). In tiles of max_tile_points, as the denoiser cuts them.
+Positions denoisedFirst(const Positions& scan, const QuadricSuperResolutionParameters& params, float noise,
+                        const ProgressCallback& progress) {
+  SimilarityDenoisingParameters dp;
+  dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
+  // The denoiser's own rule, but one pass: its second pass (from q = 0.6) is there because
+  // its first output is still noisy, and here the aggregation over similar patches is
+  // that second filter. Measured on rs1 at 0.5% (q about 0.6): two passes round the
+  // creases, 7.595e-1 / 7.851e-1 (protocol / to the surface) against 6.949e-1 / 7.365e-1.
+  dp = noiseResolvedParameters(scan, dp);
+  dp.passes = 1;
+  dp.max_tile_points = params.max_tile_points;
+  return denoiseBySimilarity(scan, dp, nullptr, {}, progress);
+}
+
+// No surface anywhere: every ball, widened as far as it goes, is collinear or one position
+// (points on lines, piles of copies). A plane through a line has no orientation; APSS and
+// RIMLS refuse such clouds too.
+InvalidInput noSurfaceAnywhere(float R) {
+  return InvalidInput("every ball of the patch radius " + detail::toString(R) +
+                       " m holds only collinear or coincident points (no surface anywhere): the cloud is points on "
+                       "lines or piles of copies; give a larger patch radius (--radius) if it is a surface sampled in lines");
+}
+
+// What a tile of the first scan adds to a run (superResolveInTiles): in the scan's order,
+// which points may seed the output (the core), the normals of the tiles before it where
+// it meets them (NaN elsewhere), and, out, its own oriented normals.
+struct TileRun {
+  std::vector<std::uint8_t> seedable;
+  Normals hints;
+  Normals oriented;
+  bool no_surface = false;  // out: every ball is collinear or one position (nothing made)
+};
+
+// Turns each connected component of the graph (as the propagation reads it: the first
+// kPropagationNeighbours entries of each list) whose normals disagree, summed over its points
+// with a usable hint, with those hints.
+void turnComponentsToHints(Normals& normals, const NeighbourGraph& g, const Normals& hints) {
+  const std::size_t n = normals.size();
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    const int* e = std::min(g.end(i), g.begin(i) + kPropagationNeighbours);
+    for (const int* j = g.begin(i); j != e; ++j) {
+      const int a = root(static_cast<int>(i)), b = root(*j);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  }
+  std::vector<double> agreement(n, 0.0);
+  for (std::size_t i = 0; i < n; ++i)
+    if (isFinite(normals[i]) && isFinite(hints[i]) && hints[i].norm() > 0.5f)
+      agreement[root(static_cast<int>(i))] += normals[i].dot(hints[i]);
+  for (std::size_t i = 0; i < n; ++i)
+    if (agreement[root(static_cast<int>(i))] < 0) normals[i] = -normals[i];
+}
+
 Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                                      QuadricSuperResolutionReport* report, const ProgressCallback& progress,
                                      Normals* normals_out, std::vector<float>* curvature_out,
-                                     std::vector<int>* source_out) {
+                                     std::vector<int>* source_out, TileRun* tile = nullptr) {
   if (scans.empty()) throw InvalidInput("no scan to super-resolve");
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
     throw InvalidInput("the scan to super-resolve needs at least 10 finite points (got " + detail::toString(finite0) + ")");
   checkOutputCount(params.output_count, finite0);
-  requireRadiusWithinExtent("patch_radius", params.patch_radius, scans[0]);
+  // A tile's radius was checked on the whole scan (a dense tile may be narrower).
+  if (!tile) requireRadiusWithinExtent("patch_radius", params.patch_radius, scans[0]);
   QuadricSuperResolutionReport rep;
 
   // 1. Neighbourhoods at the patch radius, chosen on the first scan.
@@ -196,66 +310,34 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     total += scans[s].size();
     if (s > 0 && countFinite(scans[s]) < 10) { sc[s].nh.radius = 0; continue; }
     sc[s].nh = buildRadiusNeighbourhood(scans[s], s == 0 ? params.patch_radius : sc[0].nh.radius,
-                                        params.target_neighbours, 4 * params.target_neighbours, progress);
+                                        params.target_neighbours, 4 * params.target_neighbours, progress, nullptr,
+                                        tile == nullptr);
   }
   const float R = sc[0].nh.radius;
   rep.patch_radius = R;
-  // The noise, measured only when something follows it: the kernel (adapt_to_noise) and the
-  // decision to denoise first.
-  using Denoise = QuadricSuperResolutionParameters::Denoise;
   const bool kernel_follows = params.adapt_to_noise && params.kernel_scale == 0;
-  float noise = 0.f;
-  if ((kernel_follows || params.denoise_input == Denoise::Auto) && R > 0) {
-    noise = params.noise_sigma;
-    if (noise == 0) {
-      try {
-        noise = estimateNoiseLevel(scans[0], *sc[0].nh.index, R).sigma;
-        rep.noise_estimated = true;
-      } catch (const InvalidInput&) {
-        noise = 0;  // no ball holds enough points for a fit: nothing to adapt to
-      }
-    }
-  }
+  const NoiseChoice choice = chooseNoiseAndDenoising(scans[0], *sc[0].nh.index, R, params);
+  const float noise = choice.noise;
   rep.noise_sigma = noise;
-  bool smooth_and_noisy = false;
-  if (params.denoise_input == Denoise::Auto && R > 0 && noise >= kSmoothNoise * R && noise < kQuietNoise * R) {
-    try {
-      // The noise at R is the one measured above, unless the caller gave it.
-      const float at_r = rep.noise_estimated ? noise : estimateNoiseLevel(scans[0], *sc[0].nh.index, R).sigma;
-      const float at_2r = estimateNoiseLevel(scans[0], *sc[0].nh.index, 2 * R).sigma;
-      if (at_r > 0) {
-        rep.noise_growth = at_2r / at_r;
-        smooth_and_noisy = rep.noise_growth < kSmoothGrowth;
-      }
-    } catch (const InvalidInput&) {
-      // no ball of 2R holds enough points: keep the input as it is
-    }
-  }
+  rep.noise_estimated = choice.estimated;
+  rep.noise_growth = choice.growth;
   // Denoising first (measured, docs/superresolution.md): the patches, the similarity and the
   // aggregation then work on points within a fraction of the noise of the surface. The
   // patches keep the radius chosen on the input.
   std::vector<Positions> denoised;
   std::vector<int> resorted0;  // denoised scans[0] position -> scans[0] position (it is sorted again)
-  if (params.denoise_input == Denoise::On || smooth_and_noisy ||
-      (params.denoise_input == Denoise::Auto && R > 0 && noise >= kQuietNoise * R)) {
+  if (choice.denoise) {
     denoised.resize(scans.size());
     for (std::size_t s = 0; s < scans.size(); ++s) {
       if (sc[s].nh.radius <= 0) { denoised[s] = scans[s]; continue; }
-      SimilarityDenoisingParameters dp;
-      if (s == 0) dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
-      // The denoiser's own rule, but one pass: its second pass (from q = 0.6) is there because
-      // its first output is still noisy, and here the aggregation over similar patches is
-      // that second filter. Measured on rs1 at 0.5% (q about 0.6): two passes round the
-      // creases, 7.595e-1 / 7.851e-1 (protocol / to the surface) against 6.949e-1 / 7.365e-1.
-      dp = noiseResolvedParameters(scans[s], dp);
-      dp.passes = 1;
+      const Positions d = denoisedFirst(scans[s], params, s == 0 ? noise : 0.f, progress);
       // Sorted again on the denoised positions: the run is then the one on a denoised input.
-      const Positions d = denoiseBySimilarity(scans[s], dp, nullptr, {}, progress);
       std::vector<int> resort = spatialOrderAll(d);
       denoised[s] = gathered(d, resort);
       if (s == 0) resorted0 = std::move(resort);
       sc[s].points = &denoised[s];
-      sc[s].nh = buildRadiusNeighbourhood(denoised[s], R, params.target_neighbours, 4 * params.target_neighbours, progress);
+      sc[s].nh = buildRadiusNeighbourhood(denoised[s], R, params.target_neighbours, 4 * params.target_neighbours, progress,
+                                          nullptr, tile == nullptr);
     }
     rep.denoised = true;
   }
@@ -287,6 +369,10 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     const NeighbourGraph& g = sc[s].nh.graph;
     Normals normals = estimateNormals(P, g, s == 0 && curvature_out ? &variation0 : nullptr);
     orientNormalsByPropagation(P, normals, g);
+    if (s == 0 && tile) {  // the orientation runs on from the tiles before
+      turnComponentsToHints(normals, g, tile->hints);
+      tile->oriented = normals;
+    }
     const LocalFrames frames = estimatePrincipalFrames(normals, g);
     ProgressReporter pr(progress, "quadric patches", P.size());
     const std::int64_t n = static_cast<std::int64_t>(P.size());
@@ -374,13 +460,13 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     pr.throwIfCancelled();
     pr.finish();
   }
-  // No surface anywhere: every ball, widened as far as it goes, is collinear or one position
-  // (points on lines, piles of copies). A plane through a line has no orientation; APSS and
-  // RIMLS refuse such clouds too.
+  if (fitted > 0 && collinear == fitted && tile) {  // no surface here; another tile may hold one
+    tile->no_surface = true;
+    if (report) *report = rep;
+    return {};
+  }
   if (fitted > 0 && collinear == fitted)
-    throw InvalidInput("every ball of the patch radius " + detail::toString(R) +
-                       " m holds only collinear or coincident points (no surface anywhere): the cloud is points on "
-                       "lines or piles of copies; give a larger patch radius (--radius) if it is a surface sampled in lines");
+    throw noSurfaceAnywhere(R);
   // Descriptors, once the cloud is known to hold a surface somewhere: a cloud of piles of
   // copies is refused above without describing every patch first (1M points on 20 positions:
   // 75 s before the error).
@@ -524,7 +610,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
       similar[i].push_back({s.patch, s.flip, w});
       sw += w;
     }
-    rep.without_similar += similar[i].empty();
+    rep.without_similar += similar[i].empty() && (!tile || tile->seedable[i]);
     sum_w += sw;
     ++counted;
     std::vector<std::pair<float, Similar>>().swap(cand[i]);
@@ -796,9 +882,13 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   // left the rims of a scan uncovered.
   std::vector<std::uint8_t> anchor(n0, 0);
   Normals n0s(n0, Eigen::Vector3f::Constant(NAN));
+  // In a tile only its core seeds (n0s NaN for the halo: upsamplingSeeds spawns nothing
+  // there); the halo's patches anchor the projection of the core's seeds near the border.
+  auto seeds = [&](std::size_t i) { return !tile || tile->seedable[i]; };
   for (std::size_t i = 0; i < n0; ++i)
     if (fits[i].frame.valid()) {
       anchor[i] = 1;
+      if (!seeds(i)) continue;
       n0s[i] = fits[i].frame.n;
       rep.quadric_only += !usable[i];
     }
@@ -813,7 +903,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   for (std::size_t i = 0; i < n0; ++i)
     if (thin_ball[i] && isFinite(P0[i])) {
       disc_scale[i] = params.thin_disc;
-      rep.narrowed_discs += params.thin_disc < 1.f;
+      rep.narrowed_discs += params.thin_disc < 1.f && seeds(i);
     }
   std::vector<int> origin;
   Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed,
@@ -941,12 +1031,14 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
 }
 }  // namespace
 
-Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
-                              QuadricSuperResolutionReport* report, const ProgressCallback& progress,
-                              Normals* normals, std::vector<float>* curvature, std::vector<int>* source) {
-  params.validate();
-  // Every stage loops over neighbourhoods: the scans run in Z order (in input order a shuffled
-  // scan waits on memory), which also makes the output independent of the input order.
+namespace {
+// superResolveInSpatialOrder on scans in any order. Every stage loops over neighbourhoods: the
+// scans run in Z order (in input order a shuffled scan waits on memory), which also makes the
+// output independent of the input order. `source` comes back in scans[0]'s order, and so do a
+// tile's flags, hints and oriented normals.
+Positions superResolveSorted(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                             QuadricSuperResolutionReport* report, const ProgressCallback& progress, Normals* normals,
+                             std::vector<float>* curvature, std::vector<int>* source, TileRun* tile = nullptr) {
   std::vector<Positions> sorted;
   sorted.reserve(scans.size());
   std::vector<int> order0;
@@ -955,10 +1047,239 @@ Positions superResolveQuadric(const std::vector<Positions>& scans, const Quadric
     sorted.push_back(gathered(scan, order));
     if (order0.empty()) order0 = std::move(order);
   }
-  Positions out = superResolveInSpatialOrder(sorted, params, report, progress, normals, curvature, source);
+  TileRun sorted_tile;
+  if (tile) {
+    sorted_tile.seedable = gathered(tile->seedable, order0);
+    sorted_tile.hints = gathered(tile->hints, order0);
+  }
+  Positions out = superResolveInSpatialOrder(sorted, params, report, progress, normals, curvature, source,
+                                             tile ? &sorted_tile : nullptr);
   if (source)
     for (int& s : *source) s = order0[static_cast<std::size_t>(s)];  // back to scans[0]'s order
+  if (tile) {
+    tile->no_surface = sorted_tile.no_surface;
+    tile->oriented.assign(order0.size(), Eigen::Vector3f::Constant(NAN));
+    if (sorted_tile.oriented.size() == order0.size())
+      for (std::size_t k = 0; k < order0.size(); ++k) tile->oriented[order0[k]] = sorted_tile.oriented[k];
+  }
   return out;
+}
+
+// `total` split over parts in proportion to `weights` (largest remainders, ties to the first).
+std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<std::size_t>& weights) {
+  const double sum = static_cast<double>(std::accumulate(weights.begin(), weights.end(), std::size_t(0)));
+  std::vector<std::size_t> share(weights.size(), 0);
+  if (!(sum > 0)) return share;
+  std::vector<std::pair<double, std::size_t>> rest;
+  std::size_t given = 0;
+  for (std::size_t t = 0; t < weights.size(); ++t) {
+    const double exact = static_cast<double>(total) * static_cast<double>(weights[t]) / sum;
+    share[t] = static_cast<std::size_t>(std::floor(exact));
+    given += share[t];
+    rest.push_back({exact - static_cast<double>(share[t]), t});
+  }
+  std::stable_sort(rest.begin(), rest.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  for (std::size_t k = 0; given < total && k < rest.size(); ++k, ++given) ++share[rest[k].second];
+  return share;
+}
+
+// Cells of a grid of side `cell` that hold a point of `ids`: the surface they cover, up to a
+// factor that depends on its orientation only.
+std::size_t occupiedCells(const Positions& points, const std::vector<int>& ids, float cell) {
+  std::vector<std::uint64_t> keys;
+  keys.reserve(ids.size());
+  for (const int i : ids) {
+    std::uint64_t key = 0;
+    for (int a = 0; a < 3; ++a)
+      key = key * 2097152u + (static_cast<std::uint64_t>(std::floor(points[i][a] / cell)) & 2097151u);
+    keys.push_back(key);
+  }
+  std::sort(keys.begin(), keys.end());
+  return static_cast<std::size_t>(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
+
+// The tiled run (max_tile_points): the patch radius, the noise and the decision to denoise are
+// made on the whole first scan, as in one piece; each tile then runs QSR on its core and halo
+// (and the other scans' points around it), seeds from its core only, and orients its normals
+// as the tiles before it did where they meet.
+Positions superResolveInTiles(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                              QuadricSuperResolutionReport* report, const ProgressCallback& progress,
+                              Normals* normals_out, std::vector<float>* curvature_out, std::vector<int>* source_out) {
+  const std::size_t finite0 = countFinite(scans[0]);
+  checkOutputCount(params.output_count, finite0);
+  requireRadiusWithinExtent("patch_radius", params.patch_radius, scans[0]);
+  QuadricSuperResolutionReport rep;
+  NoiseChoice choice;
+  double mean_neighbours = 0;
+  {
+    // On the scan in spatial order, as the one-piece run measures it (the samples of the radius
+    // and of the noise are drawn along the array).
+    const Positions sorted = gathered(scans[0], spatialOrderAll(scans[0]));
+    const SpatialIndex index(sorted);
+    rep.patch_radius = params.patch_radius > 0 ? params.patch_radius
+                                               : radiusForNeighbourCount(sorted, index, params.target_neighbours);
+    choice = chooseNoiseAndDenoising(sorted, index, rep.patch_radius, params);
+    // The low-resolution grid as one piece chooses it, from the mean neighbour count at R (on
+    // a sample, capped as the neighbour lists are): tiles of a scan whose density varies would
+    // each choose their own (table_scene_lms400 in 8 tiles: 6 x 6 for most points, 7 x 7 in
+    // one piece).
+    std::vector<int> idx;
+    std::vector<float> d2;
+    double sum = 0;
+    const std::vector<int> sample = spreadSample(sorted, 2000);
+    for (const int i : sample)
+      sum += index.radiusSearch(sorted[i], rep.patch_radius, idx, d2, 4 * params.target_neighbours);
+    mean_neighbours = sample.empty() ? 0.0 : sum / static_cast<double>(sample.size());
+  }
+  const float R = rep.patch_radius;
+  rep.noise_sigma = choice.noise;
+  rep.noise_estimated = choice.estimated;
+  rep.noise_growth = choice.growth;
+  std::vector<Positions> denoised;
+  if (choice.denoise) {
+    for (std::size_t s = 0; s < scans.size(); ++s)
+      denoised.push_back(s == 0 || countFinite(scans[s]) >= 10 ? denoisedFirst(scans[s], params, s == 0 ? choice.noise : 0.f, progress)
+                                                               : scans[s]);
+    rep.denoised = true;
+  }
+  const std::vector<Positions>& in = choice.denoise ? denoised : scans;
+  QuadricSuperResolutionParameters run = params;
+  run.max_tile_points = 0;
+  run.patch_radius = R;
+  if (run.grid_lr == 0) run.grid_lr = std::clamp(static_cast<int>(std::lround(std::sqrt(mean_neighbours))), 2, 16);
+  run.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
+  // A denoised scan gets the quiet kernel; a raw one the noise measured on the whole scan.
+  run.adapt_to_noise = params.adapt_to_noise && !choice.denoise;
+  if (run.adapt_to_noise && choice.noise > 0) run.noise_sigma = choice.noise;
+
+  const float margin = params.tile_margin * R;
+  const std::vector<Tile> tiles = splitIntoTiles(in[0], params.max_tile_points, margin);
+  rep.tiles = tiles.size();
+  const std::size_t total = params.output_count ? params.output_count
+                                                : static_cast<std::size_t>(std::llround(params.factor * finite0));
+  // The oriented normals of the core points of the tiles done so far: the hints of the next.
+  Normals oriented(in[0].size(), Eigen::Vector3f::Constant(NAN));
+  Positions out;
+  if (normals_out) normals_out->clear();
+  if (curvature_out) curvature_out->clear();
+  if (source_out) source_out->clear();
+  // Runs tile t for `count` output points, appended to the outputs; false (nothing appended)
+  // when the tile holds no surface.
+  auto runTile = [&](std::size_t t, std::size_t count, QuadricSuperResolutionReport& r) {
+    const Tile& tile = tiles[t];
+    std::vector<int> members(tile.core);
+    members.insert(members.end(), tile.halo.begin(), tile.halo.end());
+    rep.largest_tile = std::max(rep.largest_tile, members.size());
+    std::vector<Positions> local(in.size());
+    local[0] = gathered(in[0], members);
+    for (std::size_t s = 1; s < in.size(); ++s) local[s] = gathered(in[s], pointsAroundTile(in[0], tile, in[s], margin));
+    TileRun tr;
+    tr.seedable.assign(members.size(), 0);
+    std::fill_n(tr.seedable.begin(), tile.core.size(), 1);
+    tr.hints = gathered(oriented, members);
+    run.output_count = count;
+    run.seed = params.seed + t;  // each tile draws its own seeds
+    Normals n;
+    std::vector<float> c;
+    std::vector<int> src;
+    const Positions o = superResolveSorted(local, run, &r, tileProgress(progress, t, tiles.size()), normals_out ? &n : nullptr,
+                                           curvature_out ? &c : nullptr, &src, &tr);
+    if (tr.no_surface) return false;
+    for (std::size_t k = 0; k < tile.core.size(); ++k) oriented[tile.core[k]] = tr.oriented[k];
+    out.insert(out.end(), o.begin(), o.end());
+    if (normals_out) normals_out->insert(normals_out->end(), n.begin(), n.end());
+    if (curvature_out) curvature_out->insert(curvature_out->end(), c.begin(), c.end());
+    if (source_out)
+      for (const int k : src) source_out->push_back(members[static_cast<std::size_t>(k)]);
+    return true;
+  };
+  // Each tile's share of the output: one piece spreads it evenly over the surface (Poisson
+  // disks), so a tile gets it in proportion to the surface its core covers, counted in cells
+  // of about the seed disc (a share per point would crowd the densely sampled tiles: the
+  // scan's near field, a wire). A tile with no surface (lines, piles) makes nothing and hands
+  // its share to the next; when the last tiles make nothing, the last tile that made any is
+  // run again with their shares.
+  const float cell = std::max(params.seed_disc, 1.f) * R * std::sqrt(3.14159265f / params.target_neighbours);
+  std::vector<std::size_t> cells;
+  for (const Tile& t : tiles) cells.push_back(occupiedCells(in[0], t.core, cell));
+  const std::vector<std::size_t> shares = splitInProportion(total, cells);
+  std::vector<std::pair<std::size_t, QuadricSuperResolutionReport>> done;  // tile, its report
+  std::size_t carried = 0, last_start = 0, last_count = 0;
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    if (shares[t] + carried == 0) continue;
+    QuadricSuperResolutionReport r;
+    const std::size_t start = out.size();
+    if (!runTile(t, shares[t] + carried, r)) {
+      carried += shares[t];
+      continue;
+    }
+    last_start = start;
+    last_count = shares[t] + carried;
+    carried = 0;
+    done.push_back({t, r});
+  }
+  if (done.empty()) throw noSurfaceAnywhere(R);
+  if (carried > 0) {
+    out.resize(last_start);
+    if (normals_out) normals_out->resize(last_start);
+    if (curvature_out) curvature_out->resize(last_start);
+    if (source_out) source_out->resize(last_start);
+    runTile(done.back().first, last_count + carried, done.back().second);
+  }
+  // The tiles' orientation runs on from the first tile, whose pieces were turned up on their
+  // own; the whole is turned as one piece turns a connected scan (a closed surface out).
+  if (normals_out && upwardSign(in[0], oriented) < 0)
+    for (Eigen::Vector3f& n : *normals_out) n = -n;
+  double weighed = 0, rsim = 0, neighbours = 0, similar = 0, spacing = 0, disc = 0, kernel = 0;
+  std::map<std::pair<int, int>, std::size_t> grids;  // (grid_lr, grid_sr): core points of the tiles that chose them
+  for (const auto& [t, r] : done) {
+    const double w = static_cast<double>(tiles[t].core.size());
+    weighed += w;
+    rsim += w * r.similarity_radius;
+    neighbours += w * r.mean_neighbours;
+    similar += w * r.mean_similar_weight;
+    spacing += w * r.spacing;
+    disc += w * r.disc_radius;
+    kernel += w * r.kernel_scale;
+    grids[{r.grid_lr, r.grid_sr}] += tiles[t].core.size();
+    rep.patches += r.patches;
+    rep.plane_fallbacks += r.plane_fallbacks;
+    rep.flat_fits += r.flat_fits;
+    rep.ill_posed_fits += r.ill_posed_fits;
+    rep.widened_fits += r.widened_fits;
+    rep.thin_balls += r.thin_balls;
+    rep.narrowed_discs += r.narrowed_discs;
+    rep.without_similar += r.without_similar;
+    rep.quadric_only += r.quadric_only;
+    rep.unprojected += r.unprojected;
+  }
+  if (weighed > 0) {
+    rep.similarity_radius = static_cast<float>(rsim / weighed);
+    rep.mean_neighbours = neighbours / weighed;
+    rep.mean_similar_weight = similar / weighed;
+    rep.spacing = static_cast<float>(spacing / weighed);
+    rep.disc_radius = static_cast<float>(disc / weighed);
+    rep.kernel_scale = static_cast<float>(kernel / weighed);
+    // The grids of the most core points.
+    const auto best = std::max_element(grids.begin(), grids.end(),
+                                       [](const auto& a, const auto& b) { return a.second < b.second; });
+    rep.grid_lr = best->first.first;
+    rep.grid_sr = best->first.second;
+  }
+  rep.output = out.size();
+  if (report) *report = rep;
+  return out;
+}
+}  // namespace
+
+Positions superResolveQuadric(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
+                              QuadricSuperResolutionReport* report, const ProgressCallback& progress,
+                              Normals* normals, std::vector<float>* curvature, std::vector<int>* source) {
+  params.validate();
+  if (scans.empty()) throw InvalidInput("no scan to super-resolve");
+  if (params.max_tile_points > 0 && countFinite(scans[0]) > params.max_tile_points)
+    return superResolveInTiles(scans, params, report, progress, normals, curvature, source);
+  return superResolveSorted(scans, params, report, progress, normals, curvature, source);
 }
 
 template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointXYZ>;

@@ -60,6 +60,13 @@ constexpr int kPropagationNeighbours = 10;
 std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
                                        const NeighbourGraph& graph);
 
+/// +1 or -1: the sign that turns a group of consistently oriented normals up, by
+/// orientNormalsByPropagation's rule for a connected component: their summed z when they
+/// point one way on the whole, else the normal of the highest point within 60 degrees of
+/// vertical, else +1. Non-finite points and normals are skipped. For a stage that oriented a
+/// component piece by piece (tiles) and turns the whole at the end as one piece would.
+int upwardSign(const Positions& points, const Normals& normals);
+
 /// Principal frames: for each point, t1 is the eigenvector of largest eigenvalue of the
 /// covariance of the neighbours' normals, projected on the tangent plane. Where the normals
 /// do not vary (a plane), t1 is any tangent direction chosen deterministically.

@@ -29,6 +29,15 @@ struct Tile {
 /// a negative or non-finite margin.
 std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, float margin);
 
+/// The finite points of `other` (another scan of the same object, registered) inside the
+/// bounding box of `tile`'s core (points of `cloud`) grown by `margin` on each side, as indices
+/// into `other` in increasing order: what a stage that reads several scans sees beside a tile.
+std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, const Positions& other, float margin);
+
+/// `progress` with its stage names prefixed "tile t/n: " (t from 1), as runSortedInTiles
+/// reports; empty when `progress` is.
+ProgressCallback tileProgress(const ProgressCallback& progress, std::size_t tile, std::size_t tiles);
+
 /// A point-moving stage run tile by tile (one after the other: the working memory is one
 /// tile's): `stage(points, movable, tile_number)` gets a tile's core then halo positions and
 /// their movable flags, and returns one position per point; the outputs of the core points

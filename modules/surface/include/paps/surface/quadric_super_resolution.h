@@ -105,6 +105,17 @@ struct QuadricSuperResolutionParameters {
   enum class Denoise { Off, Auto, On };
   Denoise denoise_input = Denoise::Auto;
   std::uint64_t seed = 1;
+  /// A first scan of more finite points than this is super-resolved in tiles of at most this
+  /// many (0: one piece whatever the size): 5M points x2 took 5.8 GB in one piece. The patch
+  /// radius, the noise and the decision to denoise first are made on the whole scan (and the
+  /// denoising is the tiled SimilarityDenoising); each tile then finds its similar patches
+  /// among its own points, and seeds the output from its core points only, its share of the
+  /// output count in proportion to them. A tile's normals take the side of those of the tiles
+  /// before it where they meet, so that the orientation runs on across tiles.
+  std::size_t max_tile_points = 2000000;
+  /// Halo of a tile in patch radii (1 to 10): a core point's seeds are projected on the patches
+  /// of the points within about 1.5 R of it, whose fits read their own balls of R.
+  float tile_margin = 3.f;
   void validate() const;
 };
 
@@ -146,6 +157,14 @@ struct QuadricSuperResolutionReport {
   /// measured with denoise_input Auto when the noise is between 0.5% and 5% of R). Near 1 on
   /// a surface smooth at the patch scale; well above 1 where relief finer than 2R shows.
   float noise_growth = 0.f;
+  /// Tiles the first scan was cut into (1: one piece; max_tile_points) and the most points of
+  /// the first scan a tile held, halo included. With tiles, the counts above add up every
+  /// tile's (the fit and patch counts include the halos; narrowed_discs, quadric_only,
+  /// without_similar, unprojected and output count each point once), and similarity_radius,
+  /// mean_neighbours, mean_similar_weight, spacing, disc_radius and kernel_scale are means
+  /// over the tiles weighted by their core points; grid_lr and grid_sr are those of the most
+  /// core points.
+  std::size_t tiles = 1, largest_tile = 0;
 };
 
 /// The noise-adaptive rule (measured on the distance from the output to the true surface, on
@@ -196,6 +215,8 @@ class QuadricSuperResolution : public pcl::CloudSurfaceProcessing<PointIn, Point
   /// Seed disc radius in mean input spacings (default 1.2; about 0.6 for scan-line LiDAR).
   void setSeedDisc(float spacings) { auto p = params_; p.seed_disc = spacings; setParameters(p); }
   void setThinDisc(float scale) { auto p = params_; p.thin_disc = scale; setParameters(p); }
+  /// Tiles of at most this many points of the input (0: one piece; default 2M).
+  void setMaxTilePoints(std::size_t n) { auto p = params_; p.max_tile_points = n; setParameters(p); }
   void addScan(const typename pcl::PointCloud<PointIn>::ConstPtr& scan) { extra_.push_back(scan); }
   void clearScans() { extra_.clear(); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }

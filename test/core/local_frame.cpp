@@ -547,3 +547,41 @@ TEST(LocalFrame, NaNNormalIsInvalid) {
 }
 
 }  // namespace
+
+// upwardSign: the propagation's rule for a whole group of oriented normals. A plate seen from
+// above, pointing down: flip; a closed sphere pointing in: flip (its top points down);
+// pointing out: keep; no upright normal and no side (a vertical band): keep.
+TEST(UpwardSign, FollowsThePropagationsRuleForAComponent) {
+  const Positions sphere = fibonacciSphere(2000);
+  Normals out(sphere.begin(), sphere.end()), in;
+  for (const auto& n : out) in.push_back(-n);
+  EXPECT_EQ(paps::upwardSign(sphere, out), 1);
+  EXPECT_EQ(paps::upwardSign(sphere, in), -1);
+  Positions plate;
+  Normals down;
+  for (int i = 0; i < 400; ++i) {
+    plate.emplace_back(0.05f * (i % 20), 0.05f * (i / 20), 0.f);
+    down.emplace_back(0.1f, 0.f, -1.f);
+  }
+  EXPECT_EQ(paps::upwardSign(plate, down), -1);
+  // The propagation turns a consistently oriented group the same way.
+  Shape s = withRadiusGraph(fibonacciSphere(2000), 0.15f);
+  for (std::size_t i = 0; i < s.points.size(); ++i) s.normals[i] = -s.points[i].normalized();  // all in
+  const int before = paps::upwardSign(s.points, s.normals);
+  paps::orientNormalsByPropagation(s.points, s.normals, s.graph);
+  EXPECT_EQ(before, -1);
+  EXPECT_EQ(paps::upwardSign(s.points, s.normals), 1);
+  // A vertical band: every normal horizontal, no upright one: kept.
+  Positions band;
+  Normals side;
+  for (int i = 0; i < 100; ++i) {
+    const float a = 6.2831853f * i / 100;
+    band.emplace_back(std::cos(a), std::sin(a), 0.01f * (i % 3));
+    side.emplace_back(-std::cos(a), -std::sin(a), 0.f);
+  }
+  EXPECT_EQ(paps::upwardSign(band, side), 1);
+  // NaN normals are skipped.
+  down.push_back(Eigen::Vector3f::Constant(NAN));
+  plate.emplace_back(0.f, 0.f, 5.f);
+  EXPECT_EQ(paps::upwardSign(plate, down), -1);
+}

@@ -236,3 +236,34 @@ TEST(Tiling, EdgeCasesAndErrors) {
 }
 
 }  // namespace
+
+// pointsAroundTile: the finite points of another scan inside the tile's core box grown by the
+// margin, in increasing order; tileProgress prefixes the stage names and passes the answer on.
+TEST(Tiling, PointsAroundATileAndItsProgress) {
+  const Positions cloud = randomSlab(2000, 3);
+  const std::vector<paps::Tile> tiles = paps::splitIntoTiles(cloud, 600, 0.1f);
+  ASSERT_EQ(tiles.size(), 4u);
+  Positions other = randomSlab(3000, 4);
+  other.emplace_back(NAN, 0.f, 0.f);
+  std::size_t seen = 0;
+  for (const paps::Tile& t : tiles) {
+    const std::vector<int> around = paps::pointsAroundTile(cloud, t, other, 0.1f);
+    EXPECT_TRUE(std::is_sorted(around.begin(), around.end()));
+    std::set<int> inside(around.begin(), around.end());
+    for (std::size_t i = 0; i < other.size(); ++i)
+      EXPECT_EQ(inside.count(static_cast<int>(i)) == 1,
+                std::isfinite(other[i].x()) && inGrownBox(cloud, t.core, other[i], 0.1f)) << i;
+    seen += around.size();
+  }
+  EXPECT_GT(seen, 3000u);  // the boxes overlap by their margins
+  std::vector<std::string> names;
+  const paps::ProgressCallback cb = [&](const std::string& name, float) {
+    names.push_back(name);
+    return names.size() < 2;
+  };
+  const paps::ProgressCallback sub = paps::tileProgress(cb, 1, 4);
+  EXPECT_TRUE(sub("fits", 0.5f));
+  EXPECT_FALSE(sub("fits", 1.f));
+  EXPECT_EQ(names.front(), "tile 2/4: fits");
+  EXPECT_FALSE(static_cast<bool>(paps::tileProgress({}, 0, 4)));
+}

@@ -227,12 +227,13 @@ NoiseChoice chooseNoiseAndDenoising(const Positions& scan0, const SpatialIndex& 
   return c;
 }
 
-// A scan denoised before its patches are built; `noise` is the first scan's (0 for the others:
-// the denoiser measures it). In tiles of max_tile_points, as the denoiser cuts them.
-Positions denoisedFirst(const Positions& scan, const QuadricSuperResolutionParameters& params, float noise,
+// A scan denoised before its patches are built. The first scan's noise is the given or measured
+// one (`noise`); the denoiser measures the other scans'. In tiles of max_tile_points, as the
+// denoiser cuts them.
+Positions denoisedFirst(const Positions& scan, bool first, const QuadricSuperResolutionParameters& params, float noise,
                         const ProgressCallback& progress) {
   SimilarityDenoisingParameters dp;
-  dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
+  if (first) dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
   // The denoiser's own rule, but one pass: its second pass (from q = 0.6) is there because
   // its first output is still noisy, and here the aggregation over similar patches is
   // that second filter. Measured on rs1 at 0.5% (q about 0.6): two passes round the
@@ -330,7 +331,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     denoised.resize(scans.size());
     for (std::size_t s = 0; s < scans.size(); ++s) {
       if (sc[s].nh.radius <= 0) { denoised[s] = scans[s]; continue; }
-      const Positions d = denoisedFirst(scans[s], params, s == 0 ? noise : 0.f, progress);
+      const Positions d = denoisedFirst(scans[s], s == 0, params, noise, progress);
       // Sorted again on the denoised positions: the run is then the one on a denoised input.
       std::vector<int> resort = spatialOrderAll(d);
       denoised[s] = gathered(d, resort);
@@ -1091,11 +1092,26 @@ std::size_t occupiedCells(const Positions& points, const std::vector<int>& ids, 
   for (const int i : ids) {
     std::uint64_t key = 0;
     for (int a = 0; a < 3; ++a)
-      key = key * 2097152u + (static_cast<std::uint64_t>(std::floor(points[i][a] / cell)) & 2097151u);
+      key = key * 2097152u +
+            (static_cast<std::uint64_t>(static_cast<std::int64_t>(std::clamp(std::floor(points[i][a] / cell), -1e15f, 1e15f))) &
+             2097151u);
     keys.push_back(key);
   }
   std::sort(keys.begin(), keys.end());
   return static_cast<std::size_t>(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
+
+// The mean neighbour count at R over 2000 points spread along `sorted`, capped as the neighbour
+// lists of a run are (4 x target_neighbours). One piece chooses the low-resolution grid from the
+// mean count of its (denoised) scan; tiles of a scan whose density varies would each choose
+// their own (table_scene_lms400 in 8 tiles: 6 x 6 for most points, 7 x 7 in one piece).
+double sampledMeanCount(const Positions& sorted, const SpatialIndex& index, float R, int target_neighbours) {
+  std::vector<int> idx;
+  std::vector<float> d2;
+  double sum = 0;
+  const std::vector<int> sample = spreadSample(sorted, 2000);
+  for (const int i : sample) sum += index.radiusSearch(sorted[i], R, idx, d2, 4 * target_neighbours);
+  return sample.empty() ? 0.0 : sum / static_cast<double>(sample.size());
 }
 
 // The tiled run (max_tile_points): the patch radius, the noise and the decision to denoise are
@@ -1119,17 +1135,12 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
     rep.patch_radius = params.patch_radius > 0 ? params.patch_radius
                                                : radiusForNeighbourCount(sorted, index, params.target_neighbours);
     choice = chooseNoiseAndDenoising(sorted, index, rep.patch_radius, params);
-    // The low-resolution grid as one piece chooses it, from the mean neighbour count at R (on
-    // a sample, capped as the neighbour lists are): tiles of a scan whose density varies would
-    // each choose their own (table_scene_lms400 in 8 tiles: 6 x 6 for most points, 7 x 7 in
-    // one piece).
-    std::vector<int> idx;
-    std::vector<float> d2;
-    double sum = 0;
-    const std::vector<int> sample = spreadSample(sorted, 2000);
-    for (const int i : sample)
-      sum += index.radiusSearch(sorted[i], rep.patch_radius, idx, d2, 4 * params.target_neighbours);
-    mean_neighbours = sample.empty() ? 0.0 : sum / static_cast<double>(sample.size());
+    if (!choice.denoise) mean_neighbours = sampledMeanCount(sorted, index, rep.patch_radius, params.target_neighbours);
+  }
+  if (!(rep.patch_radius > 0)) {  // no radius to cut by (a pile of copies): one piece says what it is
+    QuadricSuperResolutionParameters one = params;
+    one.max_tile_points = 0;
+    return superResolveSorted(scans, one, report, progress, normals_out, curvature_out, source_out);
   }
   const float R = rep.patch_radius;
   rep.noise_sigma = choice.noise;
@@ -1138,9 +1149,11 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
   std::vector<Positions> denoised;
   if (choice.denoise) {
     for (std::size_t s = 0; s < scans.size(); ++s)
-      denoised.push_back(s == 0 || countFinite(scans[s]) >= 10 ? denoisedFirst(scans[s], params, s == 0 ? choice.noise : 0.f, progress)
+      denoised.push_back(s == 0 || countFinite(scans[s]) >= 10 ? denoisedFirst(scans[s], s == 0, params, choice.noise, progress)
                                                                : scans[s]);
     rep.denoised = true;
+    const Positions sorted = gathered(denoised[0], spatialOrderAll(denoised[0]));
+    mean_neighbours = sampledMeanCount(sorted, SpatialIndex(sorted), R, params.target_neighbours);
   }
   const std::vector<Positions>& in = choice.denoise ? denoised : scans;
   QuadricSuperResolutionParameters run = params;

@@ -1006,6 +1006,8 @@ TEST(QuadricSuperResolution, TiledNormalsRunOnAcrossTiles) {
   }
 }
 
+// Tiles give the same output whatever the thread count and the order of the points, and read
+// the other scans' points around each tile.
 TEST(QuadricSuperResolution, TiledOutputIsDeterministicAndUsesTheOtherScans) {
   Case c;
   synthetic::addGaussianNoise(c.sparse, 0.0005f, 9);
@@ -1023,6 +1025,9 @@ TEST(QuadricSuperResolution, TiledOutputIsDeterministicAndUsesTheOtherScans) {
   omp_set_num_threads(threads);
   EXPECT_EQ(one_thread, two_threads);
   EXPECT_EQ(r1.tiles, 4u);
+  // The tiles and each tile's run depend on the positions only, not on their order.
+  Positions reversed(c.sparse.rbegin(), c.sparse.rend());
+  EXPECT_EQ(superResolveQuadric({reversed, other}, p), one_thread);
   const Positions single = superResolveQuadric({c.sparse}, p, &alone);
   // The second scan's patches are read around each tile: about twice the patches, and more
   // similar weight per patch.

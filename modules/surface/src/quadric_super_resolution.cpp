@@ -297,7 +297,9 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   const std::size_t finite0 = countFinite(scans[0]);
   if (finite0 < 10)
     throw InvalidInput("the scan to super-resolve needs at least 10 finite points (got " + detail::toString(finite0) + ")");
-  checkOutputCount(params.output_count, finite0);
+  // A tile's share follows the surface it covers, not its points: the count was checked on the
+  // whole scan.
+  if (!tile) checkOutputCount(params.output_count, finite0);
   // A tile's radius was checked on the whole scan (a dense tile may be narrower).
   if (!tile) requireRadiusWithinExtent("patch_radius", params.patch_radius, scans[0]);
   QuadricSuperResolutionReport rep;

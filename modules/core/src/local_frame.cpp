@@ -214,13 +214,12 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
       zabs[c] += std::abs(normals[i].z());
       if (top[c] < 0 && std::abs(normals[i].z()) >= kUprightNormal) top[c] = i;
     }
-  // upwardRule sets the sign of each group. The seed's own sign (step 1: the highest point's normal up) is kept
-  // only when neither tells: that point is often on a rim, where the normal is near horizontal
-  // and its sign is noise (on rs1 sampled at 70K points it flipped one of the scan's pieces,
-  // 13% of the points).
-  const auto upward = upwardRule;
+  // upwardRule sets the sign of each group. The seed's own sign (step 1: the highest point's
+  // normal up) is kept only when neither tells: that point is often on a rim, where the normal
+  // is near horizontal and its sign is noise (on rs1 sampled at 70K points it flipped one of
+  // the scan's pieces, 13% of the points).
   if (ncomp == 1) {
-    const bool down = upward(zsum[0], zabs[0], top[0] >= 0 ? normals[top[0]].z() : 0.f) < 0;
+    const bool down = upwardRule(zsum[0], zabs[0], top[0] >= 0 ? normals[top[0]].z() : 0.f) < 0;
     std::size_t flips = 0;
     for (const int i : order) {
       if (down) { normals[i] = -normals[i]; flipped[i] ^= 1; }
@@ -266,7 +265,7 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
   }
   // 3. Components oriented relative to each other by propagation over the component graph,
   // strongest agreement first, from the component of the highest point not yet reached; then
-  // the whole group reached from it is turned up (upward, above).
+  // the whole group reached from it is turned up (upwardRule, above).
   std::vector<int> comp_order(ncomp);
   std::iota(comp_order.begin(), comp_order.end(), 0);
   std::sort(comp_order.begin(), comp_order.end(), [&](int a, int b) { return higher(comp_seed[a], comp_seed[b]); });
@@ -300,7 +299,7 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
       a += zabs[c];
       if (top[c] >= 0 && (best < 0 || higher(top[c], top[best]))) best = c;
     }
-    if (upward(z, a, best >= 0 ? sign[best] * normals[top[best]].z() : 0.f) < 0)
+    if (upwardRule(z, a, best >= 0 ? sign[best] * normals[top[best]].z() : 0.f) < 0)
       for (const int c : group) sign[c] = static_cast<std::int8_t>(-sign[c]);
   }
   std::size_t flips = 0;

@@ -3,6 +3,7 @@
 #include <paps/surface/impl/quadric_super_resolution.hpp>
 
 #include <algorithm>
+#include <array>
 #include <map>
 #include <cmath>
 #include <memory>
@@ -1089,15 +1090,11 @@ std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<
 // Cells of a grid of side `cell` that hold a point of `ids`: the surface they cover, up to a
 // factor that depends on its orientation only.
 std::size_t occupiedCells(const Positions& points, const std::vector<int>& ids, float cell) {
-  std::vector<std::uint64_t> keys;
+  std::vector<std::array<std::int64_t, 3>> keys;
   keys.reserve(ids.size());
   for (const int i : ids) {
-    std::uint64_t key = 0;
-    for (int a = 0; a < 3; ++a)
-      key = key * 2097152u +
-            (static_cast<std::uint64_t>(static_cast<std::int64_t>(std::clamp(std::floor(points[i][a] / cell), -1e15f, 1e15f))) &
-             2097151u);
-    keys.push_back(key);
+    const Eigen::Vector3d c = (points[i].cast<double>() / cell).array().floor();
+    keys.push_back({static_cast<std::int64_t>(c.x()), static_cast<std::int64_t>(c.y()), static_cast<std::int64_t>(c.z())});
   }
   std::sort(keys.begin(), keys.end());
   return static_cast<std::size_t>(std::unique(keys.begin(), keys.end()) - keys.begin());

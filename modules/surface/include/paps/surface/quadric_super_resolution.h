@@ -106,12 +106,13 @@ struct QuadricSuperResolutionParameters {
   Denoise denoise_input = Denoise::Auto;
   std::uint64_t seed = 1;
   /// A first scan of more finite points than this is super-resolved in tiles of at most this
-  /// many (0: one piece whatever the size): 5M points x2 took 5.8 GB in one piece. The patch
-  /// radius, the noise and the decision to denoise first are made on the whole scan (and the
-  /// denoising is the tiled SimilarityDenoising); each tile then finds its similar patches
-  /// among its own points, and seeds the output from its core points only, its share of the
-  /// output count in proportion to them. A tile's normals take the side of those of the tiles
-  /// before it where they meet, so that the orientation runs on across tiles.
+  /// many (0: one piece whatever the size, the first denoising included): 5M points x2 took
+  /// 5.8 GB in one piece. The patch radius, the noise, the decision to denoise first (the
+  /// denoising is the tiled SimilarityDenoising) and the low-resolution grid are chosen on the
+  /// whole scan; each tile then finds its similar patches among its own points, and seeds the
+  /// output from its core points only, its share of the output count in proportion to the
+  /// surface its core covers. A tile's normals take the side of those of the tiles before it
+  /// where they meet, so that the orientation runs on across tiles.
   std::size_t max_tile_points = 2000000;
   /// Halo of a tile in patch radii (1 to 10): a core point's seeds are projected on the patches
   /// of the points within about 1.5 R of it, whose fits read their own balls of R.

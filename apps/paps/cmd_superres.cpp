@@ -232,7 +232,8 @@ int runSuperres(int argc, char** argv) {
       std::printf("QSR: %zu points whose ball is too thin for a quadric seed over discs %.2f times as wide%s\n",
                   r.narrowed_discs, p.thin_disc, a.has("thin-disc") ? "" : " (--thin-disc)");
     if (r.denoised)
-      std::printf("QSR: the scan%s denoised first (paps denoise's default)%s\n", scans.size() > 1 ? "s were" : " was",
+      std::printf("QSR: the scan%s denoised first (paps denoise's default, %d pass%s)%s\n",
+                  scans.size() > 1 ? "s were" : " was", r.denoise_passes, r.denoise_passes == 1 ? "" : "es",
                   p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? ""
                   : r.noise_growth > 0 ? ": the surface is smooth at the patch scale (noise over balls of 2R / R below 1.3)"
                                        : ": noise >= 5% of the patch radius");

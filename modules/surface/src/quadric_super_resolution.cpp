@@ -228,20 +228,32 @@ NoiseChoice chooseNoiseAndDenoising(const Positions& scan0, const SpatialIndex& 
   return c;
 }
 
+// Below this q (noise / the denoiser's base radius) the first denoising is one pass; from it,
+// the denoiser's own pass count.
+constexpr float kDenoiseOnePassBelow = 0.75f;
+
 // A scan denoised before its patches are built. The first scan's noise is the given or measured
 // one (`noise`); the denoiser measures the other scans'. In tiles of max_tile_points, as the
-// denoiser cuts them.
+// denoiser cuts them. `passes` (optional) receives the pass count run.
 Positions denoisedFirst(const Positions& scan, bool first, const QuadricSuperResolutionParameters& params, float noise,
-                        const ProgressCallback& progress) {
+                        const ProgressCallback& progress, int* passes = nullptr) {
   SimilarityDenoisingParameters dp;
   if (first) dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
-  // The denoiser's own rule, but one pass: its second pass (from q = 0.6) is there because
-  // its first output is still noisy, and here the aggregation over similar patches is
-  // that second filter. Measured on rs1 at 0.5% (q about 0.6): two passes round the
-  // creases, 7.595e-1 / 7.851e-1 (protocol / to the surface) against 6.949e-1 / 7.365e-1.
-  dp = noiseResolvedParameters(scan, dp);
-  dp.passes = 1;
+  // The denoiser's own rule, but one pass up to q = 0.75: its second pass (from q = 0.6) is
+  // there because its first output is still noisy, and here the aggregation over similar
+  // patches is that second filter. Measured on rs1 at 0.5% (q about 0.6): two passes round
+  // the creases, 7.595e-1 / 7.851e-1 (protocol / to the surface) against 6.949e-1 / 7.365e-1.
+  // Dense scans reach higher q (the denoiser's ball holds a fixed count, so it shrinks with
+  // the density while the noise stays): there one pass leaves too much for the aggregation
+  // (rs1 2M points x2 at q 1.08: 0.365 from the surface after one pass, 0.227 after two,
+  // where the denoiser alone gives 0.237; at q 0.71, 500K points, 0.2727 against 0.2719).
+  SimilarityDenoisingReport choice;
+  dp = noiseResolvedParameters(scan, dp, &choice);
+  const float base_radius = choice.radius_scale > 0 ? dp.radius / choice.radius_scale : 0.f;
+  const float q = base_radius > 0 ? choice.noise_sigma / base_radius : 0.f;
+  if (!(q >= kDenoiseOnePassBelow)) dp.passes = 1;
   dp.max_tile_points = params.max_tile_points;
+  if (passes) *passes = dp.passes;
   return denoiseBySimilarity(scan, dp, nullptr, {}, progress);
 }
 
@@ -334,7 +346,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     denoised.resize(scans.size());
     for (std::size_t s = 0; s < scans.size(); ++s) {
       if (sc[s].nh.radius <= 0) { denoised[s] = scans[s]; continue; }
-      const Positions d = denoisedFirst(scans[s], s == 0, params, noise, progress);
+      const Positions d = denoisedFirst(scans[s], s == 0, params, noise, progress, s == 0 ? &rep.denoise_passes : nullptr);
       // Sorted again on the denoised positions: the run is then the one on a denoised input.
       std::vector<int> resort = spatialOrderAll(d);
       denoised[s] = gathered(d, resort);
@@ -1148,8 +1160,10 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
   std::vector<Positions> denoised;
   if (choice.denoise) {
     for (std::size_t s = 0; s < scans.size(); ++s)
-      denoised.push_back(s == 0 || countFinite(scans[s]) >= 10 ? denoisedFirst(scans[s], s == 0, params, choice.noise, progress)
-                                                               : scans[s]);
+      denoised.push_back(s == 0 || countFinite(scans[s]) >= 10
+                             ? denoisedFirst(scans[s], s == 0, params, choice.noise, progress,
+                                             s == 0 ? &rep.denoise_passes : nullptr)
+                             : scans[s]);
     rep.denoised = true;
     const Positions sorted = gathered(denoised[0], spatialOrderAll(denoised[0]));
     mean_neighbours = sampledMeanCount(sorted, SpatialIndex(sorted), R, params.target_neighbours);

@@ -112,9 +112,16 @@ struct SimilarityDenoisingReport {
 /// The noise-adaptive rule (measured on the engraved plane and the rs1 scan at 0.05% to 0.5%
 /// noise, docs/denoising.md): `params` with radius = base_radius x s(q), q = noise_sigma /
 /// base_radius, s growing linearly from 1 at q <= 0.2 to 2.5 at q >= 0.65; own_weight 1; one
-/// pass below q = 0.6, from there two refiltering passes. Every other field is kept. base_radius > 0 and noise_sigma >= 0, else InvalidParameter.
+/// pass below q = 0.6, from there refiltering passes (noiseAdaptedPasses). Every other field
+/// is kept. base_radius > 0 and noise_sigma >= 0, else InvalidParameter.
 SimilarityDenoisingParameters noiseAdaptedParameters(const SimilarityDenoisingParameters& params,
                                                      float base_radius, float noise_sigma);
+
+/// The pass count of the noise-adaptive rule at q = noise sigma / base radius: one pass below
+/// q = 0.6, two below 0.95, three below 1.2, four from there (measured, docs/denoising.md
+/// "Dense scans under heavy noise": the radius stops growing at x2.5 while q goes on growing
+/// with the density, and each further pass widens the support the output is averaged over).
+int noiseAdaptedPasses(float q);
 
 /// The parameters denoiseBySimilarity runs `params` with on `points`: with the automatic
 /// radius and adapt_to_noise, noiseAdaptedParameters at the given noise_sigma or the noise

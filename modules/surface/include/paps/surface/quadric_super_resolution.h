@@ -154,6 +154,10 @@ struct QuadricSuperResolutionReport {
   bool noise_estimated = false;     ///< noise_sigma was measured (not given)
   float kernel_scale = 0.f;         ///< aggregation kernel scale used
   bool denoised = false;            ///< the scans were denoised first (denoise_input)
+  /// Passes of that first denoising on the first scan (0: not denoised): one, or the
+  /// denoiser's own count from q = 0.75 (noise / the denoiser's base radius; dense scans
+  /// under heavy noise).
+  int denoise_passes = 0;
   /// Noise measured over balls of 2R / over balls of R, first scan (0: not measured; it is
   /// measured with denoise_input Auto when the noise is between 0.5% and 5% of R). Near 1 on
   /// a surface smooth at the patch scale; well above 1 where relief finer than 2R shows.

@@ -343,6 +343,12 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   std::vector<Positions> denoised;
   std::vector<int> resorted0;  // denoised scans[0] position -> scans[0] position (it is sorted again)
   if (choice.denoise) {
+    // The raw scans' lists and indices are rebuilt on the denoised scans: freed first, they
+    // do not add to the denoiser's peak (rs1 1M points at 0.5%, four passes: 2.17 -> 2.11 GB).
+    for (Scan& scan : sc) {
+      scan.nh.graph = NeighbourGraph();
+      scan.nh.index.reset();
+    }
     denoised.resize(scans.size());
     for (std::size_t s = 0; s < scans.size(); ++s) {
       if (sc[s].nh.radius <= 0) { denoised[s] = scans[s]; continue; }

@@ -2,6 +2,8 @@
 namespace paps::cli {
 extern const char* kDenoiseUsage;
 int runDenoise(int argc, char** argv);
+int runSampleMesh(int argc, char** argv);
+int runMeshDistance(int argc, char** argv);
 int runBench(int argc, char** argv);
 int runBenchFiles(int argc, char** argv);
 int runBenchLpf(int argc, char** argv);

@@ -35,6 +35,8 @@ const char* kUsage =
     "  shadows CLOUD LIST OUT --sun X,Y,Z   detect and relight the shadows of a coloured cloud\n"
     "  bench fusion [options]        image-cloud registration (Table 4.1; street and a real Kinect frame), colorization, shadows\n"
     "  bench files IN [IN..]         ours vs the peers on your own clouds: time, memory, output\n"
+    "  sample-mesh MESH N OUT        N points on a mesh, with --noise: a cloud of known surface\n"
+    "  mesh-distance MESH CLOUD      distance of a cloud to a mesh (RMS, mean, p95, max)\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
 }
@@ -81,6 +83,8 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "colorize")) return paps::cli::runColorize(argc, argv);
     if (!std::strcmp(argv[1], "shadows")) return paps::cli::runShadows(argc, argv);
 #endif
+    if (!std::strcmp(argv[1], "sample-mesh")) return paps::cli::runSampleMesh(argc, argv);
+    if (!std::strcmp(argv[1], "mesh-distance")) return paps::cli::runMeshDistance(argc, argv);
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "files")) return paps::cli::runBenchFiles(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);

@@ -1,11 +1,12 @@
 // paps sample-mesh / paps mesh-distance: clouds with a known surface, and how far a cloud lies
 // from it. They make the large-input figures of the docs reproducible without scratch programs.
 #include <cstdio>
+#include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <string>
 
-#include <pcl/conversions.h>
-#include <pcl/point_types.h>
+#include <pcl/PCLPointCloud2.h>
 
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
@@ -54,11 +55,23 @@ int runSampleMesh(int argc, char** argv) {
   if (!(mesh.area() > 0)) throw InvalidInput("the mesh '" + a.positional[0] + "' has no area to sample");
   Positions p = synthetic::sampleMesh(mesh, count, seed);
   if (noise > 0) synthetic::addGaussianNoise(p, noise, seed + 1);
-  pcl::PointCloud<pcl::PointXYZ> xyz;
-  xyz.resize(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) xyz[i].getVector3fMap() = p[i];
+  // x y z only, 12 bytes a point (a PointXYZ blob carries 4 bytes of padding a point).
   pcl::PCLPointCloud2 blob;
-  pcl::toPCLPointCloud2(xyz, blob);
+  for (const char* name : {"x", "y", "z"}) {
+    pcl::PCLPointField f;
+    f.name = name;
+    f.offset = static_cast<std::uint32_t>(4 * blob.fields.size());
+    f.datatype = pcl::PCLPointField::FLOAT32;
+    f.count = 1;
+    blob.fields.push_back(f);
+  }
+  blob.height = 1;
+  blob.width = static_cast<std::uint32_t>(p.size());
+  blob.point_step = 12;
+  blob.row_step = blob.point_step * blob.width;
+  blob.is_dense = true;
+  blob.data.resize(p.size() * 12);
+  for (std::size_t i = 0; i < p.size(); ++i) std::memcpy(&blob.data[12 * i], p[i].data(), 12);
   saveCloudAtomic(a.positional[2], blob);
   std::printf("wrote %s: %zu points on %s (%zu triangles), noise %g x the diagonal, seed %zu\n", a.positional[2].c_str(),
               p.size(), a.positional[0].c_str(), mesh.triangles.size(), noise, seed);

@@ -43,8 +43,8 @@ const char* kBenchUsage =
     "  --points N       points sampled on each test shape (default 200000)\n"
     "  --large N        points of the large speed test (default 1000000, 0 to skip)\n"
     "  --tiles N        also run ours, the bilateral filter and LPF on the large input in one\n"
-    "                   piece and in tiles of N points, and PCL MLS (time, peak memory, RMSE\n"
-    "                   to the true surface)\n"
+    "                   piece and in tiles of N points (ours also without its interleaved\n"
+    "                   subsets), and PCL MLS (time, peak memory, RMSE to the true surface)\n"
     "  --quick          one noise level, shorter sweeps (a smoke run)\n"
     "  --shapes LIST    comma-separated test shapes (default engraved-plane,rs1-scan-mesh); also\n"
     "                   engraved-plane-1cm (10 cm wavelength, 1 cm relief: detail above the\n"
@@ -399,21 +399,26 @@ int runBenchDenoise(int argc, char** argv) {
       double ours_radius = 0;
       // PCL MLS (order 2, one piece: it has no tiles) at the radius ours chose, for the error
       // of the peer on the same input.
+      // Ours also without its interleaved subsets (max_noise_ratio 0, the default before
+      // session 41), tiled: what the subsets change on a dense scan under heavy noise.
       for (const std::string m : {"ours", "mls", "bilateral", "lpf"}) {
-        for (const std::size_t tile : {std::size_t(0), n_tiles}) {
-          if (m == "mls" && tile > 0) continue;
+        for (const int variant : {0, 1, 2}) {
+          const std::size_t tile = variant == 0 ? 0 : n_tiles;
+          if ((m == "mls" && variant > 0) || (m != "ours" && variant == 2)) continue;
           std::map<std::string, double> p{{"tile", static_cast<double>(tile)}};
+          if (variant == 2) p["split"] = 0;
           if (m == "bilateral" || m == "mls") p["radius"] = ours_radius;
           if (m == "mls") p = {{"radius", ours_radius}, {"order", 2}, {"threads", 2}};
           const WorkerResult w = runWorker(out_dir, m, big, p);
-          const std::string name = tile ? "tiles of " + std::to_string(tile) : "one piece";
+          const std::string name = (tile ? "tiles of " + std::to_string(tile) : "one piece") + (variant == 2 ? ", no subsets" : "");
           if (!w.ok) { std::printf("%-10s %-24s failed: %s\n", m.c_str(), name.c_str(), w.message.c_str()); continue; }
           if (m == "ours" && tile == 0) ours_radius = w.radius;
           const ErrorStats e = pointToMeshError(w.output, truth);
           std::printf("%-10s %-24s %9.2f %9.0f %10.4g  radius %.4g%s\n", m.c_str(), name.c_str(), w.seconds, w.peak_mb,
                       e.rmse, w.radius, w.chosen.empty() ? "" : (" (" + w.chosen + ")").c_str());
           // Every method's default limit is 2M points (the parameters' max_tile_points).
-          const bool is_default = tile == SimilarityDenoisingParameters().max_tile_points && (m == "ours" || m == "lpf");
+          const bool is_default =
+              variant == 1 && tile == SimilarityDenoisingParameters().max_tile_points && (m == "ours" || m == "lpf");
           Row row{"rs1 " + std::to_string(n_large) + " pts, 0.25%", "0.25%", m, name, is_default, w, e};
           row.run.output.clear();
           rows.push_back(row);

@@ -148,6 +148,7 @@ int runBenchWorker(int argc, char** argv) {
       q.own_weight = static_cast<float>(get("own", q.own_weight));
       q.adapt_to_noise = get("adapt", 1) != 0;
       q.max_tile_points = static_cast<std::size_t>(get("tile", static_cast<double>(q.max_tile_points)));
+      q.max_noise_ratio = static_cast<float>(get("split", q.max_noise_ratio));
       if (get("centre", 0) != 0) q.aggregation = SimilarityDenoisingParameters::Aggregation::Centre;
       SimilarityDenoisingReport report;
       output = denoiseBySimilarity(input, q, &report);
@@ -157,7 +158,9 @@ int runBenchWorker(int argc, char** argv) {
         std::snprintf(b, sizeof b, "noise %.3g, radius x%.2f, own %g, %d pass%s", report.noise_sigma,
                       report.radius_scale, report.own_weight, report.passes,
                       report.passes > 1 ? (report.guided_passes ? "es guided" : "es refiltered") : "");
-        lf << "chosen " << b << (report.tiles > 1 ? ", " + std::to_string(report.tiles) + " tiles" : std::string()) << "\n";
+        lf << "chosen " << b
+           << (report.subsets > 1 ? ", " + std::to_string(report.subsets) + " interleaved subsets" : std::string())
+           << (report.tiles > report.subsets ? ", " + std::to_string(report.tiles) + " tiles" : std::string()) << "\n";
       }
     } else if (method == "lpf") {
       LpfDenoisingParameters q;

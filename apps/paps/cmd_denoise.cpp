@@ -45,6 +45,11 @@ const char* kDenoiseUsage =
     "  --tile-points N        a cloud of more finite points is denoised in tiles of at most N\n"
     "                         points, one at a time (every method; memory: about 1 KB a\n"
     "                         point of a tile; default 2000000; 0: one piece whatever the size)\n"
+    "  --max-noise-ratio Q    dense scans under heavy noise: when the noise exceeds Q x the base\n"
+    "                         radius, the cloud is denoised as interleaved subsets, each a\n"
+    "                         sparser sampling of the surface with noise at most Q x its own base\n"
+    "                         radius, each by the whole noise rule (default 1; 0: never; off with\n"
+    "                         --radius, --no-adapt, --passes, --refilter or --own-weight)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "LPF options (--method lpf; --radius is the pattern radius, --neighbours defaults to 100,\n"
     "--passes to 5):\n"
@@ -81,7 +86,8 @@ int runDenoise(int argc, char** argv) {
   a.allowOnly({"method", "radius", "neighbours", "grid", "sigma", "sigma-scale", "smoothing",
                "patches", "iterations", "quiet", "timings", "checks", "guide", "passes",
                "refilter", "aggregate", "own-weight", "noise", "no-adapt", "step", "atoms", "lambda",
-               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature", "keep-normals", "tile-points"});
+               "rounds", "seed-spacing", "free-motion", "bend-threshold", "free-curvature", "keep-normals", "tile-points",
+               "max-noise-ratio"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireCloudOutput();
   const std::string& in_path = a.positional[0];
@@ -93,7 +99,8 @@ int runDenoise(int argc, char** argv) {
   std::vector<std::string> applies = {"method", "radius", "neighbours", "quiet", "timings", "keep-normals"};
   if (method == "similarity")
     applies.insert(applies.end(), {"grid", "sigma", "sigma-scale", "smoothing", "patches", "checks", "guide", "passes",
-                                   "refilter", "aggregate", "own-weight", "noise", "no-adapt", "tile-points"});
+                                   "refilter", "aggregate", "own-weight", "noise", "no-adapt", "tile-points",
+                                   "max-noise-ratio"});
   else if (method == "lpf")
     applies.insert(applies.end(), {"step", "atoms", "lambda", "rounds", "seed-spacing", "passes", "free-motion",
                                    "free-curvature", "bend-threshold", "tile-points"});
@@ -132,10 +139,12 @@ int runDenoise(int argc, char** argv) {
     p.noise_sigma = a.real("noise", 0);
     p.adapt_to_noise = !a.has("no-adapt");
     p.max_tile_points = a.count("tile-points", p.max_tile_points);
+    p.max_noise_ratio = a.real("max-noise-ratio", p.max_noise_ratio);
     validateAsOptions({{"target_neighbours", "neighbours"}, {"grid_size", "grid"}, {"sigma_scale", "sigma-scale"},
                        {"smoothing_iterations", "smoothing"}, {"descriptor_smoothing", "guide"},
                        {"similar_patches", "patches"}, {"search_checks", "checks"}, {"own_weight", "own-weight"},
-                       {"noise_sigma", "noise"}, {"max_tile_points", "tile-points"}},
+                       {"noise_sigma", "noise"}, {"max_tile_points", "tile-points"},
+                       {"max_noise_ratio", "max-noise-ratio"}},
                       [&] { p.validate(); });
     // Schedule options given on the command line go over the noise rule's choice.
     SimilarityDenoisingReport choice, r;
@@ -159,7 +168,10 @@ int runDenoise(int argc, char** argv) {
                 r.sigma, p.sigma > 0 ? "" : " (chosen)", p.smoothing_iterations, p.similar_patches,
                 r.passes, r.passes > 1 ? "es" : "", r.passes > 1 ? (r.guided_passes ? " (guided)" : " (refiltered)") : "",
                 r.own_weight);
-    if (r.tiles > 1)
+    if (r.subsets > 1)
+      std::printf("in %zu interleaved subsets (noise %.3g x the base radius on the whole cloud; radius, noise "
+                  "and sigma above are their means)\n", r.subsets, r.split_noise_ratio);
+    if (r.tiles > r.subsets)
       std::printf("in %zu tiles (at most %zu points each, %zu with the halo of %g radii)\n", r.tiles,
                   p.max_tile_points, r.largest_tile, p.tile_margin);
     std::printf("normals oriented %s; moved %zu points; %zu NaN or Inf points passed through\n",

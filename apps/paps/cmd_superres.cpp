@@ -232,8 +232,9 @@ int runSuperres(int argc, char** argv) {
       std::printf("QSR: %zu points whose ball is too thin for a quadric seed over discs %.2f times as wide%s\n",
                   r.narrowed_discs, p.thin_disc, a.has("thin-disc") ? "" : " (--thin-disc)");
     if (r.denoised)
-      std::printf("QSR: the scan%s denoised first (paps denoise's default, %d pass%s)%s\n",
+      std::printf("QSR: the scan%s denoised first (paps denoise's default, %d pass%s%s)%s\n",
                   scans.size() > 1 ? "s were" : " was", r.denoise_passes, r.denoise_passes == 1 ? "" : "es",
+                  r.denoise_subsets > 1 ? (", in " + std::to_string(r.denoise_subsets) + " interleaved subsets").c_str() : "",
                   p.denoise_input == QuadricSuperResolutionParameters::Denoise::On ? ""
                   : r.noise_growth > 0 ? ": the surface is smooth at the patch scale (noise over balls of 2R / R below 1.3)"
                                        : ": noise >= 5% of the patch radius");

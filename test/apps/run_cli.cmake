@@ -283,6 +283,25 @@ elseif(CASE STREQUAL "denoise_tiles")
     endif()
     file(REMOVE ${output})
   endforeach()
+elseif(CASE STREQUAL "denoise_subsets")
+  # --max-noise-ratio: a cloud whose noise exceeds the ratio times its base radius is denoised
+  # in interleaved subsets and says so; at the default (the noise here is about 0.14 x the
+  # base radius), with 0 or with an explicit radius it is not; a bad ratio is one error line
+  # naming the option.
+  write_input(25000 rough)
+  run_paps(denoise ${input} ${output} --max-noise-ratio 0.05 --quiet)
+  expect_success_saying("in [0-9]+ interleaved subsets \\(noise 0\\.1[0-9]* x the base radius")
+  file(REMOVE ${output})
+  foreach(options "" "--max-noise-ratio;0" "--max-noise-ratio;0.05;--radius;0.07")
+    run_paps(denoise ${input} ${output} ${options} --quiet)
+    expect_good_output()
+    if(out MATCHES "interleaved subsets")
+      message(FATAL_ERROR "'${options}' split the cloud: ${out}")
+    endif()
+    file(REMOVE ${output})
+  endforeach()
+  run_paps(denoise ${input} ${output} --max-noise-ratio -1 --quiet)
+  expect_one_error_line("max-noise-ratio")
 elseif(CASE STREQUAL "superres_tiles")
   # QSR's --tile-points: a scan above the limit is super-resolved in tiles and says so, with the
   # count of one piece; below it (and with 0) one piece; a count under 1000 is one error line
@@ -837,7 +856,7 @@ elseif(CASE STREQUAL "bench_denoise_tiles")
   if(NOT rc STREQUAL "0")
     message(FATAL_ERROR "bench denoise --tiles: exit ${rc}: ${err}")
   endif()
-  foreach(row "ours +one piece" "ours +tiles of 2000 .*4 tiles" "mls +one piece" "bilateral +one piece"
+  foreach(row "ours +one piece" "ours +tiles of 2000 .*4 tiles" "ours +tiles of 2000, no subsets" "mls +one piece" "bilateral +one piece"
               "bilateral +tiles of 2000 .*4 tiles" "lpf +one piece" "lpf +tiles of 2000 .*4 tiles")
     if(NOT out MATCHES "\n${row}")
       message(FATAL_ERROR "no row '${row}' in the tiles table: ${out}")
@@ -851,8 +870,8 @@ elseif(CASE STREQUAL "bench_denoise_tiles")
   endif()
   file(STRINGS ${dir}/bench/denoise.csv rows REGEX "^\"rs1 6000 pts, 0.25%\",0.25%,(ours|mls|bilateral|lpf),")
   list(LENGTH rows n)
-  if(NOT n EQUAL 7)
-    message(FATAL_ERROR "expected 7 quoted tile rows in denoise.csv, got ${n}: ${rows}")
+  if(NOT n EQUAL 8)
+    message(FATAL_ERROR "expected 8 quoted tile rows in denoise.csv, got ${n}: ${rows}")
   endif()
 elseif(CASE STREQUAL "superres_keeps_fields")
   # New points carry the other fields of the input point each was made from (the input's

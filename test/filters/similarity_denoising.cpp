@@ -271,9 +271,11 @@ TEST(SimilarityDenoising, DefaultsFollowTheNoise) {
 TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseGetMorePasses) {
   const NoisyShape s = engravedPlane(40000, 0.024f, 200);
   const paps::PointToMeshDistance truth(s.mesh);
+  SimilarityDenoisingParameters whole;  // the pass rule on the whole cloud (no interleaved subsets)
+  whole.max_noise_ratio = 0;
   SimilarityDenoisingReport r;
-  const double by_default = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, {}, &r), truth).rmse;
-  SimilarityDenoisingParameters two = paps::noiseResolvedParameters(s.noisy, {});
+  const double by_default = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, whole, &r), truth).rmse;
+  SimilarityDenoisingParameters two = paps::noiseResolvedParameters(s.noisy, whole);
   two.passes = 2;
   const double with_two = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, two), truth).rmse;
   const float q = r.noise_sigma * r.radius_scale / r.radius;
@@ -282,6 +284,37 @@ TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseGetMorePasses) {
   EXPECT_GE(q, 0.95f);  // measured 1.09: three passes
   EXPECT_GE(r.passes, 3);
   EXPECT_LT(by_default, 0.93 * with_two);  // measured 0.86 (7.60e-3 against 8.83e-3)
+}
+
+TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseAreDenoisedAsInterleavedSubsets) {
+  const NoisyShape s = engravedPlane(40000, 0.024f, 200);
+  const paps::PointToMeshDistance truth(s.mesh);
+  SimilarityDenoisingReport split, one;
+  const Positions out = paps::denoiseBySimilarity(s.noisy, {}, &split);
+  const double by_default = paps::pointToMeshError(out, truth).rmse;
+  SimilarityDenoisingParameters whole;
+  whole.max_noise_ratio = 0;
+  const double in_one = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, whole, &one), truth).rmse;
+  std::printf("engraved plane 40K, noise 2.4%%: q %.2f, %zu subsets (q %.2f each, %d passes) %.4g; whole cloud "
+              "(%d passes) %.4g; input %.4g\n", split.split_noise_ratio, split.subsets,
+              split.noise_sigma * split.radius_scale / split.radius, split.passes, by_default, one.passes, in_one,
+              paps::pointToMeshError(s.noisy, truth).rmse);
+  EXPECT_GT(split.split_noise_ratio, 1.f);
+  EXPECT_GE(split.subsets, 2u);
+  EXPECT_EQ(one.subsets, 1u);
+  EXPECT_EQ(split.moved + split.isolated, s.noisy.size());
+  EXPECT_LT(split.isolated, s.noisy.size() / 1000);
+  EXPECT_LE(split.noise_sigma * split.radius_scale / split.radius, 1.05f);  // each subset's q, about the ratio
+  EXPECT_LT(by_default, 0.95 * in_one);
+  // The subsets come from the positions: the reversed cloud gives the same output, reversed.
+  Positions reversed(s.noisy.rbegin(), s.noisy.rend());
+  const Positions back = paps::denoiseBySimilarity(reversed, {});
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_EQ(back[out.size() - 1 - i], out[i]) << i;
+  // Points that may not move stay where they are.
+  std::vector<std::uint8_t> movable(s.noisy.size(), 0);
+  for (std::size_t i = 0; i < movable.size(); i += 2) movable[i] = 1;
+  const Positions half = paps::denoiseBySimilarity(s.noisy, {}, nullptr, movable);
+  for (std::size_t i = 1; i < half.size(); i += 2) ASSERT_EQ(half[i], s.noisy[i]) << i;
 }
 
 TEST(SimilarityDenoising, GivenNoiseIsUsedNotMeasured) {
@@ -502,6 +535,9 @@ TEST(SimilarityDenoising, BadParametersAreNamed) {
   expectInvalidParameter([&] { with([](auto& p) { p.tile_margin = 0.5f; }); }, "tile_margin");
   expectInvalidParameter([&] { with([nan](auto& p) { p.tile_margin = nan; }); }, "tile_margin");
   expectInvalidParameter([&] { with([](auto& p) { p.max_tile_points = std::size_t(1) << 31; }); }, "max_tile_points");
+  expectInvalidParameter([&] { f.setMaxNoiseRatio(-1.f); }, "max_noise_ratio");
+  expectInvalidParameter([&] { with([nan](auto& p) { p.max_noise_ratio = nan; }); }, "max_noise_ratio");
+  expectInvalidParameter([&] { with([](auto& p) { p.max_noise_ratio = 1e4f; }); }, "max_noise_ratio");
   // A rejected value leaves the filter as it was.
   EXPECT_EQ(f.getParameters().radius, 0.f);
   EXPECT_EQ(f.getParameters().grid_size, SimilarityDenoisingParameters().grid_size);

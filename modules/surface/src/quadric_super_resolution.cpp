@@ -236,9 +236,10 @@ constexpr float kDenoiseOnePassBelow = 0.75f;
 // one (`noise`); the denoiser measures the other scans'. In tiles of max_tile_points, as the
 // denoiser cuts them. `passes` (optional) receives the pass count run.
 Positions denoisedFirst(const Positions& scan, bool first, const QuadricSuperResolutionParameters& params, float noise,
-                        const ProgressCallback& progress, int* passes = nullptr) {
+                        const ProgressCallback& progress, QuadricSuperResolutionReport* report = nullptr) {
   SimilarityDenoisingParameters dp;
   if (first) dp.noise_sigma = params.noise_sigma > 0 ? params.noise_sigma : noise;
+  dp.max_tile_points = params.max_tile_points;
   // The denoiser's own rule, but one pass up to q = 0.75: its second pass (from q = 0.6) is
   // there because its first output is still noisy, and here the aggregation over similar
   // patches is that second filter. Measured on rs1 at 0.5% (q about 0.6): two passes round
@@ -247,14 +248,25 @@ Positions denoisedFirst(const Positions& scan, bool first, const QuadricSuperRes
   // the density while the noise stays): there one pass leaves too much for the aggregation
   // (rs1 2M points x2 at q 1.08: 0.365 from the surface after one pass, 0.227 after two,
   // where the denoiser alone gives 0.237; at q 0.71, 500K points, 0.2727 against 0.2719).
+  // From q = 1 the denoiser cuts the scan into interleaved subsets (max_noise_ratio): that
+  // choice is its own too.
   SimilarityDenoisingReport choice;
-  dp = noiseResolvedParameters(scan, dp, &choice);
-  const float base_radius = choice.radius_scale > 0 ? dp.radius / choice.radius_scale : 0.f;
+  SimilarityDenoisingParameters one = noiseResolvedParameters(scan, dp, &choice);
+  const float base_radius = choice.radius_scale > 0 ? one.radius / choice.radius_scale : 0.f;
   const float q = base_radius > 0 ? choice.noise_sigma / base_radius : 0.f;
-  if (!(q >= kDenoiseOnePassBelow)) dp.passes = 1;
-  dp.max_tile_points = params.max_tile_points;
-  if (passes) *passes = dp.passes;
-  return denoiseBySimilarity(scan, dp, nullptr, {}, progress);
+  SimilarityDenoisingReport r;
+  Positions out;
+  if (!(q >= kDenoiseOnePassBelow)) {
+    one.passes = 1;
+    out = denoiseBySimilarity(scan, one, &r, {}, progress);
+  } else {
+    out = denoiseBySimilarity(scan, dp, &r, {}, progress);
+  }
+  if (report) {
+    report->denoise_passes = r.passes;
+    report->denoise_subsets = r.subsets;
+  }
+  return out;
 }
 
 // No surface anywhere: every ball, widened as far as it goes, is collinear or one position
@@ -352,7 +364,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
     denoised.resize(scans.size());
     for (std::size_t s = 0; s < scans.size(); ++s) {
       if (sc[s].nh.radius <= 0) { denoised[s] = scans[s]; continue; }
-      const Positions d = denoisedFirst(scans[s], s == 0, params, noise, progress, s == 0 ? &rep.denoise_passes : nullptr);
+      const Positions d = denoisedFirst(scans[s], s == 0, params, noise, progress, s == 0 ? &rep : nullptr);
       // Sorted again on the denoised positions: the run is then the one on a denoised input.
       std::vector<int> resort = spatialOrderAll(d);
       denoised[s] = gathered(d, resort);
@@ -1167,8 +1179,7 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
   if (choice.denoise) {
     for (std::size_t s = 0; s < scans.size(); ++s)
       denoised.push_back(s == 0 || countFinite(scans[s]) >= 10
-                             ? denoisedFirst(scans[s], s == 0, params, choice.noise, progress,
-                                             s == 0 ? &rep.denoise_passes : nullptr)
+                             ? denoisedFirst(scans[s], s == 0, params, choice.noise, progress, s == 0 ? &rep : nullptr)
                              : scans[s]);
     rep.denoised = true;
     const Positions sorted = gathered(denoised[0], spatialOrderAll(denoised[0]));

@@ -82,6 +82,15 @@ struct SimilarityDenoisingParameters {
   std::size_t max_tile_points = 2000000;
   /// Width of a tile's halo in radii (>= 1). Measured in docs/denoising.md ("Tiles").
   float tile_margin = 3.f;
+  /// Dense scans under heavy noise. The automatic radius holds a neighbour count, so it
+  /// shrinks as the scan gets denser while the noise does not. With the automatic radius and
+  /// `adapt_to_noise`, when q = noise / base radius exceeds this ratio, the cloud is split into
+  /// J interleaved subsets (a point's subset is drawn from a hash of its position), J the
+  /// smallest count found whose first subset measures q at most this ratio; each subset, a
+  /// sparser sampling of the same surface, is denoised on its own by the whole rule (its own
+  /// noise measurement, radius, passes and tiles). 0: never. In [0, 1e3]. Measured default,
+  /// docs/denoising.md "Dense scans: interleaved subsets".
+  float max_noise_ratio = 1.f;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.
   bool use_viewpoint = false;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();
@@ -107,6 +116,12 @@ struct SimilarityDenoisingReport {
   /// included. With tiles, sigma and mean_neighbours are means over the tiles weighted by
   /// their core points; moved and isolated count each core point as one piece would.
   std::size_t tiles = 1, largest_tile = 0;
+  /// Interleaved subsets the cloud was denoised in (1: none; see max_noise_ratio), and the q
+  /// measured on the whole cloud that made the split (0 when not measured). With subsets,
+  /// radius, noise_sigma, radius_scale, sigma and mean_neighbours are means over the subsets
+  /// weighted by their point counts, passes the most any subset ran, tiles their sum.
+  std::size_t subsets = 1;
+  float split_noise_ratio = 0.f;
 };
 
 /// The noise-adaptive rule (measured on the engraved plane and the rs1 scan at 0.05% to 0.5%
@@ -174,6 +189,9 @@ class SimilarityDenoising : public pcl::Filter<PointT>, public ThreadCountOption
   /// Tiles of at most n points for clouds larger than that (0: one piece); see
   /// SimilarityDenoisingParameters::max_tile_points.
   void setMaxTilePoints(std::size_t n);
+  /// Interleaved subsets above this noise ratio (0: never); see
+  /// SimilarityDenoisingParameters::max_noise_ratio.
+  void setMaxNoiseRatio(float q);
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   /// What the last run chose (radius, sigma) and how many points it could not move.
   const SimilarityDenoisingReport& getReport() const { return report_; }

@@ -158,6 +158,9 @@ struct QuadricSuperResolutionReport {
   /// denoiser's own count from q = 0.75 (noise / the denoiser's base radius; dense scans
   /// under heavy noise).
   int denoise_passes = 0;
+  /// Interleaved subsets that first denoising cut the first scan into (1: none; 0: not
+  /// denoised; SimilarityDenoisingParameters::max_noise_ratio).
+  std::size_t denoise_subsets = 0;
   /// Noise measured over balls of 2R / over balls of R, first scan (0: not measured; it is
   /// measured with denoise_input Auto when the noise is between 0.5% and 5% of R). Near 1 on
   /// a surface smooth at the patch scale; well above 1 where relief finer than 2R shows.

@@ -32,6 +32,9 @@ template <typename PointT> void SimilarityDenoising<PointT>::setSimilarPatches(i
 template <typename PointT> void SimilarityDenoising<PointT>::setMaxTilePoints(std::size_t n) {
   auto p = params_; p.max_tile_points = n; setParameters(p);
 }
+template <typename PointT> void SimilarityDenoising<PointT>::setMaxNoiseRatio(float q) {
+  auto p = params_; p.max_noise_ratio = q; setParameters(p);
+}
 
 template <typename PointT>
 void SimilarityDenoising<PointT>::applyFilter(PointCloud& output) {

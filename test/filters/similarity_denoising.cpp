@@ -315,6 +315,13 @@ TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseAreDenoisedAsInterleavedSubse
   for (std::size_t i = 0; i < movable.size(); i += 2) movable[i] = 1;
   const Positions half = paps::denoiseBySimilarity(s.noisy, {}, nullptr, movable);
   for (std::size_t i = 1; i < half.size(); i += 2) ASSERT_EQ(half[i], s.noisy[i]) << i;
+  // The smallest ratio allowed asks for more subsets than there are points: the split stops
+  // at subsets of 10,000 points (4 here) instead of overflowing the count.
+  SimilarityDenoisingParameters tiny;
+  tiny.max_noise_ratio = 1e-30f;
+  SimilarityDenoisingReport r;
+  paps::denoiseBySimilarity(s.noisy, tiny, &r);
+  EXPECT_EQ(r.subsets, 4u);
 }
 
 TEST(SimilarityDenoising, GivenNoiseIsUsedNotMeasured) {

@@ -665,10 +665,13 @@ std::size_t interleavedSubsetCount(const Positions& points, const SimilarityDeno
   *q_out = q;
   if (!(q > ratio)) return 1;
   const auto grown = [&](std::size_t count, float measured) {
-    const double wanted = std::ceil(static_cast<double>(count) * (measured / ratio) * (measured / ratio));
+    const double r = static_cast<double>(measured) / ratio;
+    const double wanted = std::ceil(static_cast<double>(count) * r * r);
     return std::max(count + 1, static_cast<std::size_t>(std::min(wanted, 1e9)));
   };
-  std::size_t count = std::max<std::size_t>(2, static_cast<std::size_t>(std::ceil((q / ratio) * (q / ratio))));
+  // In double, capped: a tiny ratio must not overflow the count (the subset floor ends it).
+  const double start = std::ceil(static_cast<double>(q) / ratio * (static_cast<double>(q) / ratio));
+  std::size_t count = std::max<std::size_t>(2, static_cast<std::size_t>(std::min(start, 1e9)));
   for (int m = 0; m < kSubsetMeasurements; ++m) {
     if (finite / count < kMinSubsetPoints) return std::max<std::size_t>(1, finite / kMinSubsetPoints);
     Positions first;  // the first subset, in spatial order

@@ -85,11 +85,13 @@ struct SimilarityDenoisingParameters {
   /// Dense scans under heavy noise. The automatic radius holds a neighbour count, so it
   /// shrinks as the scan gets denser while the noise does not. With the automatic radius and
   /// `adapt_to_noise`, when q = noise / base radius exceeds this ratio, the cloud is split into
-  /// J interleaved subsets (a point's subset is drawn from a hash of its position), J the
-  /// smallest count found whose first subset measures q at most this ratio; each subset, a
-  /// sparser sampling of the same surface, is denoised on its own by the whole rule (its own
-  /// noise measurement, radius, passes and tiles). 0: never. In [0, 1e3]. Measured default,
-  /// docs/denoising.md "Dense scans: interleaved subsets".
+  /// J interleaved subsets (a point's subset is drawn from a hash of its position), J grown
+  /// from ceil(q^2 / ratio^2) until the first subset measures q at most this ratio; each
+  /// subset, a sparser sampling of the same surface, is denoised on its own by the whole rule
+  /// (its own noise measurement, radius, passes and tiles; its neighbours and similar patches
+  /// are its own points). Only clouds of at least 20,000 finite points split, into subsets of
+  /// at least 10,000. 0: never. In [0, 1e3]. Measured default, docs/denoising.md "Dense
+  /// scans: interleaved subsets".
   float max_noise_ratio = 1.f;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.
   bool use_viewpoint = false;
@@ -117,7 +119,7 @@ struct SimilarityDenoisingReport {
   /// their core points; moved and isolated count each core point as one piece would.
   std::size_t tiles = 1, largest_tile = 0;
   /// Interleaved subsets the cloud was denoised in (1: none; see max_noise_ratio), and the q
-  /// measured on the whole cloud that made the split (0 when not measured). With subsets,
+  /// measured on the whole cloud to decide (0 when not measured). With subsets,
   /// radius, noise_sigma, radius_scale, sigma and mean_neighbours are means over the subsets
   /// weighted by their point counts, passes the most any subset ran, tiles their sum.
   std::size_t subsets = 1;

@@ -234,7 +234,8 @@ constexpr float kDenoiseOnePassBelow = 0.75f;
 
 // A scan denoised before its patches are built. The first scan's noise is the given or measured
 // one (`noise`); the denoiser measures the other scans'. In tiles of max_tile_points, as the
-// denoiser cuts them. `passes` (optional) receives the pass count run.
+// denoiser cuts them. `report` (optional) receives the pass and subset counts run
+// (denoise_passes, denoise_subsets).
 Positions denoisedFirst(const Positions& scan, bool first, const QuadricSuperResolutionParameters& params, float noise,
                         const ProgressCallback& progress, QuadricSuperResolutionReport* report = nullptr) {
   SimilarityDenoisingParameters dp;

@@ -238,7 +238,8 @@ TEST(Tiling, EdgeCasesAndErrors) {
 }  // namespace
 
 // pointsAroundTile: the finite points of another scan inside the tile's core box grown by the
-// margin, in increasing order; tileProgress prefixes the stage names and passes the answer on.
+// margin, in increasing order; tileProgress (partProgress) prefixes the stage names and passes
+// the answer on.
 TEST(Tiling, PointsAroundATileAndItsProgress) {
   const Positions cloud = randomSlab(2000, 3);
   const std::vector<paps::Tile> tiles = paps::splitIntoTiles(cloud, 600, 0.1f);
@@ -266,4 +267,9 @@ TEST(Tiling, PointsAroundATileAndItsProgress) {
   EXPECT_FALSE(sub("fits", 1.f));
   EXPECT_EQ(names.front(), "tile 2/4: fits");
   EXPECT_FALSE(static_cast<bool>(paps::tileProgress({}, 0, 4)));
+  // The same prefix for any kind of part (the denoiser's interleaved subsets).
+  names.clear();
+  EXPECT_TRUE(paps::partProgress(cb, "subset", 2, 3)("noise", 0.f));
+  EXPECT_EQ(names.front(), "subset 3/3: noise");
+  EXPECT_FALSE(static_cast<bool>(paps::partProgress({}, "subset", 0, 3)));
 }

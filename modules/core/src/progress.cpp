@@ -36,4 +36,11 @@ void ProgressReporter::finish() {
   if (!(*cb_)(stage_, 1.f)) cancelled_ = true;
 }
 
+ProgressCallback partProgress(const ProgressCallback& progress, const std::string& part, std::size_t index,
+                              std::size_t count) {
+  if (!progress) return {};
+  const std::string prefix = part + " " + std::to_string(index + 1) + "/" + std::to_string(count) + ": ";
+  return [progress, prefix](const std::string& name, float f) { return progress(prefix + name, f); };
+}
+
 }  // namespace paps

@@ -128,9 +128,7 @@ std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, cons
 }
 
 ProgressCallback tileProgress(const ProgressCallback& progress, std::size_t tile, std::size_t tiles) {
-  if (!progress) return {};
-  const std::string prefix = "tile " + std::to_string(tile + 1) + "/" + std::to_string(tiles) + ": ";
-  return [progress, prefix](const std::string& name, float f) { return progress(prefix + name, f); };
+  return partProgress(progress, "tile", tile, tiles);
 }
 
 Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8_t>& movable,

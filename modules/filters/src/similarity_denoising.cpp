@@ -498,43 +498,63 @@ int noiseAdaptedPasses(float q) {
 }
 
 namespace {
-// noiseResolvedParameters, handing over the kd-tree it built (null when it built none).
-SimilarityDenoisingParameters resolveNoise(const Positions& points, const SimilarityDenoisingParameters& params,
-                                           SimilarityDenoisingReport* report, std::unique_ptr<SpatialIndex>* index_out,
-                                           const ProgressCallback& progress = {}) {
+// The choices read from the whole cloud: the parameters to run with (radius, passes and weight
+// resolved from the noise, adapt_to_noise off), the report fields of the choice (noise_sigma,
+// noise_estimated, radius_scale), and the kd-tree built on the points to make it (null when
+// none was built), which the first pass reuses.
+struct NoiseChoice {
+  SimilarityDenoisingParameters run;
+  SimilarityDenoisingReport report;
+  std::unique_ptr<SpatialIndex> index;
+};
+
+// noiseResolvedParameters, keeping the kd-tree it built.
+NoiseChoice resolveNoise(const Positions& points, const SimilarityDenoisingParameters& params,
+                         const ProgressCallback& progress = {}) {
   params.validate();
-  if (params.radius > 0 || !params.adapt_to_noise || countFinite(points) < 10) return params;
+  NoiseChoice choice;
+  choice.run = params;
+  if (params.radius > 0 || !params.adapt_to_noise || countFinite(points) < 10) return choice;
   ProgressReporter rep(progress, "noise", 1);
-  auto index = std::make_unique<SpatialIndex>(points);
-  const float r0 = radiusForNeighbourCount(points, *index, params.target_neighbours);
+  choice.index = std::make_unique<SpatialIndex>(points);
+  const float r0 = radiusForNeighbourCount(points, *choice.index, params.target_neighbours);
   float noise = params.noise_sigma;
   bool estimated = false;
   if (noise == 0) {
     try {
-      noise = estimateNoiseLevel(points, *index, r0).sigma;
+      noise = estimateNoiseLevel(points, *choice.index, r0).sigma;
       estimated = true;
     } catch (const InvalidInput&) {
       noise = 0;  // no ball holds enough points for a fit: nothing to adapt to
     }
   }
-  SimilarityDenoisingParameters run = noiseAdaptedParameters(params, r0, noise);
-  run.adapt_to_noise = false;
-  if (report) {
-    report->noise_sigma = noise;
-    report->noise_estimated = estimated;
-    report->radius_scale = run.radius / r0;
-  }
-  if (index_out) *index_out = std::move(index);
+  choice.run = noiseAdaptedParameters(params, r0, noise);
+  choice.run.adapt_to_noise = false;
+  choice.report.noise_sigma = noise;
+  choice.report.noise_estimated = estimated;
+  choice.report.radius_scale = choice.run.radius / r0;
   rep.finish();
   rep.throwIfCancelled();
-  return run;
+  return choice;
+}
+
+// q of the noise rule (noise / base radius) of a choice; 0 where the rule did not apply.
+float noiseRatioOf(const NoiseChoice& choice) {
+  if (!(choice.run.radius > 0) || !(choice.report.radius_scale > 0)) return 0.f;
+  return choice.report.noise_sigma / (choice.run.radius / choice.report.radius_scale);
 }
 }  // namespace
 
 SimilarityDenoisingParameters noiseResolvedParameters(const Positions& points,
                                                       const SimilarityDenoisingParameters& params,
                                                       SimilarityDenoisingReport* report) {
-  return resolveNoise(points, params, report, nullptr);
+  NoiseChoice choice = resolveNoise(points, params);
+  if (report) {
+    report->noise_sigma = choice.report.noise_sigma;
+    report->noise_estimated = choice.report.noise_estimated;
+    report->radius_scale = choice.report.radius_scale;
+  }
+  return choice.run;
 }
 
 namespace {
@@ -548,12 +568,12 @@ std::vector<std::uint8_t> halvesOf(const Positions& points) {
   return side;
 }
 
-Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisingParameters& params,
-                                SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
-                                const ProgressCallback& progress, std::vector<std::uint8_t>* status = nullptr) {
-  SimilarityDenoisingReport choice;
-  std::unique_ptr<SpatialIndex> index;  // built on `points` by the noise measurement, reused by pass 1
-  const SimilarityDenoisingParameters run = resolveNoise(points, params, &choice, &index, progress);
+// The one-piece run on points in spatial order, with the choice made on those very points (its
+// kd-tree, if any, serves the first pass).
+Positions denoiseInSpatialOrder(const Positions& points, NoiseChoice choice, SimilarityDenoisingReport* report_out,
+                                const std::vector<std::uint8_t>& movable, const ProgressCallback& progress,
+                                std::vector<std::uint8_t>* status = nullptr) {
+  const SimilarityDenoisingParameters& run = choice.run;
   Positions cur = points;
   const std::vector<std::uint8_t> side = halvesOf(points);
   SimilarityDenoisingReport report;
@@ -562,11 +582,11 @@ Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisi
     SimilarityDenoisingParameters p = run;
     if (pass > 0) p.radius = report.radius;
     if (pass > 0 && run.guided_passes) cur = denoiseOnce(points, side, p, &report, movable, progress, &cur, nullptr, status);
-    else cur = denoiseOnce(cur, side, p, &report, movable, progress, nullptr, pass == 0 ? std::move(index) : nullptr, status);
+    else cur = denoiseOnce(cur, side, p, &report, movable, progress, nullptr, pass == 0 ? std::move(choice.index) : nullptr, status);
   }
-  report.noise_sigma = choice.noise_sigma;
-  report.noise_estimated = choice.noise_estimated;
-  report.radius_scale = choice.radius_scale;
+  report.noise_sigma = choice.report.noise_sigma;
+  report.noise_estimated = choice.report.noise_estimated;
+  report.radius_scale = choice.report.radius_scale;
   report.passes = run.passes;
   report.guided_passes = run.guided_passes;
   report.own_weight = run.own_weight;
@@ -576,26 +596,18 @@ Positions denoiseInSpatialOrder(const Positions& points, const SimilarityDenoisi
 }  // namespace
 
 namespace {
-// The tiled run (SimilarityDenoisingParameters::max_tile_points): every choice that reads the
-// whole cloud (noise, radius, passes) is made once, then each tile runs with it.
-Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParameters& params,
-                         SimilarityDenoisingReport* report_out, const std::vector<std::uint8_t>& movable,
-                         const ProgressCallback& progress) {
+// The tiled run (SimilarityDenoisingParameters::max_tile_points) of `run`, the parameters
+// resolved once on the whole cloud (its radius set), whose choice `choice` reports: each tile
+// runs with them.
+Positions denoiseInTiles(const Positions& points, SimilarityDenoisingParameters run, std::size_t max_tile_points,
+                         const SimilarityDenoisingReport& choice, SimilarityDenoisingReport* report_out,
+                         const std::vector<std::uint8_t>& movable, const ProgressCallback& progress) {
   SimilarityDenoisingReport report;
-  SimilarityDenoisingParameters run;
-  {
-    // On the points in spatial order, as the one-piece run measures them: the samples of the
-    // noise and radius are drawn along the array, and so do not depend on the input order.
-    const Positions sorted = gathered(points, spatialOrderAll(points));
-    std::unique_ptr<SpatialIndex> index;
-    run = resolveNoise(sorted, params, &report, &index, progress);
-    if (!(run.radius > 0)) {
-      if (!index) index = std::make_unique<SpatialIndex>(sorted);
-      run.radius = radiusForNeighbourCount(sorted, *index, run.target_neighbours);
-    }
-  }
+  report.noise_sigma = choice.noise_sigma;
+  report.noise_estimated = choice.noise_estimated;
+  report.radius_scale = choice.radius_scale;
   run.max_tile_points = 0;
-  const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, run.tile_margin * run.radius);
+  const std::vector<Tile> tiles = splitIntoTiles(points, max_tile_points, run.tile_margin * run.radius);
   double sigma = 0, neighbours = 0;
   std::size_t weighed = 0;  // core points of the tiles that ran the filter
   report.tiles = tiles.size();
@@ -603,7 +615,7 @@ Positions denoiseInTiles(const Positions& points, const SimilarityDenoisingParam
   const SortedTileStage stage = [&](const Positions& p, const std::vector<std::uint8_t>& m,
                                     std::vector<std::uint8_t>& st, std::size_t t, const ProgressCallback& sub) {
     SimilarityDenoisingReport r;
-    const Positions o = denoiseInSpatialOrder(p, run, &r, m, sub, &st);
+    const Positions o = denoiseInSpatialOrder(p, NoiseChoice{run, {}, nullptr}, &r, m, sub, &st);
     const std::size_t core = tiles[t].core.size();
     sigma += static_cast<double>(core) * r.sigma;
     neighbours += static_cast<double>(core) * r.mean_neighbours;
@@ -645,25 +657,23 @@ std::size_t subsetOf(const Eigen::Vector3f& p, std::size_t count) {
 // q of the noise rule (noise / base radius) on `sorted` (points in spatial order, as the runs
 // measure them); 0 where the rule does not apply.
 float measuredNoiseRatio(const Positions& sorted, const SimilarityDenoisingParameters& params) {
-  SimilarityDenoisingReport choice;
-  const SimilarityDenoisingParameters run = resolveNoise(sorted, params, &choice, nullptr);
-  if (!(run.radius > 0) || !(choice.radius_scale > 0)) return 0.f;
-  return choice.noise_sigma / (run.radius / choice.radius_scale);
+  return noiseRatioOf(resolveNoise(sorted, params));
 }
 
-// The number of interleaved subsets for `points` (1: no split). The noise measured at a base
-// radius smaller than the noise reads low (rs1 at 0.25% noise: 1.03 at 1.67M points, 0.72 at
-// 5M), so q grows more slowly than the square root of the density: J starts from that law and
-// grows until the first subset measures q at most the ratio.
-std::size_t interleavedSubsetCount(const Positions& points, const SimilarityDenoisingParameters& params, float* q_out) {
-  *q_out = 0.f;
+// Whether a cloud of `finite` finite points may be cut into interleaved subsets.
+bool splitRuleApplies(const SimilarityDenoisingParameters& params, std::size_t finite) {
+  return params.max_noise_ratio > 0 && !(params.radius > 0) && params.adapt_to_noise && finite >= 2 * kMinSubsetPoints;
+}
+
+// The number of interleaved subsets for `points` (1: no split), whose whole cloud measured q
+// (points in `order`, spatialOrderAll). The noise measured at a base radius smaller than the
+// noise reads low (rs1 at 0.25% noise: 1.03 at 1.67M points, 0.72 at 5M), so q grows more
+// slowly than the square root of the density: J starts from that law and grows until the
+// first subset measures q at most the ratio.
+std::size_t interleavedSubsetCount(const Positions& points, const std::vector<int>& order, std::size_t finite,
+                                   const SimilarityDenoisingParameters& params, float q) {
   const float ratio = params.max_noise_ratio;
-  const std::size_t finite = countFinite(points);
-  if (!(ratio > 0) || params.radius > 0 || !params.adapt_to_noise || finite < 2 * kMinSubsetPoints) return 1;
-  const std::vector<int> order = spatialOrderAll(points);
-  const float q = measuredNoiseRatio(gathered(points, order), params);
-  *q_out = q;
-  if (!(q > ratio)) return 1;
+  if (!splitRuleApplies(params, finite) || !(q > ratio)) return 1;
   const auto grown = [&](std::size_t count, float measured) {
     const double r = static_cast<double>(measured) / ratio;
     const double wanted = std::ceil(static_cast<double>(count) * r * r);
@@ -709,11 +719,7 @@ Positions denoiseInInterleavedSubsets(const Positions& points, const SimilarityD
       sub[k] = points[idx[k]];
       if (!movable.empty()) sub_movable[k] = movable[idx[k]];
     }
-    ProgressCallback sub_progress;
-    if (progress) {
-      const std::string prefix = "subset " + std::to_string(j + 1) + "/" + std::to_string(count) + ": ";
-      sub_progress = [&progress, prefix](const std::string& name, float f) { return progress(prefix + name, f); };
-    }
+    const ProgressCallback sub_progress = partProgress(progress, "subset", j, count);
     SimilarityDenoisingReport r;
     const Positions o = denoiseBySimilarity(sub, sub_params, &r, sub_movable, sub_progress);
     for (std::size_t k = 0; k < idx.size(); ++k) out[idx[k]] = o[k];
@@ -755,20 +761,39 @@ Positions denoiseBySimilarity(const Positions& points, const SimilarityDenoising
   checkMovableInput(points, movable);
   if (leaveOnePositionAsItIs(points, report_out)) return points;
   requireRadiusWithinExtent("radius", params.radius, points);
+  // Every choice that reads the whole cloud (noise, radius, passes, the split) is made once, on
+  // the points in spatial order: the samples of the noise and radius are drawn along the array,
+  // and so do not depend on the input order. Every stage also loops over neighbourhoods, and on
+  // a shuffled cloud those loops wait on memory (1M points: 60 s in input order, 33 s in Z
+  // order): the filter runs in Z order, non-finite points last.
+  const std::size_t finite = countFinite(points);
   float q = 0.f;
-  const std::size_t subsets = interleavedSubsetCount(points, params, &q);
-  if (subsets > 1) return denoiseInInterleavedSubsets(points, params, subsets, q, report_out, movable, progress);
+  std::size_t subsets = 1;
   Positions out;
-  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points) {
-    out = denoiseInTiles(points, params, report_out, movable, progress);
-  } else {
-    // Every stage loops over neighbourhoods; on a shuffled cloud those loops wait on memory
-    // (1M points: 60 s in input order, 33 s in Z order). The filter runs in Z order, non-finite
-    // points last, so its output no longer depends on the order of the input either.
-    out = runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
-      return denoiseInSpatialOrder(p, params, report_out, m, progress);
-    });
+  {
+    const std::vector<int> order = spatialOrderAll(points);
+    Positions sorted = gathered(points, order);
+    NoiseChoice choice = resolveNoise(sorted, params, progress);
+    if (splitRuleApplies(params, finite)) q = noiseRatioOf(choice);
+    subsets = interleavedSubsetCount(points, order, finite, params, q);
+    if (subsets == 1 && params.max_tile_points > 0 && finite > params.max_tile_points) {
+      SimilarityDenoisingParameters run = choice.run;
+      if (!(run.radius > 0)) {
+        if (!choice.index) choice.index = std::make_unique<SpatialIndex>(sorted);
+        run.radius = radiusForNeighbourCount(sorted, *choice.index, run.target_neighbours);
+      }
+      // The tiles are there to bound the memory: the whole cloud's copy and tree go first.
+      choice.index.reset();
+      Positions().swap(sorted);
+      out = denoiseInTiles(points, run, params.max_tile_points, choice.report, report_out, movable, progress);
+    } else if (subsets == 1) {
+      const Positions sorted_out = denoiseInSpatialOrder(sorted, std::move(choice), report_out,
+                                                         movable.empty() ? movable : gathered(movable, order), progress);
+      out.resize(points.size());
+      for (std::size_t k = 0; k < order.size(); ++k) out[order[k]] = sorted_out[k];
+    }
   }
+  if (subsets > 1) return denoiseInInterleavedSubsets(points, params, subsets, q, report_out, movable, progress);
   if (report_out) report_out->split_noise_ratio = q;
   return out;
 }

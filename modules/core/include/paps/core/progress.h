@@ -13,6 +13,11 @@ namespace paps {
 /// cancel: the running algorithm then throws paps::Cancelled.
 using ProgressCallback = std::function<bool(const std::string& stage, float fraction)>;
 
+/// `progress` with "<part> <index + 1>/<count>: " before every stage name (e.g. "tile 2/5: "),
+/// for a run cut into parts; empty when `progress` is.
+ProgressCallback partProgress(const ProgressCallback& progress, const std::string& part, std::size_t index,
+                              std::size_t count);
+
 /// Thread-safe helper that calls a ProgressCallback about a hundred times per
 /// stage, from whichever thread crosses the next step. Safe to call from OpenMP loops;
 /// the call itself is serialised.

@@ -1,6 +1,7 @@
 // Tests of paps/core/noise_estimation.h: the noise of a plane and of a sphere with known
 // Gaussian noise is recovered, curvature is not taken for noise, a noise slab thicker than the
-// ball is handled by growing the ball, errors, determinism across thread counts.
+// ball is handled by growing the ball (on a thinned cloud where the ball holds more points than
+// a fit takes), errors, determinism across thread counts.
 #include <cmath>
 #include <limits>
 
@@ -78,6 +79,18 @@ TEST(EstimateNoiseLevel, NoiseThickerThanTheBallGrowsTheBall) {
   const paps::NoiseEstimate e = paps::estimateNoiseLevel(p, index, r);
   EXPECT_GT(e.radius, 5 * 0.006f);
   EXPECT_NEAR(e.sigma, 0.006f, 0.1f * 0.006f);
+}
+
+TEST(EstimateNoiseLevel, DenseCloudsUnderThickNoiseReadTheSameNoise) {
+  // The previous test's noise on 20x the points: the grown ball (about 6 sigma) holds some
+  // 4,500 points, more than a fit takes. Fitting on its 1,500 nearest (a ball of 0.6x the
+  // radius, about 3.5 sigma, whose cap cuts the slab) read 0.0054 for 0.006; an even
+  // thinning of the cloud keeps the ball's width.
+  const Positions p = noisyPlane(1000000, 0.006f, 9);
+  const paps::SpatialIndex index(p);
+  const paps::NoiseEstimate e = paps::estimateNoiseLevel(p, index, 0.01f);
+  EXPECT_GT(e.radius, 5 * 0.006f);
+  EXPECT_NEAR(e.sigma, 0.006f, 0.05f * 0.006f);
 }
 
 TEST(EstimateNoiseLevel, SameResultWithAnyThreadCount) {

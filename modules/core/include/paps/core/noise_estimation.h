@@ -26,7 +26,10 @@ struct NoiseEstimate {
 /// its PCA frame; sigma^2 is the median of the unbiased residual variances RSS / (n - 6),
 /// corrected for the median of a chi-square. When sigma comes out above radius / 5 the PCA
 /// plane is not trustworthy (the noise slab is as thick as the ball is wide) and the radius
-/// grows to 5 sigma x 1.25, at most 4 times. Deterministic. Throws InvalidParameter for a bad
+/// grows to 5 sigma x 1.25, at most 4 times. Where most balls hold more than 1,500 points the
+/// fits run on an even thinning of the cloud (by position hash) whose balls hold about 800,
+/// so that a dense cloud reads the noise a sparse one does (the 1,500 nearest would be a
+/// smaller ball, which cuts a thick noise slab). Deterministic. Throws InvalidParameter for a bad
 /// radius or sample count, InvalidInput when no ball holds the 10 points a fit needs.
 NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& index, float radius,
                                  int samples = 2000);

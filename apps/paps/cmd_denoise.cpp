@@ -48,7 +48,7 @@ const char* kDenoiseUsage =
     "  --max-noise-ratio Q    dense scans under heavy noise: when the noise exceeds Q x the base\n"
     "                         radius, the cloud is denoised as interleaved subsets, each a\n"
     "                         sparser sampling of the surface with noise at most Q x its own base\n"
-    "                         radius, each by the whole noise rule (default 1; 0: never; off with\n"
+    "                         radius, each by the whole noise rule (default 1.15; 0: never; off with\n"
     "                         --radius, --no-adapt, --passes, --refilter or --own-weight)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "LPF options (--method lpf; --radius is the pattern radius, --neighbours defaults to 100,\n"

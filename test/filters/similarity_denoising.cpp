@@ -281,13 +281,15 @@ TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseGetMorePasses) {
   const float q = r.noise_sigma * r.radius_scale / r.radius;
   std::printf("engraved plane 40K, noise 2.4%%: q %.2f, %d passes %.4g, two passes %.4g\n", q, r.passes, by_default,
               with_two);
-  EXPECT_GE(q, 0.95f);  // measured 1.09: three passes
+  EXPECT_GE(q, 0.95f);  // measured 1.18 (1.09 before the noise estimate thinned dense balls): three passes
   EXPECT_GE(r.passes, 3);
   EXPECT_LT(by_default, 0.93 * with_two);  // measured 0.86 (7.60e-3 against 8.83e-3)
 }
 
+// Heavier noise (q above the default max_noise_ratio, 1.15): the cloud is denoised as
+// interleaved subsets, closer to the surface than in one piece, whatever the input order.
 TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseAreDenoisedAsInterleavedSubsets) {
-  const NoisyShape s = engravedPlane(40000, 0.024f, 200);
+  const NoisyShape s = engravedPlane(40000, 0.03f, 200);
   const paps::PointToMeshDistance truth(s.mesh);
   SimilarityDenoisingReport split, one;
   const Positions out = paps::denoiseBySimilarity(s.noisy, {}, &split);
@@ -295,17 +297,20 @@ TEST(SimilarityDenoising, DenseScansUnderHeavyNoiseAreDenoisedAsInterleavedSubse
   SimilarityDenoisingParameters whole;
   whole.max_noise_ratio = 0;
   const double in_one = paps::pointToMeshError(paps::denoiseBySimilarity(s.noisy, whole, &one), truth).rmse;
-  std::printf("engraved plane 40K, noise 2.4%%: q %.2f, %zu subsets (q %.2f each, %d passes) %.4g; whole cloud "
+  std::printf("engraved plane 40K, noise 3%%: q %.2f, %zu subsets (q %.2f each, %d passes) %.4g; whole cloud "
               "(%d passes) %.4g; input %.4g\n", split.split_noise_ratio, split.subsets,
               split.noise_sigma * split.radius_scale / split.radius, split.passes, by_default, one.passes, in_one,
               paps::pointToMeshError(s.noisy, truth).rmse);
-  EXPECT_GT(split.split_noise_ratio, 1.f);
+  // Measured: q 1.37 on the whole cloud; 2 subsets (q 1.07 each, 3 passes) 8.595e-3 against
+  // 1.114e-2 for the whole cloud (4 passes).
+  EXPECT_GT(split.split_noise_ratio, SimilarityDenoisingParameters{}.max_noise_ratio);
   EXPECT_GE(split.subsets, 2u);
   EXPECT_EQ(one.subsets, 1u);
   EXPECT_EQ(split.moved + split.isolated, s.noisy.size());
   EXPECT_LT(split.isolated, s.noisy.size() / 1000);
-  EXPECT_LE(split.noise_sigma * split.radius_scale / split.radius, 1.05f);  // each subset's q, about the ratio
-  EXPECT_LT(by_default, 0.95 * in_one);
+  // each subset's q, about the ratio at most
+  EXPECT_LE(split.noise_sigma * split.radius_scale / split.radius, 1.05f * SimilarityDenoisingParameters{}.max_noise_ratio);
+  EXPECT_LT(by_default, 0.9 * in_one);
   // The subsets come from the positions: the reversed cloud gives the same output, reversed.
   Positions reversed(s.noisy.rbegin(), s.noisy.rend());
   const Positions back = paps::denoiseBySimilarity(reversed, {});

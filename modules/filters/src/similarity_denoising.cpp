@@ -666,10 +666,9 @@ bool splitRuleApplies(const SimilarityDenoisingParameters& params, std::size_t f
 }
 
 // The number of interleaved subsets for `points` (1: no split), whose whole cloud measured q
-// (points in `order`, spatialOrderAll). The noise measured at a base radius smaller than the
-// noise reads low (rs1 at 0.25% noise: 1.03 at 1.67M points, 0.72 at 5M), so q grows more
-// slowly than the square root of the density: J starts from that law and grows until the
-// first subset measures q at most the ratio.
+// (points in `order`, spatialOrderAll). q grows as the square root of the density: J starts
+// from that law and grows until the first subset measures q at most the ratio (the law is
+// not exact: the estimate also reads some relief as noise).
 std::size_t interleavedSubsetCount(const Positions& points, const std::vector<int>& order, std::size_t finite,
                                    const SimilarityDenoisingParameters& params, float q) {
   const float ratio = params.max_noise_ratio;

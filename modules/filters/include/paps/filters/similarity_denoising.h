@@ -90,9 +90,10 @@ struct SimilarityDenoisingParameters {
   /// subset, a sparser sampling of the same surface, is denoised on its own by the whole rule
   /// (its own noise measurement, radius, passes and tiles; its neighbours and similar patches
   /// are its own points). Only clouds of at least 20,000 finite points split, into subsets of
-  /// at least 10,000. 0: never. In [0, 1e3]. Measured default, docs/denoising.md "Dense
-  /// scans: interleaved subsets".
-  float max_noise_ratio = 1.f;
+  /// at least 10,000. 0: never. In [0, 1e3]. Measured default (rs1 at 1M / 0.5% and 5M /
+  /// 0.25%), docs/denoising.md "Dense scans: interleaved subsets" and "The noise of dense
+  /// scans".
+  float max_noise_ratio = 1.15f;
   /// Orient normals towards this point when `use_viewpoint`; otherwise by propagation.
   bool use_viewpoint = false;
   Eigen::Vector3f viewpoint = Eigen::Vector3f::Zero();

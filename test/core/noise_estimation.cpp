@@ -119,6 +119,16 @@ TEST(EstimateNoiseLevel, BadInputGivesClearErrors) {
   few.push_back(Eigen::Vector3f::Constant(std::numeric_limits<float>::quiet_NaN()));
   const paps::SpatialIndex few_index(few);
   EXPECT_THROW(paps::estimateNoiseLevel(few, few_index, 1.f), paps::InvalidInput);
+  // A pile of near-copies fills every ball within a hair's width: the thinning it asks for is
+  // capped (no overflow), and the estimate still comes out.
+  paps::Random rng(15);
+  Positions pile = noisyPlane(500, 0.f, 17);
+  for (int i = 0; i < 3000; ++i)
+    pile.emplace_back(0.5f + 1e-7f * rng.gaussian(), 0.5f + 1e-7f * rng.gaussian(), 1e-7f * rng.gaussian());
+  const paps::SpatialIndex pile_index(pile);
+  const paps::NoiseEstimate e = paps::estimateNoiseLevel(pile, pile_index, 0.2f);
+  EXPECT_TRUE(std::isfinite(e.sigma));
+  EXPECT_GE(e.sigma, 0.f);
 }
 
 }  // namespace

@@ -96,7 +96,7 @@ NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& in
 #pragma omp for schedule(dynamic, 16)
       for (std::int64_t s = 0; s < mm; ++s) {
         const int count = tree.radiusSearch(points[sample[s]], est.radius, idx, d2, kMaxBallPoints);
-        if (count == kMaxBallPoints) reach[s] = d2.back();
+        if (count == kMaxBallPoints) reach[s] = *std::max_element(d2.begin(), d2.begin() + count);
         fits[s] = fitBall(cloud, idx, count);
       }
     }
@@ -108,8 +108,10 @@ NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& in
     if (2 * full.size() > m && thinnings < 4) {
       const std::size_t mid = full.size() / 2;
       std::nth_element(full.begin(), full.begin() + mid, full.end());
-      const double held = kMaxBallPoints * static_cast<double>(est.radius) * est.radius / std::max(full[mid], 1e-30f);
-      const std::size_t one_in = keep_one_in * static_cast<std::size_t>(std::ceil(held / kThinnedBallPoints));
+      const double held = kMaxBallPoints * static_cast<double>(est.radius) * est.radius / full[mid];
+      // Capped: near-copies (a reach of almost nothing) must not overflow the count.
+      const double factor = std::min(std::ceil(held / kThinnedBallPoints), static_cast<double>(points.size()));
+      const std::size_t one_in = std::min(keep_one_in * static_cast<std::size_t>(factor), points.size());
       if (one_in > keep_one_in) {
         thinnedTo(one_in);
         ++thinnings;

@@ -249,8 +249,8 @@ Positions denoisedFirst(const Positions& scan, bool first, const QuadricSuperRes
   // the density while the noise stays): there one pass leaves too much for the aggregation
   // (rs1 2M points x2 at q 1.08: 0.365 from the surface after one pass, 0.227 after two,
   // where the denoiser alone gives 0.237; at q 0.71, 500K points, 0.2727 against 0.2719).
-  // From q = 1.15 the denoiser cuts the scan into interleaved subsets (max_noise_ratio): that
-  // choice is its own too.
+  // Above its max_noise_ratio the denoiser cuts the scan into interleaved subsets: that choice
+  // is its own too.
   SimilarityDenoisingReport choice;
   SimilarityDenoisingParameters one = noiseResolvedParameters(scan, dp, &choice);
   const float base_radius = choice.radius_scale > 0 ? one.radius / choice.radius_scale : 0.f;

@@ -65,6 +65,9 @@ const char* kCurvatureUsage =
     "  --orient M             normal orientation: input (input normals, default when present),\n"
     "                         propagate (default otherwise), or viewpoint (towards the sensor\n"
     "                         origin of a .pcd, VIEWPOINT; the origin when it has none)\n"
+    "  --tile-points N        fit a cloud of more distinct positions in tiles of at most N, one\n"
+    "                         at a time: the same outputs, the working memory of a tile\n"
+    "                         (default 2000000; 0: one piece whatever the size)\n"
     "  --quiet                no progress bar\n"
     "  --timings              print the wall time of each stage\n";
 
@@ -86,6 +89,7 @@ const char* kEnhanceUsage =
     "                         order selection drops under noise), auto or select (paps curvature)\n"
     "  --max-motion F         motion clamp as a fraction of R_phi (default 0.5)\n"
     "  --orient M             input, propagate or viewpoint (as for paps curvature)\n"
+    "  --tile-points N        as for paps curvature (default 2000000)\n"
     "  --quiet, --timings\n"
     "  Normals are written to normal_x/y/z (added when IN has none); with --alpha0 they are\n"
     "  the corrected Wavejet normals of the enhanced surface (a second fit, on OUT).\n";
@@ -151,6 +155,7 @@ WavejetParameters wavejetParameters(const Arguments& a, const char* default_poli
   w.widening = a.has("fixed-radius") ? WavejetParameters::Widening::never : WavejetParameters::Widening::automatic;
   // The cap of narrowing (0: 4 x --neighbours).
   w.narrowed_neighbours = a.integer("max-neighbours", w.narrowed_neighbours);
+  w.max_tile_points = a.count("tile-points", w.max_tile_points);
   validateAsOptions(kWavejetOptions, [&] { w.validate(); });
   // A cap below the count every ball is widened to would be raised to it without a word.
   const int count = a.integer("neighbours", 50);
@@ -181,6 +186,13 @@ void printNeighbourhoodChoice(std::size_t duplicates, std::size_t widened, float
     std::printf("narrowed: none (no ball holds more than %d distinct positions)\n", narrow_to);
 }
 
+// One line on the tiles, when there were several.
+void printTiles(const WavejetReport& r) {
+  if (r.tiles > 1)
+    std::printf("in %zu tiles (the largest held %zu distinct positions with its halo; %zu halos grown for widened "
+                "balls)\n", r.tiles, r.largest_tile, r.grown_halos);
+}
+
 // One line on the order policy: what the pilot measured and what was chosen.
 void printOrderPolicy(const WavejetParameters& asked, const WavejetReport& r, int neighbours, float radius) {
   if (!r.noise_measured) {
@@ -208,7 +220,7 @@ int runCurvature(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "select-order", "fixed-radius"});
   if (a.has("help")) { std::fputs(kCurvatureUsage, stdout); return 0; }
   a.allowOnly({"radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle", "orient", "quiet",
-               "timings", "select-order", "fixed-radius", "max-neighbours", "order-policy"});
+               "timings", "select-order", "fixed-radius", "max-neighbours", "order-policy", "tile-points"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireCloudOutput();
   WavejetParameters params = wavejetParameters(a, "auto");
@@ -222,8 +234,9 @@ int runCurvature(int argc, char** argv) {
   const ProgressCallback progress = progressBar(a.has("quiet"), a.has("timings"));
   WavejetReport r;
   const auto t0 = std::chrono::steady_clock::now();
-  const auto res = estimateWavejets(p, radius, params, &r, nullptr, nullptr, have_hints ? &hints : nullptr,
-                                    progress, neighbours);
+  std::vector<WavejetResult> res = estimateWavejets(p, radius, params, &r, nullptr, nullptr,
+                                                   have_hints ? &hints : nullptr, progress, neighbours);
+  Normals().swap(hints);
   const double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   printOrderPolicy(params, r, neighbours, radius);
   const int used = neighbours;
@@ -237,6 +250,7 @@ int runCurvature(int argc, char** argv) {
                            wavejetWidenedNeighbours(run, used), r.narrowed, r.narrowed_radius_median,
                            wavejetNarrowedNeighbours(run, used),
                            params.widening == WavejetParameters::Widening::never || radius > 0);
+  printTiles(r);
   std::printf("fitted %zu points; order lowered at %zu; plane correction not converged at %zu; tilt within the "
               "noise (plane kept) at %zu\n", r.fitted, r.lowered, r.not_converged, r.tilt_within_noise);
   if (r.too_few_neighbours)
@@ -250,12 +264,18 @@ int runCurvature(int argc, char** argv) {
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);
   // The input's own fields (intensity, colour...) and its width x height are kept; the
   // Wavejet fields are added (input normals are replaced by the corrected ones).
-  pcl::PointCloud<PointWavejet> wj;
-  wj.resize(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) toPoint(res[i], wj[i]);
+  // Each copy is released once the next holds it: the outputs of a large scan are several
+  // times its input.
   pcl::PCLPointCloud2 b2;
-  pcl::toPCLPointCloud2(wj, b2);
+  {
+    pcl::PointCloud<PointWavejet> wj;
+    wj.resize(p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) toPoint(res[i], wj[i]);
+    std::vector<WavejetResult>().swap(res);
+    pcl::toPCLPointCloud2(wj, b2);
+  }
   pcl::PCLPointCloud2 out = appendFields(cloud, b2);
+  b2 = pcl::PCLPointCloud2();
   out.is_dense = r.fitted == p.size();
   saveCloudAtomic(a.positional[1], out, params.viewpoint);
   std::printf("wrote %s\n", a.positional[1].c_str());
@@ -267,7 +287,7 @@ int runEnhance(int argc, char** argv) {
   if (a.has("help")) { std::fputs(kEnhanceUsage, stdout); return 0; }
   a.allowOnly({"alpha0", "alpha1", "radius", "neighbours", "order", "beta", "irls", "refits", "refit-angle",
                "max-motion", "orient", "quiet", "timings", "select-order", "fixed-radius", "max-neighbours",
-               "order-policy"});
+               "order-policy", "tile-points"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN and OUT");
   a.requireCloudOutput();
   if (a.has("alpha0") == a.has("alpha1"))
@@ -325,6 +345,7 @@ int runEnhance(int argc, char** argv) {
                            wavejetWidenedNeighbours(run, used), r.narrowed,
                            r.narrowed_radius_median, wavejetNarrowedNeighbours(run, used),
                            params.wavejet.widening == WavejetParameters::Widening::never || params.radius > 0);
+  printTiles(r.wavejet);
   if (r.clamped) std::fprintf(stderr, "warning: %zu motions clamped at %g R_phi (not a height field)\n", r.clamped, params.max_motion);
   if (r.unfitted) std::fprintf(stderr, "warning: %zu points have too few neighbours: left in place, normal NaN\n", r.unfitted);
   saveCloudAtomic(a.positional[1], cloud, params.wavejet.viewpoint);

@@ -79,6 +79,27 @@ TEST(Tiling, CoresPartitionTheFinitePointsAndHalosAreTheGrownBoxes) {
   }
 }
 
+// tileHalo: the halo splitIntoTiles gives, for any margin; an infinite margin is every other
+// finite point; a subset of a core gets the rest of the core in its halo.
+TEST(Tiling, HaloOfACoreForAnotherMargin) {
+  Positions p = randomSlab(3000, 5);
+  p[7] = Eigen::Vector3f::Constant(NAN);
+  const auto tiles = paps::splitIntoTiles(p, 500, 0.05f);
+  for (const auto& tile : tiles) EXPECT_EQ(paps::tileHalo(p, tile.core, 0.05f), tile.halo);
+  const std::vector<int>& core = tiles[2].core;
+  const std::vector<int> all = paps::tileHalo(p, core, INFINITY);
+  EXPECT_EQ(all.size() + core.size(), p.size() - 1);
+  const std::vector<int> part(core.begin(), core.begin() + 10);
+  const std::vector<int> wide = paps::tileHalo(p, part, 0.3f);
+  EXPECT_TRUE(std::is_sorted(wide.begin(), wide.end()));
+  std::size_t expected = 0;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    expected += paps::isFinite(p[i]) && !std::binary_search(part.begin(), part.end(), static_cast<int>(i)) &&
+                inGrownBox(p, part, p[i], 0.3f);
+  EXPECT_EQ(wide.size(), expected);
+  EXPECT_THROW(paps::tileHalo(p, core, -1.f), paps::InvalidParameter);
+}
+
 TEST(Tiling, CopiesOfAPositionStayTogetherAndTheSplitFollowsThePositionsOnly) {
   // 300 positions stored 5 times each, in a shuffled order, cut into tiles of at most 12.
   const Positions base = randomSlab(300, 8);

@@ -982,3 +982,78 @@ TEST(WavejetEstimation, NarrowingInThePclClassWithWideningAlways) {
 }
 
 }  // namespace
+
+namespace {
+// The same floats (NaN equal to NaN), field by field: a tile must give the one-piece bits.
+bool sameBits(const paps::WavejetResult& a, const paps::WavejetResult& b) {
+  auto same = [](const auto& x, const auto& y) { return std::memcmp(&x, &y, sizeof(x)) == 0; };
+  return same(a.normal, b.normal) && same(a.direction1, b.direction1) && same(a.k1, b.k1) && same(a.k2, b.k2) &&
+         same(a.mean_curvature, b.mean_curvature) && same(a.gaussian_curvature, b.gaussian_curvature) &&
+         same(a.offset, b.offset) && same(a.a0, b.a0) && same(a.a1, b.a1) && a.order == b.order &&
+         same(a.radius, b.radius) && a.fits == b.fits && same(a.residual, b.residual) &&
+         a.converged == b.converged && a.tilt_within_noise == b.tilt_within_noise;
+}
+}  // namespace
+
+// WavejetParameters::max_tile_points: a cloud fitted in tiles gets the one-piece outputs bit
+// for bit, coefficients and report included: on a sphere of uneven density stored twice (the
+// sparse part widened to balls several radii wide, which reach past a tile's first halo),
+// with a NaN, orientation hints and initial normals; on a sphere with a dense cluster (its
+// balls narrowed, most from the kd-tree); and on a noisy height field, where the noise pilot
+// selects the order and doubles the automatic radius.
+TEST(WavejetEstimation, TiledFitsAreTheOnePieceFits) {
+  std::size_t base = 0;
+  Positions sphere = varyingDensitySphere(base);
+  sphere[17] = Eigen::Vector3f::Constant(NAN);
+  Positions field = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; },
+                                       12000, 1.0, 8);
+  paps::Random rng(4);
+  for (auto& x : field) x.z() += static_cast<float>(0.01 * rng.gaussian());
+  const Positions cluster = denseClusterSphere(true);
+  const Positions* clouds[] = {&sphere, &cluster, &field};
+  for (const Positions* cloud : clouds) {
+    const Positions& p = *cloud;
+    paps::Normals hints(p.size()), initial(p.size(), Eigen::Vector3f::Constant(NAN));
+    for (std::size_t i = 0; i < p.size(); ++i) hints[i] = cloud == &field ? Eigen::Vector3f::UnitZ() : p[i];
+    for (std::size_t i = 0; i < p.size(); i += 5) initial[i] = hints[i];
+    paps::WavejetParameters one, tiled;
+    one.max_tile_points = 0;
+    tiled.max_tile_points = 1500;
+    paps::WavejetReport ra, rb;
+    std::vector<paps::WavejetCoefficients> ca, cb;
+    const auto a = paps::estimateWavejets(p, 0.f, one, &ra, &ca, &initial, &hints);
+    const auto b = paps::estimateWavejets(p, 0.f, tiled, &rb, &cb, &initial, &hints);
+    EXPECT_EQ(ra.tiles, 1u);
+    EXPECT_GE(rb.tiles, 5u);
+    EXPECT_LT(rb.largest_tile, p.size() / 2);
+    ASSERT_EQ(a.size(), b.size());
+    std::size_t valid = 0;
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      ASSERT_TRUE(sameBits(a[i], b[i])) << i << ": k1 " << a[i].k1 << " / " << b[i].k1;
+      ASSERT_EQ(ca[i].order, cb[i].order) << i;
+      ASSERT_EQ(ca[i].phi, cb[i].phi) << i;
+      valid += a[i].valid();
+    }
+    EXPECT_EQ(ra.radius, rb.radius);
+    EXPECT_EQ(ra.support_scale, rb.support_scale);
+    EXPECT_EQ(ra.select_order, rb.select_order);
+    EXPECT_EQ(ra.fitted, rb.fitted);
+    EXPECT_EQ(ra.widened, rb.widened);
+    EXPECT_EQ(ra.narrowed, rb.narrowed);
+    EXPECT_EQ(ra.duplicates, rb.duplicates);
+    EXPECT_EQ(ra.mean_neighbours, rb.mean_neighbours);
+    EXPECT_EQ(ra.widened_radius_median, rb.widened_radius_median);
+    EXPECT_GT(valid, p.size() * 9 / 10);
+    if (cloud == &sphere) {
+      EXPECT_GT(rb.grown_halos, 0u);  // the widened balls reached past the first halos
+      EXPECT_GT(ra.widened, 5000u);
+      EXPECT_EQ(ra.non_finite, 1u);
+    } else if (cloud == &cluster) {
+      EXPECT_GE(ra.narrowed, 2 * 4000u);
+      EXPECT_EQ(ra.narrowed_radius_median, rb.narrowed_radius_median);
+    } else {
+      EXPECT_TRUE(ra.select_order);
+      EXPECT_GT(ra.support_scale, 1.f);
+    }
+  }
+}

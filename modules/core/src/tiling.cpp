@@ -116,6 +116,21 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
   return out;
 }
 
+std::vector<int> tileHalo(const Positions& points, const std::vector<int>& core, float margin) {
+  if (!(margin >= 0)) throw InvalidParameter("margin", std::to_string(margin), "a distance >= 0");
+  Box b = boxOf(points, core);
+  b.lo.array() -= margin;
+  b.hi.array() += margin;
+  std::vector<int> halo;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3f& p = points[i];
+    if (isFinite(p) && (p.array() >= b.lo.array()).all() && (p.array() <= b.hi.array()).all() &&
+        !std::binary_search(core.begin(), core.end(), static_cast<int>(i)))
+      halo.push_back(static_cast<int>(i));
+  }
+  return halo;
+}
+
 std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, const Positions& other, float margin) {
   Box b = boxOf(cloud, tile.core);
   b.lo.array() -= margin;

@@ -12,6 +12,7 @@
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
+#include <paps/core/tiling.h>
 #include <paps/features/wavejet_noise.h>
 
 namespace paps {
@@ -632,13 +633,24 @@ namespace {
 enum Support : std::uint8_t { kBall = 0, kWidened = 1, kNarrowed = 2 };
 
 // Wavejets of distinct positions (no exact duplicates). `neighbour_count` gets the count
-// used per point, `support` its Support.
+// used per point, `support` its Support, `reach` (when given) the radius around the point
+// within which every position of the whole cloud must lie in `points` for its output to be
+// the whole cloud's (its ball, or the ball of its widened neighbours; infinite where the
+// points held fewer than the widening asks): a tile checks its halo with it. `fit_only`,
+// when given, flags the points to fit (the others get no output).
+//
+// Neighbourhoods are indices into `points` (fitWavejet sums them in index order), and the
+// choices of narrowing and widening break ties by index. A tile whose points keep the
+// cloud's relative order therefore fits each of its points on the same neighbours in the same
+// order as the whole cloud: the same floats, whatever the grid's origin or the kd-tree's.
 std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radius, const WavejetParameters& params,
                                             std::vector<WavejetCoefficients>* coefficients,
                                             const Normals* initial_normals, const Normals* orientation,
                                             const ProgressCallback& progress, int target_neighbours,
                                             std::vector<int>& neighbour_count, std::vector<std::uint8_t>& support,
-                                            std::unique_ptr<SpatialIndex> index, float radius_scale) {
+                                            std::unique_ptr<SpatialIndex> index, float radius_scale,
+                                            std::vector<float>* reach = nullptr,
+                                            const std::vector<std::uint8_t>* fit_only = nullptr) {
   const bool automatic = radius == 0;
   const bool widen = params.widening == WavejetParameters::Widening::always ||
                      (params.widening == WavejetParameters::Widening::automatic && automatic);
@@ -651,88 +663,107 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   std::vector<WavejetResult> out(points.size());
   neighbour_count.assign(points.size(), 0);
   support.assign(points.size(), kBall);
+  if (reach) reach->assign(points.size(), radius);
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   ProgressReporter reporter(progress, "wavejets", points.size());
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
-  // A ball with fewer than `widen_to` positions: the `widen_to` nearest instead, at their
-  // radius (R_phi at the point = max(R_phi, distance of its widen_to-th nearest)). Returns
-  // the radius to use (indices into `points` in idx) or 0 when not widened (the whole cloud
-  // holds fewer than `need` finite positions: NaN outputs as before).
-  auto widenAt = [&](int i, std::vector<int>& idx, std::vector<float>& d2) -> float {
-    const int n = index->nearestK(points[i], widen_to, idx, d2);
-    if (n < need) return 0.f;  // the whole cloud holds too few: NaN outputs as before
+  // Nearest first, ties by index: the order (and the cut) of narrowing and widening.
+  auto nearestFirst = [](const std::pair<float, int>& a, const std::pair<float, int>& b) { return a < b; };
+  // The `n` nearest of q among the kd-tree's answer for `asked` (>= n) points, nearest first
+  // with ties by index, into idx; false when the answer cannot be shown to hold every point
+  // tied with the n-th (the last point it returned is within rounding of the n-th).
+  auto nearestOfTree = [&](const Eigen::Vector3f& q, int n, int asked, std::vector<int>& idx,
+                           std::vector<int>& knn, std::vector<float>& kd2,
+                           std::vector<std::pair<float, int>>& order) -> bool {
+    const int got = index->nearestK(q, asked, knn, kd2);
+    if (got < asked) return false;
+    order.resize(got);
+    for (int j = 0; j < got; ++j) order[j] = {(points[knn[j]] - q).squaredNorm(), knn[j]};
+    std::sort(order.begin(), order.end(), nearestFirst);
+    if (!(order[n - 1].first < (1.f - 1e-5f) * order[got - 1].first)) return false;
+    idx.resize(n);
+    for (int j = 0; j < n; ++j) idx[j] = order[j].second;
+    return true;
+  };
+  // A ball with fewer than `widen_to` positions: the `widen_to` nearest instead (ties by
+  // index), at their radius (R_phi at the point = max(R_phi, distance of its widen_to-th
+  // nearest)). Returns the radius to use, or 0 when not widened (the points hold fewer
+  // than `need` finite positions: NaN outputs as before, or the ball is full after all).
+  constexpr int kTreeExtra = 16;
+  auto widenAt = [&](int i, std::vector<int>& idx, std::vector<int>& knn, std::vector<float>& kd2,
+                     std::vector<std::pair<float, int>>& order) -> float {
+    const Eigen::Vector3f& q = points[i];
+    if (!nearestOfTree(q, widen_to, widen_to + kTreeExtra, idx, knn, kd2, order)) {
+      // Ties at the cut, or fewer points than asked: every point out to the farthest the
+      // tree gave, then the same order and cut.
+      const int got = index->nearestK(q, widen_to, knn, kd2);
+      if (got < widen_to) {
+        if (reach) (*reach)[i] = INFINITY;  // the whole cloud may hold more than these
+        if (got < need) return 0.f;
+      }
+      float far2 = 0.f;
+      for (int j = 0; j < got; ++j) far2 = std::max(far2, (points[knn[j]] - q).squaredNorm());
+      index->radiusSearch(q, std::sqrt(far2) * (1.f + 1e-5f), knn, kd2);
+      order.resize(knn.size());
+      for (std::size_t j = 0; j < knn.size(); ++j) order[j] = {(points[knn[j]] - q).squaredNorm(), knn[j]};
+      std::sort(order.begin(), order.end(), nearestFirst);
+      const int n = std::min<int>(widen_to, static_cast<int>(order.size()));
+      idx.resize(n);
+      for (int j = 0; j < n; ++j) idx[j] = order[j].second;
+    }
+    const float r = std::sqrt((points[idx.back()] - q).squaredNorm());
+    if (reach && std::isfinite((*reach)[i])) (*reach)[i] = std::max(radius, r);
     // A ball one short by the grid's float test but full by the kd-tree's (its last point on
     // the sphere): the ball itself, as it would be without widening.
-    const float r = std::sqrt(d2[n - 1]);
     return r > radius ? r : 0.f;
   };
-  // A ball with more than `narrow_to` positions (`found` indices into `pts` in idx, squared
-  // distances to q in d2, filled here when empty): keeps its `narrow_to` nearest, ties broken
-  // by index (the same choice whatever the order of the ball), moved to the front of idx in
-  // that order, and returns their radius (the distance of the farthest).
-  auto narrowAt = [&](const Positions& pts, const Eigen::Vector3f& q, std::vector<int>& idx,
-                      std::vector<float>& d2, std::vector<std::pair<float, int>>& order) -> float {
+  // A ball with more than `narrow_to` positions (indices in idx): keeps its `narrow_to`
+  // nearest, ties broken by index, moved to the front of idx in that order, and returns
+  // their radius (the distance of the farthest).
+  auto narrowAt = [&](const Eigen::Vector3f& q, std::vector<int>& idx, std::vector<std::pair<float, int>>& order) {
     const int found = static_cast<int>(idx.size());
     order.resize(found);
-    for (int j = 0; j < found; ++j)
-      order[j] = {d2.size() == idx.size() ? d2[j] : (pts[idx[j]] - q).squaredNorm(), idx[j]};
-    std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end());
-    std::sort(order.begin(), order.begin() + narrow_to);
+    for (int j = 0; j < found; ++j) order[j] = {(points[idx[j]] - q).squaredNorm(), idx[j]};
+    std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end(), nearestFirst);
+    std::sort(order.begin(), order.begin() + narrow_to, nearestFirst);
     for (int j = 0; j < narrow_to; ++j) idx[j] = order[j].second;
     idx.resize(narrow_to);
     return std::sqrt(order[narrow_to - 1].first);
   };
-  // A ball far larger than `narrow_to` (a cluster much denser than the rest of the cloud): its
-  // `narrow_to` nearest from the kd-tree, as slots of `grid` in the order narrowAt gives on the
-  // whole ball, whose gathering costs the ball's size (200K points, half of them in a 1 cm
-  // cluster: 46 s, most of it there). Returns their radius, or 0 when the tree's answer cannot
-  // be shown to be the same: the ball holds at most `narrow_to` points, or the boundary is
-  // within rounding of the farthest point the tree returned (ties, or another rounding of the
-  // distances in the tree).
-  constexpr int kTreeExtra = 16;
-  std::vector<int> slot_of;
-  auto narrowByTree = [&](const CellGrid& grid, int i, const Eigen::Vector3f& q, std::vector<int>& idx,
-                          std::vector<int>& knn, std::vector<float>& kd2,
-                          std::vector<std::pair<float, int>>& order) -> float {
-    const int n = index->nearestK(points[i], narrow_to + kTreeExtra, knn, kd2);
-    if (n < narrow_to + kTreeExtra) return 0.f;
-    order.resize(n);
-    for (int j = 0; j < n; ++j) {
-      const int slot = slot_of[knn[j]];
-      order[j] = {(grid.sorted()[slot] - q).squaredNorm(), slot};
-    }
-    std::sort(order.begin(), order.end());
-    const float margin = 1.f - 1e-5f;
-    if (!(order[narrow_to].first <= radius * radius) || !(order[narrow_to].first < margin * order[n - 1].first))
-      return 0.f;
-    idx.resize(narrow_to);
-    for (int j = 0; j < narrow_to; ++j) idx[j] = order[j].second;
-    return std::sqrt(order[narrow_to - 1].first);
-  };
-  auto fitPoint = [&](int i, const Positions& pts, const int* nb, int found, const Eigen::Vector3f& q, float r,
-                      WavejetWorkspace& ws) {
+  auto fitPoint = [&](int i, const int* nb, int found, float r, WavejetWorkspace& ws) {
     neighbour_count[i] = found;
-    out[i] = fitWavejet(pts, nb, found, q, r, params, ws, initial_normals ? (*initial_normals)[i] : nan3,
+    out[i] = fitWavejet(points, nb, found, points[i], r, params, ws, initial_normals ? (*initial_normals)[i] : nan3,
                         orientation ? (*orientation)[i] : nan3, coefficients ? &(*coefficients)[i] : nullptr);
+  };
+  // One point, its ball (indices into `points`, any order) in idx.
+  auto fitBall = [&](int i, std::vector<int>& idx, std::vector<int>& wide, std::vector<int>& knn,
+                     std::vector<float>& kd2, std::vector<std::pair<float, int>>& order, WavejetWorkspace& ws) {
+    const int found = static_cast<int>(idx.size());
+    const float r = widen && found < widen_to ? widenAt(i, wide, knn, kd2, order) : 0.f;
+    if (r > 0) {
+      support[i] = kWidened;
+      fitPoint(i, wide.data(), static_cast<int>(wide.size()), r, ws);
+    } else if (widen && found > narrow_to) {
+      const float rn = narrowAt(points[i], idx, order);
+      support[i] = kNarrowed;
+      fitPoint(i, idx.data(), narrow_to, rn, ws);
+    } else {
+      fitPoint(i, idx.data(), found, radius, ws);
+    }
   };
   // Uniform grid of cells of side R_phi (the shared core one); falls back to the kd-tree when
   // the extent is too large for it.
   CellGrid grid;
   if (grid.build(points, radius)) {
-    // Points visited in cell order and fitted on the copy in that order (memory locality);
-    // neighbours come in cell order then index order, whatever the thread count. Results
-    // are stored at their input index.
+    // Points visited in cell order (memory locality; the points come in spatial order too).
     const Positions& sorted = grid.sorted();
+    const std::vector<int>& original = grid.original();
     const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
-    if (widen) {
-      slot_of.assign(points.size(), -1);
-      for (std::int64_t s = 0; s < finite; ++s) slot_of[grid.original()[s]] = static_cast<int>(s);
-    }
 #pragma omp parallel
     {
       WavejetWorkspacePtr ws = makeWavejetWorkspace();
       std::vector<int> idx, wide, knn;
-      std::vector<float> d2, none, kd2;
+      std::vector<float> kd2;
       std::vector<std::pair<float, int>> order;
       idx.reserve(256);
       CellGrid::Cursor cursor;
@@ -740,31 +771,28 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
 #pragma omp for schedule(dynamic, 256)
       for (std::int64_t s = 0; s < finite; ++s) {
         if (reporter.cancelled()) continue;
-        const int i = grid.original()[s];
-        if (dense) {
-          const float rn = narrowByTree(grid, i, sorted[s], idx, knn, kd2, order);
-          if (rn > 0) {
-            support[i] = kNarrowed;
-            fitPoint(i, sorted, idx.data(), narrow_to, sorted[s], rn, *ws);
-            reporter.advance();
-            continue;
-          }
+        const int i = original[s];
+        if (fit_only && !(*fit_only)[i]) {
+          reporter.advance();
+          continue;
+        }
+        // A ball far larger than `narrow_to` (a cluster much denser than the rest of the
+        // cloud): its `narrow_to` nearest from the kd-tree, the same points in the same order
+        // as narrowing the whole ball, whose gathering costs the ball's size (200K points,
+        // half of them in a 1 cm cluster: 46 s, most of it there). Where the tree's answer
+        // cannot be shown to be the same (ties, or the ball holds fewer), the ball is gathered.
+        if (dense && nearestOfTree(points[i], narrow_to, narrow_to + kTreeExtra, idx, knn, kd2, order) &&
+            order[narrow_to].first <= radius * radius) {
+          support[i] = kNarrowed;
+          fitPoint(i, idx.data(), narrow_to, std::sqrt(order[narrow_to - 1].first), *ws);
+          reporter.advance();
+          continue;
         }
         const int found = grid.query(sorted[s], radius, idx, cursor);
         // Points come in cell order: a ball four times over the cap is followed by others.
         dense = widen && found > 4 * narrow_to;
-        const float r = widen && found < widen_to ? widenAt(i, wide, d2) : 0.f;
-        if (r > 0) {
-          support[i] = kWidened;
-          fitPoint(i, points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
-        } else if (widen && found > narrow_to) {
-          idx.resize(found);
-          const float rn = narrowAt(sorted, sorted[s], idx, none, order);
-          support[i] = kNarrowed;
-          fitPoint(i, sorted, idx.data(), narrow_to, sorted[s], rn, *ws);
-        } else {
-          fitPoint(i, sorted, idx.data(), found, sorted[s], radius, *ws);
-        }
+        for (int j = 0; j < found; ++j) idx[j] = original[idx[j]];
+        fitBall(i, idx, wide, knn, kd2, order, *ws);
         reporter.advance();
       }
     }
@@ -774,27 +802,15 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
 #pragma omp parallel
     {
       WavejetWorkspacePtr ws = makeWavejetWorkspace();
-      std::vector<int> idx, wide;
-      std::vector<float> d2;
+      std::vector<int> idx, wide, knn;
+      std::vector<float> d2, kd2;
       std::vector<std::pair<float, int>> order;
 #pragma omp for schedule(dynamic, 256)
       for (std::int64_t i = 0; i < count; ++i) {
         if (reporter.cancelled()) continue;
-        if (isFinite(points[i])) {
-          const int found = index->radiusSearch(points[i], radius, idx, d2);
-          const float r = widen && found < widen_to ? widenAt(static_cast<int>(i), wide, d2) : 0.f;
-          if (r > 0) {
-            support[i] = kWidened;
-            fitPoint(static_cast<int>(i), points, wide.data(), static_cast<int>(wide.size()), points[i], r, *ws);
-          } else if (widen && found > narrow_to) {
-            idx.resize(found);
-            d2.resize(found);
-            const float rn = narrowAt(points, points[i], idx, d2, order);
-            support[i] = kNarrowed;
-            fitPoint(static_cast<int>(i), points, idx.data(), narrow_to, points[i], rn, *ws);
-          } else {
-            fitPoint(static_cast<int>(i), points, idx.data(), found, points[i], radius, *ws);
-          }
+        if (isFinite(points[i]) && (!fit_only || (*fit_only)[i])) {
+          index->radiusSearch(points[i], radius, idx, d2);
+          fitBall(static_cast<int>(i), idx, wide, knn, kd2, order, *ws);
         }
         reporter.advance();
       }
@@ -803,6 +819,99 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   reporter.throwIfCancelled();
   reporter.finish();
   return out;
+}
+
+// Where estimateDistinctInTiles writes: at the input index first[d] of distinct position d.
+struct TiledOutputs {
+  const std::vector<int>& first;
+  std::vector<WavejetResult>& out;
+  std::vector<int>& neighbour_count;
+  std::vector<std::uint8_t>& support;
+  std::vector<WavejetCoefficients>* coefficients;
+};
+
+struct TileCount {
+  std::size_t tiles = 1, largest = 0, grown_halos = 0;
+};
+
+// estimateDistinct tile by tile (WavejetParameters::max_tile_points) on distinct positions
+// in spatial order, with the radius and the widening resolved here on the whole cloud, so
+// that each tile fits its core points as the whole cloud would. A tile holds its points in
+// the cloud's relative order (estimateDistinct's canonical neighbour order), and its halo is
+// grown and the tile run again where a fit reached past it (a widened ball in a sparse spot).
+TileCount estimateDistinctInTiles(const Positions& points, float& radius, WavejetParameters run,
+                                  const Normals* initial_normals, const Normals* orientation,
+                                  const ProgressCallback& progress, int target_neighbours,
+                                  std::unique_ptr<SpatialIndex> index, float radius_scale, TiledOutputs& to) {
+  const bool automatic = radius == 0;
+  const bool widen = run.widening == WavejetParameters::Widening::always ||
+                     (run.widening == WavejetParameters::Widening::automatic && automatic);
+  if (automatic) {
+    if (!index) index = std::make_unique<SpatialIndex>(points);
+    radius = radius_scale * radiusForNeighbourCount(points, *index, target_neighbours);
+  }
+  index.reset();
+  run.widening = widen ? WavejetParameters::Widening::always : WavejetParameters::Widening::never;
+  // Two radii: every ball, and most widened ones, without growing the halo.
+  std::vector<Tile> tiles = splitIntoTiles(points, run.max_tile_points, 2 * radius);
+  TileCount count;
+  count.tiles = tiles.size();
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    // First the whole tile; then, while some core points reached past the halo (a widened
+    // ball in a sparse spot), those points alone, on a halo grown to what they reached.
+    Tile part = std::move(tiles[t]);
+    const ProgressCallback sub = tileProgress(progress, t, tiles.size());
+    float margin = 2 * radius;
+    for (bool first = true; !part.core.empty(); first = false) {
+      std::vector<int> ids(part.core.size() + part.halo.size());
+      std::merge(part.core.begin(), part.core.end(), part.halo.begin(), part.halo.end(), ids.begin());
+      count.largest = std::max(count.largest, ids.size());
+      std::vector<int> core_at;  // positions of the core points in ids
+      core_at.reserve(part.core.size());
+      for (std::size_t j = 0, c = 0; j < ids.size() && c < part.core.size(); ++j)
+        if (ids[j] == part.core[c]) { core_at.push_back(static_cast<int>(j)); ++c; }
+      std::vector<std::uint8_t> only;
+      if (!first) {
+        only.assign(ids.size(), 0);
+        for (const int j : core_at) only[j] = 1;
+      }
+      Normals t_initial, t_orientation;
+      if (initial_normals) t_initial = gathered(*initial_normals, ids);
+      if (orientation) t_orientation = gathered(*orientation, ids);
+      float r = radius;
+      std::vector<int> t_count;
+      std::vector<std::uint8_t> t_support;
+      std::vector<float> reach;
+      std::vector<WavejetCoefficients> t_coefficients;
+      std::vector<WavejetResult> res =
+          estimateDistinct(gathered(points, ids), r, run, to.coefficients ? &t_coefficients : nullptr,
+                           initial_normals ? &t_initial : nullptr, orientation ? &t_orientation : nullptr, sub,
+                           target_neighbours, t_count, t_support, nullptr, 1.f, &reach, first ? nullptr : &only);
+      // The halo box holds every point within `margin` of a core point (float rounding aside).
+      std::vector<int> again;
+      float needed = 0.f;
+      for (std::size_t c = 0; c < core_at.size(); ++c) {
+        const int j = core_at[c];
+        if (!(reach[j] * (1.f + 1e-5f) <= margin)) {
+          again.push_back(part.core[c]);
+          needed = std::max(needed, reach[j]);
+          continue;
+        }
+        const int i = to.first[part.core[c]];
+        to.out[i] = res[j];
+        to.neighbour_count[i] = t_count[j];
+        to.support[i] = t_support[j];
+        if (to.coefficients) (*to.coefficients)[i] = std::move(t_coefficients[j]);
+      }
+      if (!again.empty()) {
+        margin = std::isfinite(needed) ? needed * 1.001f : INFINITY;
+        part.halo = tileHalo(points, again, margin);
+        ++count.grown_halos;
+      }
+      part.core = std::move(again);
+    }
+  }
+  return count;
 }
 
 }  // namespace
@@ -894,23 +1003,44 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       run.order_policy = WavejetParameters::OrderPolicy::fixed;
     }
   }
-  std::vector<int> d_count;
-  std::vector<std::uint8_t> d_support;
-  std::vector<WavejetCoefficients> d_coefficients;
-  std::vector<WavejetResult> d_out =
-      estimateDistinct(fitted, radius, run, coefficients ? &d_coefficients : nullptr,
-                       initial_normals ? &d_initial : nullptr, orientation ? &d_orientation : nullptr, progress,
-                       target_neighbours, d_count, d_support, std::move(index), radius_scale);
   std::vector<WavejetResult> out(points.size());
   std::vector<int> neighbour_count(points.size(), 0);
   std::vector<std::uint8_t> support(points.size(), kBall);
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    if (slot[i] < 0) continue;
-    out[i] = d_out[slot[i]];
-    neighbour_count[i] = d_count[slot[i]];
-    support[i] = d_support[slot[i]];
-    if (coefficients) (*coefficients)[i] = d_coefficients[slot[i]];
+  TileCount tiles;
+  if (params.max_tile_points == 0 || fitted.size() <= params.max_tile_points) {
+    std::vector<int> d_count;
+    std::vector<std::uint8_t> d_support;
+    std::vector<WavejetCoefficients> d_coefficients;
+    std::vector<WavejetResult> d_out =
+        estimateDistinct(fitted, radius, run, coefficients ? &d_coefficients : nullptr,
+                         initial_normals ? &d_initial : nullptr, orientation ? &d_orientation : nullptr, progress,
+                         target_neighbours, d_count, d_support, std::move(index), radius_scale);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      if (slot[i] < 0) continue;
+      out[i] = d_out[slot[i]];
+      neighbour_count[i] = d_count[slot[i]];
+      support[i] = d_support[slot[i]];
+      if (coefficients) (*coefficients)[i] = d_coefficients[slot[i]];
+    }
+  } else {
+    // Outputs written at the input index of each position's first copy, then copied.
+    std::vector<int> first(fitted.size());
+    for (std::size_t i = 0; i < points.size(); ++i)
+      if (rep[i] == static_cast<int>(i)) first[slot[i]] = static_cast<int>(i);
+    std::vector<int>().swap(slot);
+    TiledOutputs to{first, out, neighbour_count, support, coefficients};
+    tiles = estimateDistinctInTiles(fitted, radius, run, initial_normals ? &d_initial : nullptr,
+                                    orientation ? &d_orientation : nullptr, progress, target_neighbours,
+                                    std::move(index), radius_scale, to);
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const int r = rep[i];
+      if (r < 0 || r == static_cast<int>(i)) continue;
+      out[i] = out[r];
+      neighbour_count[i] = neighbour_count[r];
+      support[i] = support[r];
+      if (coefficients) (*coefficients)[i] = (*coefficients)[r];
+    }
   }
   if (report) {
     *report = WavejetReport();
@@ -923,6 +1053,9 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
     report->beta = run.beta;
     report->support_scale = target_was_automatic ? radius_scale : 1.f;
     report->duplicates = duplicates;
+    report->tiles = tiles.tiles;
+    report->largest_tile = tiles.largest;
+    report->grown_halos = tiles.grown_halos;
     double sum = 0;
     std::vector<float> widened_radii, narrowed_radii;
     for (std::size_t i = 0; i < points.size(); ++i) {

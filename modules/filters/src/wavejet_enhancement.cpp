@@ -79,12 +79,20 @@ Normals enhanceNormals(const Positions& points, const WavejetEnhancementParamete
                        const Normals* orientation) {
   WavejetEnhancementReport local;
   WavejetEnhancementReport& r = report ? *report : local;
+  // Without gain the output is the corrected normal itself: no frames to keep (they cost
+  // about 170 bytes a point).
+  const bool gain = params.alpha1 != std::complex<float>(1.f, 0.f);
   std::vector<WavejetCoefficients> coef;
-  const auto res = fitAll(points, params, &r, progress, orientation, &coef);
+  const auto res = fitAll(points, params, &r, progress, orientation, gain ? &coef : nullptr);
   Normals out(points.size(), Eigen::Vector3f::Constant(NAN));
   const std::complex<double> alpha(params.alpha1);
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!res[i].valid()) continue;
+    if (!gain) {
+      out[i] = res[i].normal;
+      ++r.changed;
+      continue;
+    }
     // Equation 2.22, then Corollary 1: phi'_11 defines the false tangent plane
     // z = 2 Re(phi'_11 (x + i y)) over the tangent frame.
     const std::complex<double> phi11 = -M_PI * (alpha - 1.0) * std::complex<double>(res[i].a1);

@@ -29,6 +29,12 @@ struct Tile {
 /// a negative or non-finite margin.
 std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, float margin);
 
+/// The halo of a tile of `points` whose core is `core` (increasing indices) for another
+/// margin than splitIntoTiles was given: every other finite point inside the bounding box of
+/// the core grown by `margin` (>= 0, metres; infinite: every other finite point), in
+/// increasing order. For a stage that finds after a run that its fits reached farther.
+std::vector<int> tileHalo(const Positions& points, const std::vector<int>& core, float margin);
+
 /// The finite points of `other` (another scan of the same object, registered) inside the
 /// bounding box of `tile`'s core (points of `cloud`) grown by `margin` on each side, as indices
 /// into `other` in increasing order: what a stage that reads several scans sees beside a tile.

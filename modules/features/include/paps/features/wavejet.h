@@ -22,6 +22,8 @@
 #include <vector>
 
 #include <paps/core/local_frame.h>
+#include <cstddef>
+
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 
@@ -115,6 +117,11 @@ struct WavejetParameters {
   /// table). 0 = 4 N (N the widening count above, 200 by default); any value is raised to at
   /// least N. Never binds on evenly sampled surfaces (bench part "analytic": 0 narrowed).
   int narrowed_neighbours = 0;
+  /// estimateWavejets fits a cloud of more distinct positions than this in tiles of at most
+  /// this many (0: one piece whatever the size). The noise, the radius and the order policy
+  /// are resolved once on the whole cloud, and each tile carries the points its fits reach,
+  /// so the outputs are the one-piece outputs, bit for bit; the working memory is a tile's.
+  std::size_t max_tile_points = 2000000;
   /// Throws InvalidParameter naming the first bad value.
   void validate() const;
 };
@@ -230,6 +237,12 @@ struct WavejetReport {
   std::size_t narrowed = 0;          ///< fitted with R_phi narrowed (WavejetParameters::narrowed_neighbours)
   float narrowed_radius_median = 0.f;///< median R_phi of the narrowed points (metres)
   float max_radius = 0.f;            ///< largest R_phi used at a fitted point (metres)
+  /// Tiles the distinct positions were fitted in (1: one piece; max_tile_points), the most
+  /// points one held with its halo (0 in one piece), and how many tiles were run again on a
+  /// grown halo because a widened ball reached past it.
+  std::size_t tiles = 1;
+  std::size_t largest_tile = 0;
+  std::size_t grown_halos = 0;
 };
 
 /// The count of distinct neighbours (self included) that order `params.order` needs before

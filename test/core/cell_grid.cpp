@@ -108,6 +108,58 @@ TEST(CellGrid, QueryGivesTheBallInCellOrder) {
   EXPECT_EQ(grid.query(Eigen::Vector3f(kNaN, 0, 0), r, slots, cursor), 0);
 }
 
+// Anchored grids (build(..., true)) of one cell size order the points two clouds share alike:
+// a part of a cloud (every third point of a box, away from the origin, indices kept in order)
+// lists them in the whole grid's relative order, and so do its queries. An unanchored grid
+// keys its cells from the bounding box, so the part's order differs.
+TEST(CellGrid, AnchoredGridsOrderSharedPointsAlike) {
+  Positions whole = randomCloud(20000, 9, 3.f);
+  for (auto& p : whole) p += Eigen::Vector3f(1000.3f, -250.7f, 12.1f);
+  std::vector<int> part_ids;  // whole indices of the part, increasing
+  for (std::size_t i = 0; i < whole.size(); ++i)
+    if (whole[i].x() < 1001.f && i % 3 != 1) part_ids.push_back(static_cast<int>(i));
+  Positions part;
+  for (const int i : part_ids) part.push_back(whole[i]);
+  const float cell = 0.13f;
+  auto relativeOrderMatches = [&](bool anchored) {
+    CellGrid a, b;
+    EXPECT_TRUE(a.build(whole, cell, anchored));
+    EXPECT_TRUE(b.build(part, cell, anchored));
+    std::vector<int> in_whole;  // the part's points in the whole grid's order
+    std::vector<char> member(whole.size(), 0);
+    for (const int i : part_ids) member[i] = 1;
+    for (const int i : a.original())
+      if (member[i]) in_whole.push_back(i);
+    std::vector<int> in_part;
+    for (const int j : b.original()) in_part.push_back(part_ids[j]);
+    return in_whole == in_part;
+  };
+  EXPECT_TRUE(relativeOrderMatches(true));
+  EXPECT_FALSE(relativeOrderMatches(false));
+  // Queries: the part's ball, mapped to whole indices, is the whole ball restricted to the
+  // part, in the same order; and the anchored grid finds the brute-force ball.
+  CellGrid a, b;
+  a.build(whole, cell, true);
+  b.build(part, cell, true);
+  CellGrid::Cursor ca, cb;
+  std::vector<int> sa, sb;
+  for (std::size_t k = 0; k < part.size(); k += 97) {
+    const float r = 0.21f;
+    a.query(part[k], r, sa, ca);
+    b.query(part[k], r, sb, cb);
+    std::vector<int> from_whole, from_part;
+    std::vector<char> member(whole.size(), 0);
+    for (const int i : part_ids) member[i] = 1;
+    for (const int s : sa)
+      if (member[a.original()[s]]) from_whole.push_back(a.original()[s]);
+    for (const int s : sb) from_part.push_back(part_ids[b.original()[s]]);
+    ASSERT_EQ(from_whole, from_part) << k;
+    std::size_t brute = 0;
+    for (const auto& p : whole) brute += (p - part[k]).squaredNorm() <= r * r;
+    ASSERT_EQ(sa.size(), brute) << k;
+  }
+}
+
 TEST(CellGrid, HugeAndTinyRadius) {
   const Positions p = randomCloud(400, 3);
   CellGrid grid;

@@ -60,19 +60,22 @@ __attribute__((noinline)) bool cappedListFromTree(const SpatialIndex& tree, cons
 }
 }  // namespace
 
-bool CellGrid::build(const Positions& points, float cell) {
+bool CellGrid::build(const Positions& points, float cell, bool anchored) {
   requirePositive("cell", cell);
   *this = CellGrid();
   cell_ = cell;
   inv_ = 1.0 / double(cell);
+  anchored_ = anchored;
   Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
   for (const auto& p : points)
     if (isFinite(p)) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
   if (!(lo.x() <= hi.x())) return true;  // no finite point: an empty grid
   // Two cells of margin: every occupied coordinate is >= 1 even after rounding.
   origin_ = lo.cast<double>() - Eigen::Vector3d::Constant(2 * cell_);
-  if (((hi.cast<double>() - origin_) * inv_).maxCoeff() > kMaxCell && !buildWindow(points)) return false;
-  const Eigen::Vector3d top = (hi.cast<double>() - origin_) * inv_;
+  if (anchored_)
+    for (int a = 0; a < 3; ++a) base_[a] = std::floor(double(lo[a]) * inv_) - 2;
+  if (coordinates(hi).maxCoeff() > kMaxCell && !buildWindow(points)) return false;
+  const Eigen::Vector3d top = coordinates(hi);
   for (int a = 0; a < 3; ++a) top_[a] = static_cast<std::int64_t>(std::clamp(top[a], 0.0, kMaxCell));
   std::vector<std::pair<std::uint64_t, int>> keyed;
   keyed.reserve(points.size());
@@ -102,11 +105,14 @@ bool CellGrid::buildWindow(const Positions& points) {
   // points outside, hence the limit.
   constexpr std::size_t kMaxOutside = 4096;
   // No lower than the full grid's origin.
-  origin_ = origin_.cwiseMax(medianPoint(points) - Eigen::Vector3d::Constant(0.5 * kMaxCell * cell_));
+  const Eigen::Vector3d median = medianPoint(points);
+  origin_ = origin_.cwiseMax(median - Eigen::Vector3d::Constant(0.5 * kMaxCell * cell_));
+  if (anchored_)
+    for (int a = 0; a < 3; ++a) base_[a] = std::max(base_[a], std::floor(median[a] * inv_ - 0.5 * kMaxCell));
   std::size_t outside = 0;
   for (const auto& p : points) {
     if (!isFinite(p)) continue;
-    const Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+    const Eigen::Vector3d c = coordinates(p);
     outside += c.minCoeff() < 0 || c.maxCoeff() > kMaxCell;
     if (outside > kMaxOutside) return false;
   }
@@ -114,8 +120,15 @@ bool CellGrid::buildWindow(const Positions& points) {
   return true;
 }
 
+Eigen::Vector3d CellGrid::coordinates(const Eigen::Vector3f& p) const {
+  // Anchored: p / cell less a whole number is exact in double (|p / cell| < 2^52), so a point
+  // falls in the same lattice cell whatever the base.
+  if (anchored_) return p.cast<double>() * inv_ - base_;
+  return (p.cast<double>() - origin_) * inv_;
+}
+
 std::uint64_t CellGrid::keyOf(const Eigen::Vector3f& p) const {
-  Eigen::Vector3d c = (p.cast<double>() - origin_) * inv_;
+  Eigen::Vector3d c = coordinates(p);
   if (windowed_) c = c.cwiseMax(0.0).cwiseMin(kMaxCell);
   return pack(std::uint64_t(c.x()), std::uint64_t(c.y()), std::uint64_t(c.z()));
 }
@@ -126,8 +139,8 @@ void CellGrid::prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) co
   const double slack = double(reach) * (1 + 1e-5);
   std::int64_t box[6];
   for (int a = 0; a < 3; ++a) {
-    const double lo = std::floor((double(q[a]) - slack - origin_[a]) * inv_);
-    const double hi = std::floor((double(q[a]) + slack - origin_[a]) * inv_);
+    const double lo = std::floor(anchored_ ? (double(q[a]) - slack) * inv_ - base_[a] : (double(q[a]) - slack - origin_[a]) * inv_);
+    const double hi = std::floor(anchored_ ? (double(q[a]) + slack) * inv_ - base_[a] : (double(q[a]) + slack - origin_[a]) * inv_);
     // Windowed: the box is clamped like the keys (a query outside scans the border cells).
     const double floor_at = windowed_ ? 0.0 : -1.0, ceil_at = double(top_[a]) + (windowed_ ? 0 : 1);
     box[2 * a] = static_cast<std::int64_t>(std::clamp(lo, floor_at, ceil_at));

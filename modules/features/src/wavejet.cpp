@@ -639,10 +639,11 @@ enum Support : std::uint8_t { kBall = 0, kWidened = 1, kNarrowed = 2 };
 // points held fewer than the widening asks): a tile checks its halo with it. `fit_only`,
 // when given, flags the points to fit (the others get no output).
 //
-// Neighbourhoods are indices into `points` (fitWavejet sums them in index order), and the
-// choices of narrowing and widening break ties by index. A tile whose points keep the
+// fitWavejet sums a neighbourhood in the order of its indices: into the grid's copy, whose
+// cells lie on a lattice anchored at 0 (ordered z, y, x, then by index), or into `points` for
+// widened balls; narrowing and widening break ties by index. A tile whose points keep the
 // cloud's relative order therefore fits each of its points on the same neighbours in the same
-// order as the whole cloud: the same floats, whatever the grid's origin or the kd-tree's.
+// order as the whole cloud: the same floats, whatever the tile's extent or the kd-tree's order.
 std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radius, const WavejetParameters& params,
                                             std::vector<WavejetCoefficients>* coefficients,
                                             const Normals* initial_normals, const Normals* orientation,
@@ -669,31 +670,43 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
   // Nearest first, ties by index: the order (and the cut) of narrowing and widening.
   auto nearestFirst = [](const std::pair<float, int>& a, const std::pair<float, int>& b) { return a < b; };
+  // The grid (below) keys its cells on the lattice of multiples of the radius, so a tile
+  // orders its points as the whole cloud does: the fits see their balls in the same order.
+  CellGrid grid;
+  const bool gridded = grid.build(points, radius, true);
+  // Slot in the grid's copy of each point (for the kd-tree's answers in the grid's order).
+  std::vector<int> slot_of;
+  if (gridded && widen) {
+    slot_of.assign(points.size(), -1);
+    for (std::size_t s = 0; s < grid.original().size(); ++s) slot_of[grid.original()[s]] = static_cast<int>(s);
+  }
   // The `n` nearest of q among the kd-tree's answer for `asked` (>= n) points, nearest first
-  // with ties by index, into idx; false when the answer cannot be shown to hold every point
-  // tied with the n-th (the last point it returned is within rounding of the n-th).
-  auto nearestOfTree = [&](const Eigen::Vector3f& q, int n, int asked, std::vector<int>& idx,
+  // with ties by index (by slot when `slots`: indices into the grid's copy), into idx; false
+  // when the answer cannot be shown to hold every point tied with the n-th (the last point it
+  // returned is within rounding of the n-th).
+  auto nearestOfTree = [&](const Eigen::Vector3f& q, int n, int asked, bool slots, std::vector<int>& idx,
                            std::vector<int>& knn, std::vector<float>& kd2,
                            std::vector<std::pair<float, int>>& order) -> bool {
     const int got = index->nearestK(q, asked, knn, kd2);
     if (got < asked) return false;
     order.resize(got);
-    for (int j = 0; j < got; ++j) order[j] = {(points[knn[j]] - q).squaredNorm(), knn[j]};
+    for (int j = 0; j < got; ++j) order[j] = {(points[knn[j]] - q).squaredNorm(), slots ? slot_of[knn[j]] : knn[j]};
     std::sort(order.begin(), order.end(), nearestFirst);
     if (!(order[n - 1].first < (1.f - 1e-5f) * order[got - 1].first)) return false;
     idx.resize(n);
     for (int j = 0; j < n; ++j) idx[j] = order[j].second;
     return true;
   };
-  // A ball with fewer than `widen_to` positions: the `widen_to` nearest instead (ties by
-  // index), at their radius (R_phi at the point = max(R_phi, distance of its widen_to-th
-  // nearest)). Returns the radius to use, or 0 when not widened (the points hold fewer
-  // than `need` finite positions: NaN outputs as before, or the ball is full after all).
+  // A ball with fewer than `widen_to` positions: the `widen_to` nearest instead (indices into
+  // `points`, ties by index), at their radius (R_phi at the point = max(R_phi, distance of its
+  // widen_to-th nearest)). Returns the radius to use, or 0 when not widened (the points hold
+  // fewer than `need` finite positions: NaN outputs as before, or the ball is full after all).
   constexpr int kTreeExtra = 16;
   auto widenAt = [&](int i, std::vector<int>& idx, std::vector<int>& knn, std::vector<float>& kd2,
                      std::vector<std::pair<float, int>>& order) -> float {
     const Eigen::Vector3f& q = points[i];
-    if (!nearestOfTree(q, widen_to, widen_to + kTreeExtra, idx, knn, kd2, order)) {
+    // One more than needed shows whether the cut falls between two distances.
+    if (!nearestOfTree(q, widen_to, widen_to + 1, false, idx, knn, kd2, order)) {
       // Ties at the cut, or fewer points than asked: every point out to the farthest the
       // tree gave, then the same order and cut.
       const int got = index->nearestK(q, widen_to, knn, kd2);
@@ -717,45 +730,48 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     // the sphere): the ball itself, as it would be without widening.
     return r > radius ? r : 0.f;
   };
-  // A ball with more than `narrow_to` positions (indices in idx): keeps its `narrow_to`
-  // nearest, ties broken by index, moved to the front of idx in that order, and returns
-  // their radius (the distance of the farthest).
-  auto narrowAt = [&](const Eigen::Vector3f& q, std::vector<int>& idx, std::vector<std::pair<float, int>>& order) {
+  // A ball with more than `narrow_to` positions (indices into pts in idx): keeps its
+  // `narrow_to` nearest, ties broken by index, moved to the front of idx in that order, and
+  // returns their radius (the distance of the farthest).
+  auto narrowAt = [&](const Positions& pts, const Eigen::Vector3f& q, std::vector<int>& idx,
+                      std::vector<std::pair<float, int>>& order) {
     const int found = static_cast<int>(idx.size());
     order.resize(found);
-    for (int j = 0; j < found; ++j) order[j] = {(points[idx[j]] - q).squaredNorm(), idx[j]};
+    for (int j = 0; j < found; ++j) order[j] = {(pts[idx[j]] - q).squaredNorm(), idx[j]};
     std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end(), nearestFirst);
     std::sort(order.begin(), order.begin() + narrow_to, nearestFirst);
     for (int j = 0; j < narrow_to; ++j) idx[j] = order[j].second;
     idx.resize(narrow_to);
     return std::sqrt(order[narrow_to - 1].first);
   };
-  auto fitPoint = [&](int i, const int* nb, int found, float r, WavejetWorkspace& ws) {
+  // Point i fitted on the neighbours nb (indices into pts: the points or the grid's copy).
+  auto fitPoint = [&](int i, const Positions& pts, const int* nb, int found, float r, WavejetWorkspace& ws) {
     neighbour_count[i] = found;
-    out[i] = fitWavejet(points, nb, found, points[i], r, params, ws, initial_normals ? (*initial_normals)[i] : nan3,
+    out[i] = fitWavejet(pts, nb, found, points[i], r, params, ws, initial_normals ? (*initial_normals)[i] : nan3,
                         orientation ? (*orientation)[i] : nan3, coefficients ? &(*coefficients)[i] : nullptr);
   };
-  // One point, its ball (indices into `points`, any order) in idx.
-  auto fitBall = [&](int i, std::vector<int>& idx, std::vector<int>& wide, std::vector<int>& knn,
-                     std::vector<float>& kd2, std::vector<std::pair<float, int>>& order, WavejetWorkspace& ws) {
+  // Point i and its ball (indices into pts, any order) in idx: widened, narrowed or as it is.
+  auto fitBall = [&](int i, const Positions& pts, std::vector<int>& idx, std::vector<int>& wide,
+                     std::vector<int>& knn, std::vector<float>& kd2, std::vector<std::pair<float, int>>& order,
+                     WavejetWorkspace& ws) {
     const int found = static_cast<int>(idx.size());
     const float r = widen && found < widen_to ? widenAt(i, wide, knn, kd2, order) : 0.f;
     if (r > 0) {
       support[i] = kWidened;
-      fitPoint(i, wide.data(), static_cast<int>(wide.size()), r, ws);
+      fitPoint(i, points, wide.data(), static_cast<int>(wide.size()), r, ws);
     } else if (widen && found > narrow_to) {
-      const float rn = narrowAt(points[i], idx, order);
+      const float rn = narrowAt(pts, points[i], idx, order);
       support[i] = kNarrowed;
-      fitPoint(i, idx.data(), narrow_to, rn, ws);
+      fitPoint(i, pts, idx.data(), narrow_to, rn, ws);
     } else {
-      fitPoint(i, idx.data(), found, radius, ws);
+      fitPoint(i, pts, idx.data(), found, radius, ws);
     }
   };
   // Uniform grid of cells of side R_phi (the shared core one); falls back to the kd-tree when
   // the extent is too large for it.
-  CellGrid grid;
-  if (grid.build(points, radius)) {
-    // Points visited in cell order (memory locality; the points come in spatial order too).
+  if (gridded) {
+    // Points visited in cell order and fitted on the grid's copy in that order (memory
+    // locality; fitting on `points` cost 10-15%).
     const Positions& sorted = grid.sorted();
     const std::vector<int>& original = grid.original();
     const std::int64_t finite = static_cast<std::int64_t>(sorted.size());
@@ -781,18 +797,17 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
         // as narrowing the whole ball, whose gathering costs the ball's size (200K points,
         // half of them in a 1 cm cluster: 46 s, most of it there). Where the tree's answer
         // cannot be shown to be the same (ties, or the ball holds fewer), the ball is gathered.
-        if (dense && nearestOfTree(points[i], narrow_to, narrow_to + kTreeExtra, idx, knn, kd2, order) &&
+        if (dense && nearestOfTree(points[i], narrow_to, narrow_to + kTreeExtra, true, idx, knn, kd2, order) &&
             order[narrow_to].first <= radius * radius) {
           support[i] = kNarrowed;
-          fitPoint(i, idx.data(), narrow_to, std::sqrt(order[narrow_to - 1].first), *ws);
+          fitPoint(i, sorted, idx.data(), narrow_to, std::sqrt(order[narrow_to - 1].first), *ws);
           reporter.advance();
           continue;
         }
         const int found = grid.query(sorted[s], radius, idx, cursor);
         // Points come in cell order: a ball four times over the cap is followed by others.
         dense = widen && found > 4 * narrow_to;
-        for (int j = 0; j < found; ++j) idx[j] = original[idx[j]];
-        fitBall(i, idx, wide, knn, kd2, order, *ws);
+        fitBall(i, sorted, idx, wide, knn, kd2, order, *ws);
         reporter.advance();
       }
     }
@@ -810,7 +825,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
         if (reporter.cancelled()) continue;
         if (isFinite(points[i]) && (!fit_only || (*fit_only)[i])) {
           index->radiusSearch(points[i], radius, idx, d2);
-          fitBall(static_cast<int>(i), idx, wide, knn, kd2, order, *ws);
+          fitBall(static_cast<int>(i), points, idx, wide, knn, kd2, order, *ws);
         }
         reporter.advance();
       }

@@ -29,7 +29,10 @@ class CellGrid {
   /// an axis, the grid is a window of that many cells around the median point and at most
   /// 4096 points outside it share its border cells (queries return the same points);
   /// returns false (grid left empty) when more lie outside. An empty cloud is a valid grid.
-  bool build(const Positions& points, float cell);
+  /// `anchored`: the cells are those of the lattice of multiples of `cell` (a point's cell is
+  /// floor(x / cell) on each axis), not of the points' bounding box, so grids of one cell size
+  /// built on overlapping point sets order their common points alike (a tile and its cloud).
+  bool build(const Positions& points, float cell, bool anchored = false);
 
   float cell() const { return static_cast<float>(cell_); }
   /// Number of finite points.
@@ -90,11 +93,15 @@ class CellGrid {
   static std::uint64_t pack(std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | (y << 21) | (z << 42); }
   bool buildWindow(const Positions& points);
   std::uint64_t keyOf(const Eigen::Vector3f& p) const;
+  /// Cell coordinates of p (before the window's clamp), as doubles.
+  Eigen::Vector3d coordinates(const Eigen::Vector3f& p) const;
   void prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) const;
 
   double cell_ = 0, inv_ = 0;
   bool windowed_ = false;  // far points clamped into the border cells (see build)
   Eigen::Vector3d origin_ = Eigen::Vector3d::Zero();
+  bool anchored_ = false;
+  Eigen::Vector3d base_ = Eigen::Vector3d::Zero();  // anchored: the lattice cell of coordinate 0
   std::int64_t top_[3] = {0, 0, 0};  // largest occupied cell coordinate per axis
   std::vector<std::uint64_t> keys_;   // occupied cells, ascending
   std::vector<int> start_;            // first slot of each occupied cell, then size()

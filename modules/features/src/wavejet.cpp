@@ -879,8 +879,12 @@ TileCount estimateDistinctInTiles(const Positions& points, float& radius, Waveje
     // ball in a sparse spot), those points alone, on a halo grown to what they reached.
     Tile part = std::move(tiles[t]);
     const ProgressCallback sub = tileProgress(progress, t, tiles.size());
+    // A pass on a grown halo is its own stage (not the tile's bar starting again).
+    const ProgressCallback grown =
+        sub ? ProgressCallback([sub](const std::string& stage, float f) { return sub(stage + " (grown halo)", f); })
+            : ProgressCallback();
     float margin = 3 * radius;
-    while (!part.core.empty()) {
+    for (bool first = true; !part.core.empty(); first = false) {
       std::vector<int> ids(part.core.size() + part.halo.size());
       std::merge(part.core.begin(), part.core.end(), part.halo.begin(), part.halo.end(), ids.begin());
       count.largest = std::max(count.largest, ids.size());
@@ -900,7 +904,8 @@ TileCount estimateDistinctInTiles(const Positions& points, float& radius, Waveje
       std::vector<WavejetCoefficients> t_coefficients;
       std::vector<WavejetResult> res =
           estimateDistinct(gathered(points, ids), r, run, to.coefficients ? &t_coefficients : nullptr,
-                           initial_normals ? &t_initial : nullptr, orientation ? &t_orientation : nullptr, sub,
+                           initial_normals ? &t_initial : nullptr, orientation ? &t_orientation : nullptr,
+                           first ? sub : grown,
                            target_neighbours, t_count, t_support, nullptr, 1.f, &reach, &only);
       // The halo box holds every point within `margin` of a core point (float rounding aside).
       std::vector<int> again;

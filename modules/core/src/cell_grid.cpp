@@ -120,11 +120,14 @@ bool CellGrid::buildWindow(const Positions& points) {
   return true;
 }
 
-Eigen::Vector3d CellGrid::coordinates(const Eigen::Vector3f& p) const {
-  // Anchored: p / cell less a whole number is exact in double (|p / cell| < 2^52), so a point
+double CellGrid::coordinate(int axis, double v) const {
+  // Anchored: v / cell less a whole number is exact in double (|v / cell| < 2^52), so a point
   // falls in the same lattice cell whatever the base.
-  if (anchored_) return p.cast<double>() * inv_ - base_;
-  return (p.cast<double>() - origin_) * inv_;
+  return anchored_ ? v * inv_ - base_[axis] : (v - origin_[axis]) * inv_;
+}
+
+Eigen::Vector3d CellGrid::coordinates(const Eigen::Vector3f& p) const {
+  return {coordinate(0, p.x()), coordinate(1, p.y()), coordinate(2, p.z())};
 }
 
 std::uint64_t CellGrid::keyOf(const Eigen::Vector3f& p) const {
@@ -139,8 +142,8 @@ void CellGrid::prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) co
   const double slack = double(reach) * (1 + 1e-5);
   std::int64_t box[6];
   for (int a = 0; a < 3; ++a) {
-    const double lo = std::floor(anchored_ ? (double(q[a]) - slack) * inv_ - base_[a] : (double(q[a]) - slack - origin_[a]) * inv_);
-    const double hi = std::floor(anchored_ ? (double(q[a]) + slack) * inv_ - base_[a] : (double(q[a]) + slack - origin_[a]) * inv_);
+    const double lo = std::floor(coordinate(a, double(q[a]) - slack));
+    const double hi = std::floor(coordinate(a, double(q[a]) + slack));
     // Windowed: the box is clamped like the keys (a query outside scans the border cells).
     const double floor_at = windowed_ ? 0.0 : -1.0, ceil_at = double(top_[a]) + (windowed_ ? 0 : 1);
     box[2 * a] = static_cast<std::int64_t>(std::clamp(lo, floor_at, ceil_at));

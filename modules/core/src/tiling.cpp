@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <string>
 
 #include <paps/core/error.h>
@@ -116,21 +117,6 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
   return out;
 }
 
-std::vector<int> tileHalo(const Positions& points, const std::vector<int>& core, float margin) {
-  if (!(margin >= 0)) throw InvalidParameter("margin", std::to_string(margin), "a distance >= 0");
-  Box b = boxOf(points, core);
-  b.lo.array() -= margin;
-  b.hi.array() += margin;
-  std::vector<int> halo;
-  for (std::size_t i = 0; i < points.size(); ++i) {
-    const Eigen::Vector3f& p = points[i];
-    if (isFinite(p) && (p.array() >= b.lo.array()).all() && (p.array() <= b.hi.array()).all() &&
-        !std::binary_search(core.begin(), core.end(), static_cast<int>(i)))
-      halo.push_back(static_cast<int>(i));
-  }
-  return halo;
-}
-
 std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, const Positions& other, float margin) {
   Box b = boxOf(cloud, tile.core);
   b.lo.array() -= margin;
@@ -140,6 +126,15 @@ std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, cons
     if (isFinite(other[i]) && (other[i].array() >= b.lo.array()).all() && (other[i].array() <= b.hi.array()).all())
       inside.push_back(static_cast<int>(i));
   return inside;
+}
+
+std::vector<int> tileHalo(const Positions& points, const std::vector<int>& core, float margin) {
+  if (!(margin >= 0)) throw InvalidParameter("margin", std::to_string(margin), "a distance >= 0");
+  // The grown box's points of the cloud itself, less the core.
+  const std::vector<int> inside = pointsAroundTile(points, Tile{core, {}}, points, margin);
+  std::vector<int> halo;
+  std::set_difference(inside.begin(), inside.end(), core.begin(), core.end(), std::back_inserter(halo));
+  return halo;
 }
 
 ProgressCallback tileProgress(const ProgressCallback& progress, std::size_t tile, std::size_t tiles) {

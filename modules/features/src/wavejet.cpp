@@ -670,8 +670,6 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   ProgressReporter reporter(progress, "wavejets", points.size());
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(kNaN);
-  // Nearest first, ties by index: the order (and the cut) of narrowing and widening.
-  auto nearestFirst = [](const std::pair<float, int>& a, const std::pair<float, int>& b) { return a < b; };
   // The grid (below) keys its cells on the lattice of multiples of the radius, so a tile
   // orders its points as the whole cloud does: the fits see their balls in the same order.
   CellGrid grid;
@@ -693,7 +691,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     if (got < asked) return false;
     order.resize(got);
     for (int j = 0; j < got; ++j) order[j] = {(points[knn[j]] - q).squaredNorm(), slots ? slot_of[knn[j]] : knn[j]};
-    std::sort(order.begin(), order.end(), nearestFirst);
+    std::sort(order.begin(), order.end());
     if (!(order[n - 1].first < (1.f - 1e-5f) * order[got - 1].first)) return false;
     idx.resize(n);
     for (int j = 0; j < n; ++j) idx[j] = order[j].second;
@@ -703,7 +701,6 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   // `points`, ties by index), at their radius (R_phi at the point = max(R_phi, distance of its
   // widen_to-th nearest)). Returns the radius to use, or 0 when not widened (the points hold
   // fewer than `need` finite positions: NaN outputs as before, or the ball is full after all).
-  constexpr int kTreeExtra = 16;
   auto widenAt = [&](int i, std::vector<int>& idx, std::vector<int>& knn, std::vector<float>& kd2,
                      std::vector<std::pair<float, int>>& order) -> float {
     const Eigen::Vector3f& q = points[i];
@@ -721,7 +718,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
       index->radiusSearch(q, std::sqrt(far2) * (1.f + 1e-5f), knn, kd2);
       order.resize(knn.size());
       for (std::size_t j = 0; j < knn.size(); ++j) order[j] = {(points[knn[j]] - q).squaredNorm(), knn[j]};
-      std::sort(order.begin(), order.end(), nearestFirst);
+      std::sort(order.begin(), order.end());
       const int n = std::min<int>(widen_to, static_cast<int>(order.size()));
       idx.resize(n);
       for (int j = 0; j < n; ++j) idx[j] = order[j].second;
@@ -740,8 +737,8 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
     const int found = static_cast<int>(idx.size());
     order.resize(found);
     for (int j = 0; j < found; ++j) order[j] = {(pts[idx[j]] - q).squaredNorm(), idx[j]};
-    std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end(), nearestFirst);
-    std::sort(order.begin(), order.begin() + narrow_to, nearestFirst);
+    std::nth_element(order.begin(), order.begin() + (narrow_to - 1), order.end());
+    std::sort(order.begin(), order.begin() + narrow_to);
     for (int j = 0; j < narrow_to; ++j) idx[j] = order[j].second;
     idx.resize(narrow_to);
     return std::sqrt(order[narrow_to - 1].first);
@@ -771,6 +768,7 @@ std::vector<WavejetResult> estimateDistinct(const Positions& points, float& radi
   };
   // Uniform grid of cells of side R_phi (the shared core one); falls back to the kd-tree when
   // the extent is too large for it.
+  constexpr int kTreeExtra = 16;  // the kd-tree's extra answers for a crowded ball (below)
   if (gridded) {
     // Points visited in cell order and fitted on the grid's copy in that order (memory
     // locality; fitting on `points` cost 10-15%).

@@ -93,7 +93,8 @@ class CellGrid {
   static std::uint64_t pack(std::uint64_t x, std::uint64_t y, std::uint64_t z) { return x | (y << 21) | (z << 42); }
   bool buildWindow(const Positions& points);
   std::uint64_t keyOf(const Eigen::Vector3f& p) const;
-  /// Cell coordinates of p (before the window's clamp), as doubles.
+  /// Cell coordinate of v along `axis`, and of p (before the window's clamp), as doubles.
+  double coordinate(int axis, double v) const;
   Eigen::Vector3d coordinates(const Eigen::Vector3f& p) const;
   void prepare(const Eigen::Vector3f& q, float reach, Cursor& cursor) const;
 

@@ -17,13 +17,12 @@
 //  * Curvatures are signed with respect to the output normal: positive where the surface
 //    bends towards the normal (a sphere with outward normals has k1 = k2 = -1/r). k1 >= k2.
 #include <complex>
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 #include <vector>
 
 #include <paps/core/local_frame.h>
-#include <cstddef>
-
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 

@@ -72,7 +72,8 @@ const char* kUsage =
     "                   qsr-adapt: QSR on the raw scan with the opt-in noise-adaptive kernel; qsr-raw: QSR without\n"
     "                   denoising the input first; seeds-only: a control,\n"
     "                   the seeds on the noisy input's tangent discs, projected on no surface;\n"
-    "                   qsr-tiles, only when listed: QSR with the input cut into 4 tiles)\n";
+    "                   qsr-tiles, apss-tiles, rimls-tiles, only when listed: the method with the\n"
+    "                   input cut into 4 tiles)\n";
 
 // Child process: runs `method` on the scans in files sr_in0.bin, sr_in1.bin ... of `dir`.
 using SrResult = WorkerResult;
@@ -373,9 +374,12 @@ int runSuperresWorker(int argc, char** argv) {
          << r.grid_sr << " K-1 " << r.mean_similar_weight << " flat " << r.flat_fits << " ill-posed " << r.ill_posed_fits << " widened " << r.widened_fits << " thin " << r.thin_balls << " noise "
          << r.noise_sigma << " kernel " << r.kernel_scale << " denoised " << r.denoised << " tiles " << r.tiles << "\n";
     } else if (method == "apss" || method == "rimls" || method == "apss-refit" || method == "rimls-refit" ||
-               method == "apss-wide" || method == "rimls-wide") {
+               method == "apss-wide" || method == "rimls-wide" || method == "apss-tiles" || method == "rimls-tiles") {
       MlsUpsamplingParameters q;
       q.output_count = target;
+      // -tiles: the input in 4 tiles (the tiles of large scans, measured at bench size).
+      if (method.find("-tiles") != std::string::npos)
+        q.max_tile_points = std::max<std::size_t>(1000, (countFinite(scans[0]) + 3) / 4);
       q.fit_per_input_point = method.find("-refit") == std::string::npos;
       // -wide: seeds spread over discs as wide as QSR's (1.2 mean spacings).
       if (method.find("-wide") != std::string::npos) q.disc_scale = 1.7724539f;
@@ -400,7 +404,7 @@ int runSuperresWorker(int argc, char** argv) {
       const Positions den = denoiseBySimilarity(scans[0], q);
       out = pclMlsUpsample(den, "plane", get("radius", 0), target);
     } else {
-      throw InvalidParameter("method", method, "qsr[-adapt|-raw|-narrow|-even|-tiles], apss[-refit|-wide], rimls[-refit|-wide], pcl-mls-{plane,random,voxel}, simden+mls");
+      throw InvalidParameter("method", method, "qsr[-adapt|-raw|-narrow|-even|-tiles], apss[-refit|-wide|-tiles], rimls[-refit|-wide|-tiles], pcl-mls-{plane,random,voxel}, simden+mls");
     }
     const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     timespec c1{};
@@ -434,15 +438,15 @@ int runBenchSuperres(int argc, char** argv) {
   const std::vector<std::string> all_methods = {"qsr",           "qsr-narrow",     "qsr-even",       "qsr-adapt",      "qsr-4scans",     "apss",           "apss-refit",
                                                 "apss-wide",     "rimls",          "rimls-refit",    "rimls-wide",
                                                 "pcl-mls-plane", "pcl-mls-random", "pcl-mls-voxel",  "simden+mls",
-                                                "qsr-raw", "seeds-only", "qsr-tiles"};
-  // qsr-tiles only when asked: it measures the tiles, not a method of the table.
+                                                "qsr-raw", "seeds-only", "qsr-tiles", "apss-tiles", "rimls-tiles"};
+  // The tiled runs only when asked: they measure the tiles, not a method of the table.
   const std::vector<std::string> methods = a.has("methods") ? splitList(a.text("methods", ""))
-                                                            : std::vector<std::string>(all_methods.begin(), all_methods.end() - 1);
+                                                            : std::vector<std::string>(all_methods.begin(), all_methods.end() - 3);
   for (const auto& m : methods)
     if (std::find(all_methods.begin(), all_methods.end(), m) == all_methods.end())
       throw InvalidParameter("methods", m, "a comma-separated subset of qsr, qsr-narrow, qsr-even, qsr-adapt, qsr-4scans, apss, apss-refit, apss-wide, "
                                            "rimls, rimls-refit, rimls-wide, pcl-mls-plane, pcl-mls-random, "
-                                           "pcl-mls-voxel, simden+mls, qsr-raw, seeds-only, qsr-tiles");
+                                           "pcl-mls-voxel, simden+mls, qsr-raw, seeds-only, qsr-tiles, apss-tiles, rimls-tiles");
   const std::vector<std::string> shapes = splitList(a.text("shapes", "engraved-plane,rs1,scan-lines"));
   for (const auto& sh : shapes)
     if (sh != "engraved-plane" && sh != "rs1" && sh != "scan-lines")

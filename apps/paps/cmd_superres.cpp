@@ -63,9 +63,10 @@ const char* kSuperresUsage =
     "                         auto also denoises from 0.5% when the surface is smooth at the patch\n"
     "                         scale (scan-line bench: 17% closer to the ground); on denoises always,\n"
     "                         which costs detailed, quiet surfaces their detail\n"
-    "  --tile-points N        QSR: a first scan of more finite points is super-resolved in tiles of\n"
-    "                         at most N points, one at a time (memory: about 1.2 KB a point of a\n"
-    "                         tile at x2; default 2000000; 0: one piece whatever the size)\n"
+    "  --tile-points N        QSR, APSS, RIMLS: a first scan of more finite points is\n"
+    "                         super-resolved in tiles of at most N points, one at a time (memory:\n"
+    "                         QSR about 1.2 KB a point of a tile at x2; default 2000000; 0: one\n"
+    "                         piece whatever the size)\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
     "  --seed-disc S          radius of the tangent discs the output seeds are spread over, in mean\n"
@@ -101,7 +102,8 @@ int runSuperres(int argc, char** argv) {
                                    "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient",
                                    "keep-normals", "tile-points"});
   else if (method != "lpf")
-    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals"});
+    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals",
+                                   "tile-points"});
   requireOptionsOf(a, applies, "--method " + method);
   const std::string out_path = a.positional.back();
   // Parameters are checked before the scans are read, so a bad value fails at once.
@@ -254,12 +256,14 @@ int runSuperres(int argc, char** argv) {
     p.target_neighbours = a.integer("neighbours", p.target_neighbours);
     p.fit_per_input_point = !a.has("refit");
     p.max_neighbours = a.integer("max-neighbours", 0);
+    p.max_tile_points = a.count("tile-points", p.max_tile_points);
     if (a.has("seed-disc")) {
       const double disc = a.number("seed-disc", 0);
       requireInRange("seed-disc", disc, 0.1, 10.0);
       p.disc_scale = static_cast<float>(disc / kMlsDiscSpacingsAtScaleOne);
     }
-    validateAsOptions({{"target_neighbours", "neighbours"}, {"max_neighbours", "max-neighbours"}},
+    validateAsOptions({{"target_neighbours", "neighbours"}, {"max_neighbours", "max-neighbours"},
+                       {"max_tile_points", "tile-points"}},
                       [&] { p.validate(); });
     readScans();
     normalsFromInput();
@@ -269,6 +273,9 @@ int runSuperres(int argc, char** argv) {
                       normals_out ? &curvature : nullptr, carries() ? &source : nullptr);
     std::printf("%s: radius %g m%s, seeds spread over tangent discs of radius %g m\n", method.c_str(), r.radius,
                 p.radius > 0 ? "" : " (chosen)", r.disc_radius);
+    if (r.tiles > 1)
+      std::printf("%s: in %zu tiles (at most %zu points each, %zu with the halo its fits read)\n", method.c_str(), r.tiles,
+                  p.max_tile_points, r.largest_tile);
     if (r.capped)
       std::printf("%s: %zu input points hold at least %d neighbours within the radius (much denser than typical); "
                   "their kernels keep the nearest %d (--max-neighbours)\n",

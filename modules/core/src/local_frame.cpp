@@ -312,6 +312,29 @@ std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals
   return flips;
 }
 
+void turnComponentsToHints(Normals& normals, const NeighbourGraph& g, const Normals& hints) {
+  const std::size_t n = normals.size();
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  auto root = [&](int i) {
+    while (parent[i] != i) i = parent[i] = parent[parent[i]];
+    return i;
+  };
+  for (std::size_t i = 0; i < g.size(); ++i) {
+    const int* e = std::min(g.end(i), g.begin(i) + kPropagationNeighbours);
+    for (const int* j = g.begin(i); j != e; ++j) {
+      const int a = root(static_cast<int>(i)), b = root(*j);
+      if (a != b) parent[std::max(a, b)] = std::min(a, b);
+    }
+  }
+  std::vector<double> agreement(n, 0.0);
+  for (std::size_t i = 0; i < n; ++i)
+    if (isFinite(normals[i]) && isFinite(hints[i]) && hints[i].norm() > 0.5f)
+      agreement[root(static_cast<int>(i))] += normals[i].dot(hints[i]);
+  for (std::size_t i = 0; i < n; ++i)
+    if (agreement[root(static_cast<int>(i))] < 0) normals[i] = -normals[i];
+}
+
 int upwardSign(const Positions& points, const Normals& normals) {
   double z = 0, a = 0;
   int top = -1;

@@ -191,6 +191,16 @@ double meanNearestNeighbourDistance(const Positions& points, const SpatialIndex&
   return sum / static_cast<double>(n);
 }
 
+double sampledMeanNeighbourCount(const Positions& points, const SpatialIndex& index, float radius, int max_count,
+                                 std::size_t samples) {
+  std::vector<int> idx;
+  std::vector<float> d2;
+  double sum = 0;
+  const std::vector<int> sample = spreadSample(points, samples);
+  for (const int i : sample) sum += index.radiusSearch(points[i], radius, idx, d2, max_count);
+  return sample.empty() ? 0.0 : sum / static_cast<double>(sample.size());
+}
+
 float radiusForNeighbourCount(const Positions& points, const SpatialIndex& index, int target_count,
                               NeighbourCountStatistic statistic, int samples) {
   requireInRange("target_count", target_count, 2, 100000);

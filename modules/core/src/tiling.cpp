@@ -1,9 +1,14 @@
 #include <paps/core/tiling.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <cstdint>
 #include <iterator>
+#include <numeric>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include <paps/core/error.h>
 #include <paps/core/spatial_order.h>
@@ -173,6 +178,56 @@ Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8
     }
     return o;
   });
+}
+
+std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<std::size_t>& weights) {
+  const double sum = static_cast<double>(std::accumulate(weights.begin(), weights.end(), std::size_t(0)));
+  std::vector<std::size_t> share(weights.size(), 0);
+  if (!(sum > 0)) return share;
+  std::vector<std::pair<double, std::size_t>> rest;
+  std::size_t given = 0;
+  for (std::size_t t = 0; t < weights.size(); ++t) {
+    const double exact = static_cast<double>(total) * static_cast<double>(weights[t]) / sum;
+    share[t] = static_cast<std::size_t>(std::floor(exact));
+    given += share[t];
+    rest.push_back({exact - static_cast<double>(share[t]), t});
+  }
+  std::stable_sort(rest.begin(), rest.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
+  for (std::size_t k = 0; given < total && k < rest.size(); ++k, ++given) ++share[rest[k].second];
+  return share;
+}
+
+std::size_t occupiedCells(const Positions& points, const std::vector<int>& ids, float cell) {
+  std::vector<std::array<std::int64_t, 3>> keys;
+  keys.reserve(ids.size());
+  for (const int i : ids) {
+    const Eigen::Vector3d c = (points[i].cast<double>() / cell).array().floor();
+    keys.push_back({static_cast<std::int64_t>(c.x()), static_cast<std::int64_t>(c.y()), static_cast<std::int64_t>(c.z())});
+  }
+  std::sort(keys.begin(), keys.end());
+  return static_cast<std::size_t>(std::unique(keys.begin(), keys.end()) - keys.begin());
+}
+
+std::vector<std::size_t> runTileShares(const std::vector<std::size_t>& shares,
+                                       const std::function<bool(std::size_t, std::size_t)>& run,
+                                       const std::function<void(std::size_t)>& undo) {
+  std::vector<std::size_t> made;
+  std::size_t carried = 0, last_count = 0;
+  for (std::size_t t = 0; t < shares.size(); ++t) {
+    if (shares[t] + carried == 0) continue;
+    if (!run(t, shares[t] + carried)) {
+      carried += shares[t];
+      continue;
+    }
+    last_count = shares[t] + carried;
+    carried = 0;
+    made.push_back(t);
+  }
+  if (!made.empty() && carried > 0) {
+    undo(made.back());
+    run(made.back(), last_count + carried);
+  }
+  return made;
 }
 
 }  // namespace paps

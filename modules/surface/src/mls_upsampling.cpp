@@ -15,6 +15,7 @@
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
+#include <paps/core/tiling.h>
 
 namespace paps {
 
@@ -29,6 +30,9 @@ void MlsUpsamplingParameters::validate() const {
   requirePositive("sigma_r", sigma_r);
   requirePositive("sigma_n", sigma_n);
   requireInRange("disc_scale", disc_scale, 0.1f, 15.f);
+  if (max_tile_points != 0 && (max_tile_points < 1000 || max_tile_points >= (std::size_t(1) << 31)))
+    throw InvalidParameter("max_tile_points", std::to_string(max_tile_points),
+                           "0 (one piece) or a count from 1000 to below 2^31");
 }
 
 void checkOutputCount(std::size_t output_count, std::size_t input_points) {
@@ -1062,17 +1066,63 @@ PAPS_AVX2_CLONE __attribute__((noinline)) bool fitRimlsAtOrigin(Block& b, float 
 }  // namespace
 
 namespace {
+// No kernel anywhere holds 3 distinct points off a line.
+[[noreturn]] void throwNoNormalAnywhere(const MlsUpsamplingParameters& params, float h) {
+  if (params.radius > 0)
+    throw InvalidParameter("radius", detail::toString(h),
+                           "a kernel support holding at least 3 points around some point (none does: no normal)");
+  // The automatic support holds the target count, so its balls are all copies or lines.
+  throw InvalidInput("no ball of the automatic kernel support " + detail::toString(h) +
+                     " m holds 3 distinct points off a line (no normal anywhere): the cloud is piles of copies "
+                     "or lines; give a radius wide enough to reach other positions");
+}
+
+// The radius of the lists of projections refitted at every seed: past h by about the seed
+// disc at the target count, then by the disc actually used when it is wider (sparser than the
+// target count at a user radius).
+float firstListReach(float h, int target_neighbours) {
+  return h * (1.1f + 1.5f / std::sqrt(static_cast<float>(target_neighbours)));
+}
+float kernelListReach(float h, float disc, int target_neighbours) {
+  return std::max(firstListReach(h, target_neighbours), 1.05f * h + disc);
+}
+
+// What a tile adds to a run (upsampleInTiles): the kernel support and the seed disc, chosen on
+// the whole cloud; in the tile's order, which points seed the output (its core) and the
+// normals of the tiles before it where it meets them (NaN elsewhere); out, its oriented
+// normals, or that no ball of it has a normal (nothing made).
+struct MlsTileRun {
+  float h = 0.f, disc = 0.f;
+  std::vector<std::uint8_t> seedable;
+  Normals hints;
+  Normals oriented;
+  bool no_normal = false;
+};
+
 Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
                                  MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals_out,
-                                 std::vector<float>* curvature_out, std::vector<int>* source_out) {
+                                 std::vector<float>* curvature_out, std::vector<int>* source_out,
+                                 MlsTileRun* tile = nullptr) {
   const std::size_t finite = countFinite(points);
-  if (finite < 3) throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
-  checkOutputCount(params.output_count, finite);
+  // A tile with nothing to fit hands its share on; the whole cloud was checked.
+  auto nothingHere = [&] {
+    tile->no_normal = true;
+    return Positions();
+  };
+  if (finite < 3) {
+    if (tile) return nothingHere();
+    throw InvalidInput("APSS/RIMLS need at least 3 finite points (got " + detail::toString(finite) + ")");
+  }
+  // A tile's share follows the surface it covers, and its support was checked on the whole.
+  if (!tile) {
+    checkOutputCount(params.output_count, finite);
+    requireRadiusWithinExtent("radius", params.radius, points);
+  }
   // Kernel support h, then neighbour lists reaching past h by the seed disc radius, so that
   // the lists of an input point hold every point within h of the seeds generated from it.
-  requireRadiusWithinExtent("radius", params.radius, points);
-  float h = params.radius;
+  float h = tile ? tile->h : params.radius;
   if (h <= 0) {
+
     const SpatialIndex index(points);
     h = radiusForNeighbourCount(points, index, params.target_neighbours, NeighbourCountStatistic::Median);
   }
@@ -1084,21 +1134,12 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   // less than 0.1%): the lists at h serve for everything. Refitted at every seed, the
   // projections read past h by the seed disc.
   const bool only_h = per_point;
-  float reach = h * (1.1f + 1.5f / std::sqrt(static_cast<float>(params.target_neighbours)));
+  float reach = tile ? kernelListReach(h, tile->disc, params.target_neighbours) : firstListReach(h, params.target_neighbours);
   // Grid neighbour lists (core CellGrid): on scanned surfaces several times faster than
   // kd-tree radius searches, which dominated the cost of the whole upsampling.
   // Lists capped at the nearest max_neighbours (the same lists as uncapped where no ball holds
   // more).
   const int cap = params.max_neighbours > 0 ? params.max_neighbours : 16 * params.target_neighbours;
-  auto noNormalAnywhere = [&] {
-    if (params.radius > 0)
-      throw InvalidParameter("radius", detail::toString(h),
-                             "a kernel support holding at least 3 points around some point (none does: no normal)");
-    // The automatic support holds the target count, so its balls are all copies or lines.
-    throw InvalidInput("no ball of the automatic kernel support " + detail::toString(h) +
-                       " m holds 3 distinct points off a line (no normal anywhere): the cloud is piles of copies "
-                       "or lines; give a radius wide enough to reach other positions");
-  };
   // Mostly copies (3 points in 4 or more): the distinct positions are looked at first. A
   // kernel's capped list holds copies besides its distinct positions, which are among the cap
   // nearest distinct ones: when none of those lists has a normal, no kernel list can, and the
@@ -1109,7 +1150,10 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   if (copies * 4 >= finite * 3) {
     const Positions distinct = distinctPositions(points, first);
     const Normals n = estimateNormals(distinct, gridRadiusGraph(distinct, h, {}, cap));
-    if (std::none_of(n.begin(), n.end(), [](const Eigen::Vector3f& v) { return isFinite(v); })) noNormalAnywhere();
+    if (std::none_of(n.begin(), n.end(), [](const Eigen::Vector3f& v) { return isFinite(v); })) {
+      if (tile) return nothingHere();
+      throwNoNormalAnywhere(params, h);
+    }
   }
   NeighbourGraph graph_ext, graph_h;
   if (only_h) {
@@ -1119,30 +1163,46 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
     graph_h = restrictedGraph(points, graph_ext, h);
   }
   const double mean_count = std::max(1.0, graph_h.meanCount());
-  const float disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f * params.disc_scale;
-  if (!only_h && reach < 1.05f * h + disc) {  // sparser than the target count at a user radius
-    reach = 1.05f * h + disc;
+  const float disc = tile ? tile->disc : h / std::sqrt(static_cast<float>(mean_count)) * 1.2f * params.disc_scale;
+  if (!only_h && reach < kernelListReach(h, disc, params.target_neighbours)) {
+    reach = kernelListReach(h, disc, params.target_neighbours);
     graph_ext = gridRadiusGraph(points, reach, {}, cap);
   }
-  std::size_t capped = 0;
+  auto seeds = [&](std::size_t i) { return !tile || tile->seedable[i]; };
+  std::size_t capped = 0, capped_seeding = 0;
   {
     const NeighbourGraph& g = only_h ? graph_h : graph_ext;
-    for (std::size_t i = 0; i < g.size(); ++i) capped += g.count(i) >= cap;
+    for (std::size_t i = 0; i < g.size(); ++i)
+      if (g.count(i) >= cap) ++capped, capped_seeding += seeds(i);
   }
   const NeighbourGraph& lists = only_h ? graph_h : graph_ext;
   std::vector<float> variation;
   Normals normals = estimateNormals(points, graph_h, curvature_out ? &variation : nullptr);
-  if (std::none_of(normals.begin(), normals.end(), [](const Eigen::Vector3f& n) { return isFinite(n); }))
-    noNormalAnywhere();
+  const std::size_t np = points.size();
+  bool seeding_normal = false;
+  for (std::size_t i = 0; i < np && !seeding_normal; ++i) seeding_normal = seeds(i) && isFinite(normals[i]);
+  if (!seeding_normal) {
+    if (tile) return nothingHere();
+    throwNoNormalAnywhere(params, h);
+  }
   orientNormalsByPropagation(points, normals, graph_h);
+  // Only the core seeds in a tile (NaN normals spawn nothing); the halo is read by the fits.
+  Normals core_normals;
+  if (tile) {
+    turnComponentsToHints(normals, graph_h, tile->hints);
+    tile->oriented = normals;
+    core_normals = normals;
+    for (std::size_t i = 0; i < np; ++i)
+      if (!seeds(i)) core_normals[i] = Eigen::Vector3f::Constant(NAN);
+  }
   const std::size_t count = params.output_count ? params.output_count
                                                 : static_cast<std::size_t>(std::llround(params.factor * finite));
   std::vector<int> origin;
   // The lists are complete (and spare the thinner its grid) unless a ball was over the cap.
-  Positions out = upsamplingSeeds(points, normals, count, disc, params.seed, &origin, capped ? nullptr : &lists,
-                                  only_h ? h : reach);
+  Positions out = upsamplingSeeds(points, tile ? core_normals : normals, count, disc, params.seed, &origin,
+                                  capped ? nullptr : &lists, only_h ? h : reach);
+  Normals().swap(core_normals);
   // Seeds grouped by the input point they were generated from.
-  const std::size_t np = points.size();
   std::vector<std::int64_t> soff(np + 1, 0);
   for (const int o : origin) ++soff[o + 1];
   for (std::size_t i = 0; i < np; ++i) soff[i + 1] += soff[i];
@@ -1226,9 +1286,118 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
     report->radius = h;
     report->output = out.size();
     report->unprojected = unprojected;
-    report->capped = capped;
+    report->capped = capped_seeding;
+    report->tiles = 1;
+    report->largest_tile = np;
     report->max_neighbours = cap;
     report->disc_radius = disc;
+  }
+  return out;
+}
+
+// The tiled run (max_tile_points): the kernel support and the seed disc are chosen on the
+// whole cloud, as one piece chooses them; each tile then fits its core and halo, seeds from its
+// core only, and orients its normals as the tiles before it did where they meet. The halo
+// holds every point the core's fits read and the points their normals were estimated from.
+Positions upsampleInTiles(const Positions& points, MlsSurface surface, const MlsUpsamplingParameters& params,
+                          MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals_out,
+                          std::vector<float>* curvature_out, std::vector<int>* source_out) {
+  const std::size_t finite = countFinite(points);
+  checkOutputCount(params.output_count, finite);
+  requireRadiusWithinExtent("radius", params.radius, points);
+  const int cap = params.max_neighbours > 0 ? params.max_neighbours : 16 * params.target_neighbours;
+  float h = params.radius;
+  double mean_count = 0;
+  {
+    // On the cloud in spatial order, as one piece measures it (the radius's samples are drawn
+    // along the array): the same h. The disc follows the mean count of a spread sample where
+    // one piece takes the mean of its lists.
+    const Positions sorted = gathered(points, spatialOrderAll(points));
+    const SpatialIndex index(sorted);
+    if (h <= 0) h = radiusForNeighbourCount(sorted, index, params.target_neighbours, NeighbourCountStatistic::Median);
+    mean_count = std::max(1.0, sampledMeanNeighbourCount(sorted, index, h, cap, 20000));
+  }
+  MlsTileRun base;
+  base.h = h;
+  base.disc = h / std::sqrt(static_cast<float>(mean_count)) * 1.2f * params.disc_scale;
+  const float lists = params.fit_per_input_point ? h : kernelListReach(h, base.disc, params.target_neighbours);
+  const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, 1.01f * (lists + h));
+  const std::size_t total = params.output_count ? params.output_count
+                                                : static_cast<std::size_t>(std::llround(params.factor * finite));
+  // The oriented normals of the core points of the tiles done so far: the hints of the next.
+  Normals oriented(points.size(), Eigen::Vector3f::Constant(NAN));
+  Positions out;
+  if (normals_out) normals_out->clear();
+  if (curvature_out) curvature_out->clear();
+  if (source_out) source_out->clear();
+  MlsUpsamplingParameters run = params;
+  run.max_tile_points = 0;
+  std::vector<MlsUpsamplingReport> reports(tiles.size());
+  std::vector<std::size_t> starts(tiles.size(), 0);
+  std::size_t largest = 0;
+  auto runTile = [&](std::size_t t, std::size_t count) {
+    const Tile& tile = tiles[t];
+    std::vector<int> members(tile.core);
+    members.insert(members.end(), tile.halo.begin(), tile.halo.end());
+    largest = std::max(largest, members.size());
+    // In spatial order, as one piece runs.
+    std::vector<int> sorted = spatialOrderAll(gathered(points, members));
+    MlsTileRun tr = base;
+    tr.seedable.resize(sorted.size());
+    for (std::size_t k = 0; k < sorted.size(); ++k) {
+      tr.seedable[k] = static_cast<std::size_t>(sorted[k]) < tile.core.size();
+      sorted[k] = members[static_cast<std::size_t>(sorted[k])];
+    }
+    std::vector<int>().swap(members);
+    tr.hints = gathered(oriented, sorted);
+    run.output_count = count;
+    run.seed = params.seed + t;  // each tile draws its own seeds
+    Normals n;
+    std::vector<float> c;
+    std::vector<int> src;
+    const Positions o = upsampleInSpatialOrder(gathered(points, sorted), surface, run, &reports[t],
+                                               tileProgress(progress, t, tiles.size()), normals_out ? &n : nullptr,
+                                               curvature_out ? &c : nullptr, source_out ? &src : nullptr, &tr);
+    if (tr.no_normal) return false;
+    for (std::size_t k = 0; k < sorted.size(); ++k)
+      if (tr.seedable[k]) oriented[static_cast<std::size_t>(sorted[k])] = tr.oriented[k];
+    starts[t] = out.size();
+    out.insert(out.end(), o.begin(), o.end());
+    if (normals_out) normals_out->insert(normals_out->end(), n.begin(), n.end());
+    if (curvature_out) curvature_out->insert(curvature_out->end(), c.begin(), c.end());
+    if (source_out)
+      for (const int k : src) source_out->push_back(sorted[static_cast<std::size_t>(k)]);
+    return true;
+  };
+  // Each tile's share of the output (runTileShares), by the surface its core covers, counted
+  // in cells of the mean spacing or the seed disc, the larger.
+  const float cell = std::max(base.disc, h * std::sqrt(3.14159265f / static_cast<float>(mean_count)));
+  std::vector<std::size_t> cells;
+  for (const Tile& t : tiles) cells.push_back(occupiedCells(points, t.core, cell));
+  const std::vector<std::size_t> made = runTileShares(splitInProportion(total, cells), runTile, [&](std::size_t t) {
+    out.resize(starts[t]);
+    if (normals_out) normals_out->resize(starts[t]);
+    if (curvature_out) curvature_out->resize(starts[t]);
+    if (source_out) source_out->resize(starts[t]);
+  });
+  if (made.empty()) throwNoNormalAnywhere(params, h);
+  // The tiles' orientation runs on from the first tile, whose pieces were turned up on their
+  // own; the whole is turned as one piece turns a connected cloud.
+  if (normals_out && upwardSign(points, oriented) < 0)
+    for (Eigen::Vector3f& n : *normals_out) n = -n;
+  if (report) {
+    MlsUpsamplingReport rep;
+    rep.radius = h;
+    rep.output = out.size();
+    rep.max_neighbours = cap;
+    rep.disc_radius = base.disc;
+    rep.tiles = tiles.size();
+    rep.largest_tile = largest;
+    for (const std::size_t t : made) {
+      rep.unprojected += reports[t].unprojected;
+      rep.capped += reports[t].capped;
+    }
+    *report = rep;
   }
   return out;
 }
@@ -1238,6 +1407,8 @@ Positions upsampleMls(const Positions& points, MlsSurface surface, const MlsUpsa
                       MlsUpsamplingReport* report, const ProgressCallback& progress, Normals* normals,
                       std::vector<float>* curvature, std::vector<int>* source) {
   params.validate();
+  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points)
+    return upsampleInTiles(points, surface, params, report, progress, normals, curvature, source);
   // In Z order, as QSR: neighbourhood loops stay in cache, the output ignores the input order.
   const std::vector<int> order = spatialOrderAll(points);
   Positions out =

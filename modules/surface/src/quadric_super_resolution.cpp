@@ -289,32 +289,6 @@ struct TileRun {
   bool no_surface = false;  // out: every ball is collinear or one position (nothing made)
 };
 
-// Turns each connected component of the graph (as the propagation reads it: the first
-// kPropagationNeighbours entries of each list) whose normals disagree, summed over its points
-// with a usable hint, with those hints.
-void turnComponentsToHints(Normals& normals, const NeighbourGraph& g, const Normals& hints) {
-  const std::size_t n = normals.size();
-  std::vector<int> parent(n);
-  std::iota(parent.begin(), parent.end(), 0);
-  auto root = [&](int i) {
-    while (parent[i] != i) i = parent[i] = parent[parent[i]];
-    return i;
-  };
-  for (std::size_t i = 0; i < g.size(); ++i) {
-    const int* e = std::min(g.end(i), g.begin(i) + kPropagationNeighbours);
-    for (const int* j = g.begin(i); j != e; ++j) {
-      const int a = root(static_cast<int>(i)), b = root(*j);
-      if (a != b) parent[std::max(a, b)] = std::min(a, b);
-    }
-  }
-  std::vector<double> agreement(n, 0.0);
-  for (std::size_t i = 0; i < n; ++i)
-    if (isFinite(normals[i]) && isFinite(hints[i]) && hints[i].norm() > 0.5f)
-      agreement[root(static_cast<int>(i))] += normals[i].dot(hints[i]);
-  for (std::size_t i = 0; i < n; ++i)
-    if (agreement[root(static_cast<int>(i))] < 0) normals[i] = -normals[i];
-}
-
 Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const QuadricSuperResolutionParameters& params,
                                      QuadricSuperResolutionReport* report, const ProgressCallback& progress,
                                      Normals* normals_out, std::vector<float>* curvature_out,
@@ -1100,50 +1074,6 @@ Positions superResolveSorted(const std::vector<Positions>& scans, const QuadricS
   return out;
 }
 
-// `total` split over parts in proportion to `weights` (largest remainders, ties to the first).
-std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<std::size_t>& weights) {
-  const double sum = static_cast<double>(std::accumulate(weights.begin(), weights.end(), std::size_t(0)));
-  std::vector<std::size_t> share(weights.size(), 0);
-  if (!(sum > 0)) return share;
-  std::vector<std::pair<double, std::size_t>> rest;
-  std::size_t given = 0;
-  for (std::size_t t = 0; t < weights.size(); ++t) {
-    const double exact = static_cast<double>(total) * static_cast<double>(weights[t]) / sum;
-    share[t] = static_cast<std::size_t>(std::floor(exact));
-    given += share[t];
-    rest.push_back({exact - static_cast<double>(share[t]), t});
-  }
-  std::stable_sort(rest.begin(), rest.end(), [](const auto& a, const auto& b) { return a.first > b.first; });
-  for (std::size_t k = 0; given < total && k < rest.size(); ++k, ++given) ++share[rest[k].second];
-  return share;
-}
-
-// Cells of a grid of side `cell` that hold a point of `ids`: the surface they cover, up to a
-// factor that depends on its orientation only.
-std::size_t occupiedCells(const Positions& points, const std::vector<int>& ids, float cell) {
-  std::vector<std::array<std::int64_t, 3>> keys;
-  keys.reserve(ids.size());
-  for (const int i : ids) {
-    const Eigen::Vector3d c = (points[i].cast<double>() / cell).array().floor();
-    keys.push_back({static_cast<std::int64_t>(c.x()), static_cast<std::int64_t>(c.y()), static_cast<std::int64_t>(c.z())});
-  }
-  std::sort(keys.begin(), keys.end());
-  return static_cast<std::size_t>(std::unique(keys.begin(), keys.end()) - keys.begin());
-}
-
-// The mean neighbour count at R over 2000 points spread along `sorted`, capped as the neighbour
-// lists of a run are (4 x target_neighbours). One piece chooses the low-resolution grid from the
-// mean count of its (denoised) scan; tiles of a scan whose density varies would each choose
-// their own (table_scene_lms400 in 8 tiles: 6 x 6 for most points, 7 x 7 in one piece).
-double sampledMeanCount(const Positions& sorted, const SpatialIndex& index, float R, int target_neighbours) {
-  std::vector<int> idx;
-  std::vector<float> d2;
-  double sum = 0;
-  const std::vector<int> sample = spreadSample(sorted, 2000);
-  for (const int i : sample) sum += index.radiusSearch(sorted[i], R, idx, d2, 4 * target_neighbours);
-  return sample.empty() ? 0.0 : sum / static_cast<double>(sample.size());
-}
-
 // The tiled run (max_tile_points): the patch radius, the noise and the decision to denoise are
 // made on the whole first scan, as in one piece; each tile then runs QSR on its core and halo
 // (and the other scans' points around it), seeds from its core only, and orients its normals
@@ -1165,7 +1095,10 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
     rep.patch_radius = params.patch_radius > 0 ? params.patch_radius
                                                : radiusForNeighbourCount(sorted, index, params.target_neighbours);
     choice = chooseNoiseAndDenoising(sorted, index, rep.patch_radius, params);
-    if (!choice.denoise) mean_neighbours = sampledMeanCount(sorted, index, rep.patch_radius, params.target_neighbours);
+    // The low-resolution grid follows the mean count of the whole scan, as in one piece: tiles
+    // of a scan whose density varies would each choose their own (table_scene_lms400 in 8
+    // tiles: 6 x 6 for most points, 7 x 7 in one piece). Counted as the run's lists (4 x target).
+    if (!choice.denoise) mean_neighbours = sampledMeanNeighbourCount(sorted, index, rep.patch_radius, 4 * params.target_neighbours);
   }
   if (!(rep.patch_radius > 0)) {  // no radius to cut by (a pile of copies): one piece says what it is
     QuadricSuperResolutionParameters one = params;
@@ -1184,7 +1117,7 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
                              : scans[s]);
     rep.denoised = true;
     const Positions sorted = gathered(denoised[0], spatialOrderAll(denoised[0]));
-    mean_neighbours = sampledMeanCount(sorted, SpatialIndex(sorted), R, params.target_neighbours);
+    mean_neighbours = sampledMeanNeighbourCount(sorted, SpatialIndex(sorted), R, 4 * params.target_neighbours);
   }
   const std::vector<Positions>& in = choice.denoise ? denoised : scans;
   QuadricSuperResolutionParameters run = params;
@@ -1209,8 +1142,13 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
   if (source_out) source_out->clear();
   // Runs tile t for `count` output points, appended to the outputs; false (nothing appended)
   // when the tile holds no surface.
-  auto runTile = [&](std::size_t t, std::size_t count, QuadricSuperResolutionReport& r) {
+  std::vector<QuadricSuperResolutionReport> reports(tiles.size());
+  std::vector<std::size_t> starts(tiles.size(), 0);
+  auto runTile = [&](std::size_t t, std::size_t count) {
     const Tile& tile = tiles[t];
+    QuadricSuperResolutionReport& r = reports[t];
+    r = QuadricSuperResolutionReport();
+    starts[t] = out.size();
     std::vector<int> members(tile.core);
     members.insert(members.end(), tile.halo.begin(), tile.halo.end());
     rep.largest_tile = std::max(rep.largest_tile, members.size());
@@ -1237,46 +1175,26 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
       for (const int k : src) source_out->push_back(members[static_cast<std::size_t>(k)]);
     return true;
   };
-  // Each tile's share of the output: one piece spreads it evenly over the surface (Poisson
-  // disks), so a tile gets it in proportion to the surface its core covers, counted in cells
-  // of about the seed disc (a share per point would crowd the densely sampled tiles: the
-  // scan's near field, a wire). A tile with no surface (lines, piles) makes nothing and hands
-  // its share to the next; when the last tiles make nothing, the last tile that made any is
-  // run again with their shares.
+  // Each tile's share of the output (runTileShares), by the surface its core covers, counted
+  // in cells of about the seed disc.
   const float cell = std::max(params.seed_disc, 1.f) * R * std::sqrt(3.14159265f / params.target_neighbours);
   std::vector<std::size_t> cells;
   for (const Tile& t : tiles) cells.push_back(occupiedCells(in[0], t.core, cell));
-  const std::vector<std::size_t> shares = splitInProportion(total, cells);
-  std::vector<std::pair<std::size_t, QuadricSuperResolutionReport>> done;  // tile, its report
-  std::size_t carried = 0, last_start = 0, last_count = 0;
-  for (std::size_t t = 0; t < tiles.size(); ++t) {
-    if (shares[t] + carried == 0) continue;
-    QuadricSuperResolutionReport r;
-    const std::size_t start = out.size();
-    if (!runTile(t, shares[t] + carried, r)) {
-      carried += shares[t];
-      continue;
-    }
-    last_start = start;
-    last_count = shares[t] + carried;
-    carried = 0;
-    done.push_back({t, r});
-  }
-  if (done.empty()) throw noSurfaceAnywhere(R);
-  if (carried > 0) {
-    out.resize(last_start);
-    if (normals_out) normals_out->resize(last_start);
-    if (curvature_out) curvature_out->resize(last_start);
-    if (source_out) source_out->resize(last_start);
-    runTile(done.back().first, last_count + carried, done.back().second);
-  }
+  const std::vector<std::size_t> made = runTileShares(splitInProportion(total, cells), runTile, [&](std::size_t t) {
+    out.resize(starts[t]);
+    if (normals_out) normals_out->resize(starts[t]);
+    if (curvature_out) curvature_out->resize(starts[t]);
+    if (source_out) source_out->resize(starts[t]);
+  });
+  if (made.empty()) throw noSurfaceAnywhere(R);
   // The tiles' orientation runs on from the first tile, whose pieces were turned up on their
   // own; the whole is turned as one piece turns a connected scan (a closed surface out).
   if (normals_out && upwardSign(in[0], oriented) < 0)
     for (Eigen::Vector3f& n : *normals_out) n = -n;
   double weighed = 0, rsim = 0, neighbours = 0, similar = 0, spacing = 0, disc = 0, kernel = 0;
   std::map<std::pair<int, int>, std::size_t> grids;  // (grid_lr, grid_sr): core points of the tiles that chose them
-  for (const auto& [t, r] : done) {
+  for (const std::size_t t : made) {
+    const QuadricSuperResolutionReport& r = reports[t];
     const double w = static_cast<double>(tiles[t].core.size());
     weighed += w;
     rsim += w * r.similarity_radius;

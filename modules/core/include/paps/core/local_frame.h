@@ -60,6 +60,13 @@ constexpr int kPropagationNeighbours = 10;
 std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
                                        const NeighbourGraph& graph);
 
+/// For a stage run in tiles: turns each connected component of `graph` (as
+/// orientNormalsByPropagation reads it: the first kPropagationNeighbours entries of each list)
+/// whose normals disagree with `hints` (the sum of n.h over its points with a finite, unit
+/// hint is negative), so that the tile goes on from the normals of the tiles before it where
+/// they meet. Components without a hint stay as they are.
+void turnComponentsToHints(Normals& normals, const NeighbourGraph& graph, const Normals& hints);
+
 /// +1 or -1: the sign that turns a group of consistently oriented normals up, by
 /// orientNormalsByPropagation's rule for a connected component: their summed z when they
 /// point one way on the whole, else the normal of the highest point within 60 degrees of

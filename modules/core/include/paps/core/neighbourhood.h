@@ -109,6 +109,13 @@ enum class NeighbourCountStatistic {
 /// (finite count / samples)-th finite point, in array order): indices into `points`.
 std::vector<int> spreadSample(const Positions& points, std::size_t samples);
 
+/// Mean neighbour count (self included) at `radius` over spreadSample(points, samples), at
+/// most `max_count` counted per ball (0: all); `index` built on `points`. For a stage run in
+/// tiles that sizes something by the whole cloud's count, as one piece does by its lists'.
+/// 0 when no point is finite.
+double sampledMeanNeighbourCount(const Positions& points, const SpatialIndex& index, float radius, int max_count,
+                                 std::size_t samples = 2000);
+
 /// Mean distance (metres) from each finite point to its nearest other point (0 for an exact
 /// duplicate), `index` built on `points`. Throws InvalidInput when there are fewer than 2
 /// finite points.

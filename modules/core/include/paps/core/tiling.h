@@ -75,4 +75,25 @@ Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8
                            const ProgressCallback& progress = {}, std::vector<std::uint8_t>* status = nullptr,
                            std::uint8_t pile_status = 0, std::size_t* largest_tile = nullptr);
 
+/// `total` split over parts in proportion to `weights` (largest remainders, ties to the first
+/// part); all zero when the weights sum to 0.
+std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<std::size_t>& weights);
+
+/// Cells of a grid of side `cell` (metres, lattice of its multiples) holding a point of `ids`:
+/// the surface those points cover, up to a factor of its orientation. An upsampling stage
+/// gives each tile its share of the output by it: one piece spreads the output evenly over the
+/// surface, and a share per input point would crowd the densely sampled tiles (a scan's near
+/// field, a wire).
+std::size_t occupiedCells(const Positions& points, const std::vector<int>& ids, float cell);
+
+/// An upsampling stage run tile by tile, each with its share of the output (`shares`, one per
+/// tile): `run(t, count)` appends `count` points made from tile t and returns true, or appends
+/// nothing and returns false when the tile holds no surface (lines, piles of copies); its
+/// share then goes to the next tile. When the last tiles hold none, `undo(t)` drops what the
+/// last tile t that made any appended, and that tile runs again with their shares too, so the
+/// total is always sum(shares). Returns the tiles that made output, in order (empty: none did).
+std::vector<std::size_t> runTileShares(const std::vector<std::size_t>& shares,
+                                       const std::function<bool(std::size_t, std::size_t)>& run,
+                                       const std::function<void(std::size_t)>& undo);
+
 }  // namespace paps

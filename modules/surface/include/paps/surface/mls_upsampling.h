@@ -64,6 +64,13 @@ struct MlsUpsamplingParameters {
   float disc_scale = 1.f;
   /// Seed of the seed points.
   std::uint64_t seed = 1;
+  /// A cloud of more finite points is upsampled in tiles of at most this many (a core, plus a
+  /// halo of every point its fits read), one after the other: the working memory of a tile.
+  /// The kernel support and the seed disc are chosen on the whole cloud; each tile gets a
+  /// share of the output by the surface it covers and orients its normals as the tiles before
+  /// it where they meet. The seeds of two tiles are thinned apart, so a seam can hold seeds
+  /// closer than the Poisson-disk radius. 0: one piece whatever the size; else 1000 to 2^31 - 1.
+  std::size_t max_tile_points = 2000000;
   void validate() const;
 };
 
@@ -76,6 +83,8 @@ struct MlsUpsamplingReport {
   std::size_t capped = 0;       ///< input points whose kernel holds max_neighbours (the cap)
   int max_neighbours = 0;       ///< the cap used
   float disc_radius = 0.f;      ///< radius of the tangent discs the seeds were spread over
+  std::size_t tiles = 1;        ///< tiles the cloud was upsampled in (1: one piece)
+  std::size_t largest_tile = 0; ///< most points a tile held, halo included (one piece: all)
 };
 
 /// Upsamples `points` (NaN entries ignored). Throws InvalidInput for fewer than 3 finite points.

@@ -585,3 +585,26 @@ TEST(UpwardSign, FollowsThePropagationsRuleForAComponent) {
   plate.emplace_back(0.f, 0.f, 5.f);
   EXPECT_EQ(paps::upwardSign(plate, down), -1);
 }
+
+// A tile's components take the side of the hints where they have some: two separate spheres,
+// each oriented out; hints (the tiles before) say "in" on a few points of the first one and
+// "out" on a few of the second; the first is turned whole, the second kept, and a component
+// without hints stays as it was. Hints that are NaN or not unit are ignored.
+TEST(TurnComponentsToHints, EachComponentTakesTheSideOfItsHints) {
+  Positions pts = fibonacciSphere(1500);
+  const std::size_t n1 = pts.size();
+  for (const auto& p : fibonacciSphere(1500)) pts.push_back(p + Eigen::Vector3f(5.f, 0.f, 0.f));
+  for (const auto& p : fibonacciSphere(1500)) pts.push_back(p + Eigen::Vector3f(0.f, 5.f, 0.f));
+  Shape s = withRadiusGraph(pts, 0.2f);
+  const Eigen::Vector3f centres[3] = {Eigen::Vector3f::Zero(), Eigen::Vector3f(5.f, 0.f, 0.f), Eigen::Vector3f(0.f, 5.f, 0.f)};
+  for (std::size_t i = 0; i < pts.size(); ++i) s.normals[i] = (pts[i] - centres[i / n1]).normalized();
+  Normals hints(pts.size(), Eigen::Vector3f::Constant(NAN));
+  for (std::size_t i = 0; i < 20; ++i) hints[i] = -s.normals[i];                   // first: in
+  for (std::size_t i = n1; i < n1 + 20; ++i) hints[i] = s.normals[i];              // second: out
+  hints[n1 + 30] = -0.1f * s.normals[n1 + 30];                                      // not unit: ignored
+  paps::turnComponentsToHints(s.normals, s.graph, hints);
+  for (std::size_t i = 0; i < pts.size(); ++i) {
+    const float side = s.normals[i].dot(pts[i] - centres[i / n1]);
+    ASSERT_EQ(side < 0, i < n1) << i;
+  }
+}

@@ -604,3 +604,23 @@ TEST(ExactDuplicateRepresentatives, EveryPointTwiceInShuffledOrder) {
 }
 
 }  // namespace
+
+// The mean count over a spread sample: on a regular grid every interior ball at 1.01 spacings
+// holds 5 points (self and 4 neighbours), the corners 3 and the edges 4; the cap counts at most
+// that many per ball; non-finite points are not sampled.
+TEST(SampledMeanNeighbourCount, KnownCountsOnAGrid) {
+  Positions grid;
+  for (int j = 0; j < 50; ++j)
+    for (int i = 0; i < 50; ++i) grid.emplace_back(0.1f * i, 0.1f * j, 0.f);
+  grid.emplace_back(NAN, 0.f, 0.f);
+  const SpatialIndex index(grid);
+  // All 2,500 points sampled: 4 corners of 3, 192 edge points of 4, 2,304 interior of 5.
+  const double all = (4 * 3 + 192 * 4 + 2304 * 5) / 2500.0;
+  EXPECT_NEAR(paps::sampledMeanNeighbourCount(grid, index, 0.101f, 0, 5000), all, 1e-9);
+  EXPECT_NEAR(paps::sampledMeanNeighbourCount(grid, index, 0.101f, 2, 5000), 2.0, 1e-9);
+  const double sampled = paps::sampledMeanNeighbourCount(grid, index, 0.101f, 0, 100);
+  EXPECT_GE(sampled, 3.0);
+  EXPECT_LE(sampled, 5.0);
+  const Positions none{Eigen::Vector3f::Constant(NAN)};
+  EXPECT_EQ(paps::sampledMeanNeighbourCount(none, SpatialIndex(none), 1.f, 0), 0.0);
+}

@@ -294,3 +294,79 @@ TEST(Tiling, PointsAroundATileAndItsProgress) {
   EXPECT_EQ(names.front(), "subset 3/3: noise");
   EXPECT_FALSE(static_cast<bool>(paps::partProgress({}, "subset", 0, 3)));
 }
+
+// An upsampling stage's shares: largest remainders (ties to the first part), the exact total.
+TEST(Tiling, SharesInProportionAddUpToTheTotal) {
+  EXPECT_EQ(paps::splitInProportion(10, {1, 1, 1}), (std::vector<std::size_t>{4, 3, 3}));
+  EXPECT_EQ(paps::splitInProportion(10, {0, 2, 3}), (std::vector<std::size_t>{0, 4, 6}));
+  EXPECT_EQ(paps::splitInProportion(7, {0, 0}), (std::vector<std::size_t>{0, 0}));
+  EXPECT_EQ(paps::splitInProportion(0, {5, 1}), (std::vector<std::size_t>{0, 0}));
+  const std::vector<std::size_t> w{7, 11, 13, 17, 19};
+  const std::vector<std::size_t> s = paps::splitInProportion(1000003, w);
+  std::size_t sum = 0;
+  for (std::size_t t = 0; t < s.size(); ++t) {
+    sum += s[t];
+    EXPECT_NEAR(static_cast<double>(s[t]), 1000003.0 * static_cast<double>(w[t]) / 67.0, 1.0);
+  }
+  EXPECT_EQ(sum, 1000003u);
+}
+
+// Occupied cells count the surface, not the points: a 10 x 10 patch of 0.1 m cells holds 100
+// cells however densely it is sampled; cells sit on the lattice of multiples of their side.
+TEST(Tiling, OccupiedCellsCountTheSurfaceNotThePoints) {
+  paps::Positions p;
+  std::vector<int> sparse, dense;
+  for (int i = 0; i < 40; ++i)
+    for (int j = 0; j < 40; ++j) {
+      dense.push_back(static_cast<int>(p.size()));
+      if (i % 4 == 0 && j % 4 == 0) sparse.push_back(static_cast<int>(p.size()));
+      p.emplace_back(0.0125f + 0.025f * i, 0.0125f + 0.025f * j, 0.05f);
+    }
+  EXPECT_EQ(paps::occupiedCells(p, dense, 0.1f), 100u);
+  EXPECT_EQ(paps::occupiedCells(p, sparse, 0.1f), 100u);
+  EXPECT_EQ(paps::occupiedCells(p, {0}, 0.1f), 1u);
+  EXPECT_EQ(paps::occupiedCells(p, {}, 0.1f), 0u);
+  EXPECT_EQ(paps::occupiedCells(p, dense, 0.5f), 4u);
+}
+
+// Tiles without surface hand their shares on; when the last ones have none, the last tile
+// that made points runs again with them; the total is kept; none anywhere: nothing made.
+TEST(Tiling, TileSharesCarryOverTilesWithoutSurface) {
+  struct Run {
+    std::vector<bool> surface;
+    std::vector<std::pair<std::size_t, std::size_t>> calls;  // (tile, count)
+    std::vector<std::size_t> undone;
+    std::size_t made = 0;
+    std::vector<std::size_t> go(const std::vector<std::size_t>& shares) {
+      std::vector<std::size_t> per(shares.size(), 0);
+      const std::vector<std::size_t> tiles = paps::runTileShares(
+          shares,
+          [&](std::size_t t, std::size_t count) {
+            calls.push_back({t, count});
+            if (!surface[t]) return false;
+            per[t] = count;
+            made += count;
+            return true;
+          },
+          [&](std::size_t t) {
+            undone.push_back(t);
+            made -= per[t];
+          });
+      return tiles;
+    }
+  };
+  Run a{{true, false, true, false, false}};
+  EXPECT_EQ(a.go({3, 4, 5, 6, 0}), (std::vector<std::size_t>{0, 2}));
+  EXPECT_EQ(a.calls, (std::vector<std::pair<std::size_t, std::size_t>>{{0, 3}, {1, 4}, {2, 9}, {3, 6}, {4, 6}, {2, 15}}));
+  EXPECT_EQ(a.undone, (std::vector<std::size_t>{2}));
+  EXPECT_EQ(a.made, 18u);
+  Run b{{false, true}};
+  EXPECT_EQ(b.go({2, 0}), (std::vector<std::size_t>{1}));  // a zero share still takes the carried part
+  EXPECT_EQ(b.made, 2u);
+  Run c{{false, false}};
+  EXPECT_TRUE(c.go({2, 3}).empty());
+  EXPECT_TRUE(c.undone.empty());
+  Run d{{true, true}};
+  EXPECT_EQ(d.go({0, 5}), (std::vector<std::size_t>{1}));  // a tile with nothing to make is not run
+  EXPECT_EQ(d.calls.size(), 1u);
+}

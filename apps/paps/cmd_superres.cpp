@@ -63,10 +63,10 @@ const char* kSuperresUsage =
     "                         auto also denoises from 0.5% when the surface is smooth at the patch\n"
     "                         scale (scan-line bench: 17% closer to the ground); on denoises always,\n"
     "                         which costs detailed, quiet surfaces their detail\n"
-    "  --tile-points N        QSR, APSS, RIMLS: a first scan of more finite points is\n"
-    "                         super-resolved in tiles of at most N points, one at a time (memory:\n"
-    "                         QSR about 1.2 KB a point of a tile at x2; default 2000000; 0: one\n"
-    "                         piece whatever the size)\n"
+    "  --tile-points N        a first scan of more finite points is super-resolved in tiles of at\n"
+    "                         most N points, one at a time (memory: QSR about 1.2 KB a point of a\n"
+    "                         tile at x2, LPF 1.5 KB; default 2000000; 0: one piece whatever the\n"
+    "                         size)\n"
     "  --refit                APSS/RIMLS: refit at every output point instead of once per input\n"
     "                         point (slower, slightly more accurate)\n"
     "  --seed-disc S          radius of the tangent discs the output seeds are spread over, in mean\n"
@@ -96,14 +96,13 @@ int runSuperres(int argc, char** argv) {
     throw InvalidParameter("method", method, "qsr, apss, rimls or lpf");
   // An option of another method would be silently ignored: refused instead (LPF sets its
   // density by --factor and gives no normals; APSS and RIMLS have no thin-ball test).
-  std::vector<std::string> applies = {"factor", "method", "radius", "neighbours", "quiet", "timings"};
+  std::vector<std::string> applies = {"factor", "method", "radius", "neighbours", "quiet", "timings", "tile-points"};
   if (method == "qsr")
     applies.insert(applies.end(), {"count", "similarity", "grid-lr", "grid-sr", "patches", "kernel", "similarity-scale",
                                    "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient",
-                                   "keep-normals", "tile-points"});
+                                   "keep-normals"});
   else if (method != "lpf")
-    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals",
-                                   "tile-points"});
+    applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals"});
   requireOptionsOf(a, applies, "--method " + method);
   const std::string out_path = a.positional.back();
   // Parameters are checked before the scans are read, so a bad value fails at once.
@@ -159,13 +158,17 @@ int runSuperres(int argc, char** argv) {
     p.factor = a.real("factor", p.factor);
     p.probing.radius = a.real("radius", 0);
     p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
-    p.validate();
+    p.max_tile_points = a.count("tile-points", p.max_tile_points);
+    validateAsOptions({{"max_tile_points", "tile-points"}}, [&] { p.validate(); });
     readScans();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     LpfResamplingReport r;
     out = lpfResample(scans[0], p, &r, progress);
     std::printf("lpf: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %zu proposals\n", r.radius,
                 p.probing.radius > 0 ? "" : " (chosen)", r.step, r.pattern_nodes, r.fields, r.proposals);
+    if (r.tiles > 1)
+      std::printf("lpf: in %zu tiles (at most %zu points each, %zu with the halo its fields read)\n", r.tiles,
+                  p.max_tile_points, r.largest_tile);
   } else if (method == "qsr") {
     QuadricSuperResolutionParameters p;
     p.factor = a.real("factor", p.factor);

@@ -303,9 +303,9 @@ elseif(CASE STREQUAL "denoise_subsets")
   run_paps(denoise ${input} ${output} --max-noise-ratio -1 --quiet)
   expect_one_error_line("max-noise-ratio")
 elseif(CASE STREQUAL "superres_tiles")
-  # --tile-points (QSR, APSS, RIMLS): a scan above the limit is super-resolved in tiles and says
-  # so, with the count of one piece; below it (and with 0) one piece; a count under 1000 is one
-  # error line naming the option, and so is the option with LPF (not tiled).
+  # --tile-points (every method): a scan above the limit is super-resolved in tiles and says
+  # so, with the count of one piece (LPF: about the factor); below it (and with 0) one piece; a
+  # count under 1000 is one error line naming the option.
   write_input(3000)
   run_paps(superres ${input} ${output} --tile-points 1000 --factor 2 --quiet)
   expect_success_saying("in 4 tiles \\(at most 1000 points each")
@@ -333,7 +333,13 @@ elseif(CASE STREQUAL "superres_tiles")
     run_paps(superres ${input} ${output} --method ${method} --tile-points 999 --quiet)
     expect_one_error_line("tile-points")
   endforeach()
-  run_paps(superres ${input} ${output} --method lpf --tile-points 1000 --quiet)
+  run_paps(superres ${input} ${output} --method lpf --tile-points 1000 --factor 2 --quiet)
+  expect_success_saying("lpf: in 4 tiles \\(at most 1000 points each")
+  if(NOT out MATCHES "wrote [^\n]*: [3-9][0-9][0-9][0-9] points")
+    message(FATAL_ERROR "lpf tiles did not about double the points: ${out}")
+  endif()
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --method lpf --tile-points 999 --quiet)
   expect_one_error_line("tile-points")
 elseif(CASE STREQUAL "mesh_tools")
   # sample-mesh and mesh-distance on a unit square (z = 0): clean samples lie on it, noisy

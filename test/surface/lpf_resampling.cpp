@@ -1,6 +1,7 @@
 // Tests of paps/surface/lpf_resampling.h: a clean plate and a clean wire are resampled
 // denser without leaving them; on the plate and wires with noise the output is closer to
 // the true shape than APSS's at the same count; determinism, order, the pcl stage, errors.
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -157,3 +158,90 @@ TEST(LpfResampling, BadInputAndParametersAreNamed) {
 }
 
 }  // namespace
+
+namespace {
+// Distance of each point to its nearest other point, sorted.
+std::vector<float> sortedNearestDistances(const Positions& a) {
+  const paps::SpatialIndex index(a);
+  std::vector<int> idx;
+  std::vector<float> d2, d;
+  for (const auto& p : a) {
+    index.nearestK(p, 2, idx, d2);
+    d.push_back(std::sqrt(d2[1]));
+  }
+  std::sort(d.begin(), d.end());
+  return d;
+}
+}  // namespace
+
+// Tiles (max_tile_points): the pattern radius is the whole cloud's, the output as dense and as
+// close to the plate and wires as in one piece, and the consensus runs on across the seams:
+// no two output points closer than tau (0.7 x the step) in tiles either.
+TEST(LpfResampling, TilesKeepTheDensityTheAccuracyAndTheConsensusAcrossSeams) {
+  const auto shape = paps::synthetic::plateAndWires(16000, 3);
+  Positions in = shape.points;
+  paps::synthetic::addGaussianNoise(in, 0.0005f, 5);
+  auto rms = [](const Positions& p) {
+    double s = 0;
+    for (const auto& x : p) s += std::pow(paps::synthetic::distanceToPlateAndWires(x), 2);
+    return std::sqrt(s / static_cast<double>(p.size()));
+  };
+  LpfResamplingParameters p;
+  LpfResamplingReport one, tiled;
+  const Positions a = paps::lpfResample(in, p, &one);
+  p.max_tile_points = 4000;
+  const Positions b = paps::lpfResample(in, p, &tiled);
+  const std::vector<float> na = sortedNearestDistances(a), nb = sortedNearestDistances(b);
+  const float tau = 0.7f * one.step;
+  std::printf("one piece: %zu points, RMS %.4e, closest pair %.4e; %zu tiles (largest %zu): %zu points, RMS %.4e, "
+              "closest pair %.4e; tau %.4e; fields %zu / %zu\n",
+              a.size(), rms(a), na.front(), tiled.tiles, tiled.largest_tile, b.size(), rms(b), nb.front(), tau,
+              one.fields, tiled.fields);
+  EXPECT_EQ(one.tiles, 1u);
+  EXPECT_EQ(one.largest_tile, in.size());
+  EXPECT_GE(tiled.tiles, 4u);
+  EXPECT_GT(tiled.largest_tile, 4000u);
+  EXPECT_EQ(tiled.radius, one.radius);
+  EXPECT_EQ(tiled.step, one.step);
+  EXPECT_EQ(tiled.output, b.size());
+  EXPECT_NEAR(static_cast<double>(b.size()), static_cast<double>(a.size()), 0.03 * static_cast<double>(a.size()));
+  EXPECT_LT(rms(b), 1.1 * rms(a));
+  // Kept points are more than tau apart (to the rounding of the index's distances).
+  EXPECT_GT(na.front(), 0.999f * tau);
+  EXPECT_GT(nb.front(), 0.999f * tau);
+  // The same in tiles whatever the thread count and the order of the points; the PCL stage
+  // gives the function's output.
+  const int saved = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const Positions c = paps::lpfResample(in, p);
+  omp_set_num_threads(saved);
+  EXPECT_TRUE(c == b);
+  const Positions reversed(in.rbegin(), in.rend());
+  EXPECT_TRUE(paps::lpfResample(reversed, p) == b);
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  paps::writePositions(in, *cloud);
+  paps::LpfResampling<pcl::PointXYZ> stage;
+  stage.setParameters(p);
+  stage.setInputCloud(cloud);
+  pcl::PointCloud<pcl::PointXYZ> out;
+  stage.process(out);
+  ASSERT_EQ(out.size(), b.size());
+  for (std::size_t i = 0; i < out.size(); ++i) ASSERT_EQ(out[i].getVector3fMap(), b[i]) << i;
+  EXPECT_EQ(stage.getReport().tiles, tiled.tiles);
+}
+
+TEST(LpfResampling, TileParametersAreChecked) {
+  LpfResamplingParameters p;
+  p.max_tile_points = 999;
+  EXPECT_THROW(p.validate(), paps::InvalidParameter);
+  p.max_tile_points = std::size_t(1) << 31;
+  EXPECT_THROW(p.validate(), paps::InvalidParameter);
+  p.max_tile_points = 0;
+  p.validate();
+  p.tile_margin = 2.f;
+  EXPECT_THROW(p.validate(), paps::InvalidParameter);
+  p.tile_margin = NAN;
+  EXPECT_THROW(p.validate(), paps::InvalidParameter);
+  p.tile_margin = 10.f;
+  p.validate();
+}

@@ -9,7 +9,9 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
+#include <paps/core/tiling.h>
 
 namespace paps {
 
@@ -18,6 +20,11 @@ void LpfResamplingParameters::validate() const {
   requireInRange("factor", factor, 1.f, 100.f);
   if (!(tau_p >= 0) || !std::isfinite(tau_p))
     throw InvalidParameter("tau_p", detail::toString(tau_p), "0 (0.7 x the pattern step) or a finite value > 0");
+  if (max_tile_points != 0 && (max_tile_points < 1000 || max_tile_points >= (std::size_t(1) << 31)))
+    throw InvalidParameter("max_tile_points", std::to_string(max_tile_points),
+                           "0 (one piece) or a count from 1000 to below 2^31");
+  if (!(tile_margin >= 2.5f && tile_margin <= 10.f))
+    throw InvalidParameter("tile_margin", detail::toString(tile_margin), "2.5 to 10 pattern radii");
 }
 
 namespace {
@@ -36,16 +43,18 @@ struct CellKey {
   }
 };
 
-Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingParameters& params,
-                                 LpfResamplingReport* report_out, const ProgressCallback& progress) {
-  LpfResamplingReport report;
+// The proposals of eq. 3.7 of the fields of `points` (in spatial order), field by field; the
+// report gets the analysis's radius, step, pattern and fields, and `tau` the consensus radius.
+Positions proposeInSpatialOrder(const Positions& points, const LpfResamplingParameters& params,
+                                LpfResamplingReport& report, float& tau, const ProgressCallback& progress,
+                                bool check_extent) {
   // The analysis resolves the radius (from the neighbour count; no noise rule here: the
   // proposals are filtered at the input spacing that count implies) and the step (`factor`
   // nodes a point).
   LocalProbingParameters probing = params.probing;
   probing.noise_sigmas = 0.f;
   probing.nodes_per_point = params.factor;
-  LocalProbingAnalysis analysis(points, probing, progress);
+  LocalProbingAnalysis analysis(points, probing, progress, check_extent);
   analysis.analyse(points, probing.rounds, progress);
   const ProbingPattern& pattern = analysis.pattern();
   const float r = analysis.radius();
@@ -54,7 +63,7 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
   report.step = pattern.step();
   report.pattern_nodes = pattern.size();
   report.fields = analysis.fieldCount();
-  const float tau = params.tau_p > 0 ? params.tau_p : 0.7f * pattern.step();
+  tau = params.tau_p > 0 ? params.tau_p : 0.7f * pattern.step();
   const float target_r = probing.target_factor * r;
 
   // Proposals (eq. 3.7), field by field: the consolidated points s + R (u + D a). (Proposing
@@ -90,17 +99,25 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
     Positions().swap(f);
   }
   report.proposals = proposals.size();
-  if (report_out) *report_out = report;
-  // An empty cloud is no answer (the PCL stage would hand it on as one).
-  if (proposals.empty())
-    throw InvalidInput("LPF resampling proposed no point: no field holds enough points (" +
-                       std::to_string(countFinite(points)) + " finite points)");
+  return proposals;
+}
 
-  // Consensus (eq. 3.8): in proposal order, a proposal that no kept point conflicts with (one
-  // within tau) gathers the proposals within tau of it; their mean is kept unless a kept point
-  // conflicts with it. Proposals on a grid of cells of tau, sorted by cell.
+// An empty cloud is no answer (the PCL stage would hand it on as one).
+InvalidInput noProposal(const Positions& points) {
+  return InvalidInput("LPF resampling proposed no point: no field holds enough points (" +
+                      std::to_string(countFinite(points)) + " finite points)");
+}
+
+// Consensus (eq. 3.8): in proposal order, a proposal that no kept point conflicts with (one
+// within tau) gathers the proposals within tau of it; their mean is kept unless a kept point
+// conflicts with it. Proposals on a grid of cells of tau, sorted by cell. `kept_before`
+// (tiles: the points the tiles before kept near this one's proposals) conflict as kept
+// points do, and are not returned.
+Positions consensus(const Positions& proposals, float tau, const Positions& kept_before,
+                    const ProgressCallback& progress) {
   Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = -lo;
   for (const auto& p : proposals) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
+  for (const auto& p : kept_before) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
   if (((hi - lo) / tau).maxCoeff() > 2e6f)
     throw InvalidParameter("tau_p", detail::toString(tau), "at least 1e-6 of the extent of the output (2 million cells an axis)");
   const CellKey key{lo - Eigen::Vector3f::Constant(tau), 1.f / tau};
@@ -114,7 +131,8 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
   std::vector<std::uint64_t> sorted_keys(order.size());
   for (std::size_t k = 0; k < order.size(); ++k) sorted_keys[k] = keys[order[k]];
   std::unordered_map<std::uint64_t, std::vector<int>> kept_cells;
-  Positions kept;
+  Positions kept = kept_before;
+  for (std::size_t k = 0; k < kept.size(); ++k) kept_cells[key(kept[k])].push_back(static_cast<int>(k));
   const float tau2 = tau * tau;
   auto conflicts = [&](const Eigen::Vector3f& q) {
     for (int dz = -1; dz <= 1; ++dz)
@@ -152,9 +170,99 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
   }
   rep.throwIfCancelled();
   rep.finish();
+  kept.erase(kept.begin(), kept.begin() + static_cast<std::ptrdiff_t>(kept_before.size()));
+  return kept;
+}
+
+Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingParameters& params,
+                                 LpfResamplingReport* report_out, const ProgressCallback& progress) {
+  LpfResamplingReport report;
+  float tau = 0.f;
+  Positions proposals = proposeInSpatialOrder(points, params, report, tau, progress, true);
+  if (report_out) *report_out = report;
+  if (proposals.empty()) throw noProposal(points);
+  Positions kept = consensus(proposals, tau, {}, progress);
   report.output = kept.size();
+  report.largest_tile = points.size();
   if (report_out) *report_out = report;
   return kept;
+}
+
+// Distance from p to a box (0 inside).
+float distanceToBox(const Eigen::Vector3f& p, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
+  return (lo - p).cwiseMax(p - hi).cwiseMax(0.f).norm();
+}
+
+// The tiled run (max_tile_points): the pattern radius is chosen once, on the whole cloud in
+// spatial order as one piece chooses it (so the same step and consensus radius); each tile's
+// fields are analysed on its core and halo, and it keeps the proposals nearer its core's box
+// than any other core's box (ties to the first tile), so that every proposal is made by the
+// tile whose fields see all around it. The consensus runs tile after tile, the points the
+// tiles before kept near this tile's proposals counting as kept: no two output points closer
+// than tau, across the seams too.
+Positions resampleInTiles(const Positions& points, const LpfResamplingParameters& params,
+                          LpfResamplingReport* report_out, const ProgressCallback& progress) {
+  LpfResamplingParameters run = params;
+  run.max_tile_points = 0;
+  {
+    LocalProbingParameters probing = params.probing;
+    probing.noise_sigmas = 0.f;  // as the one-piece analysis resolves it
+    const Positions sorted = gathered(points, spatialOrderAll(points));
+    const SpatialIndex index(sorted);
+    run.probing.radius = LocalProbingAnalysis::chooseRadius(sorted, index, probing, nullptr);
+  }
+  const float r = run.probing.radius;
+  const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, params.tile_margin * r);
+  std::vector<Eigen::Vector3f> lo(tiles.size(), Eigen::Vector3f::Constant(INFINITY)),
+      hi(tiles.size(), Eigen::Vector3f::Constant(-INFINITY));
+  for (std::size_t t = 0; t < tiles.size(); ++t)
+    for (const int i : tiles[t].core) lo[t] = lo[t].cwiseMin(points[i]), hi[t] = hi[t].cwiseMax(points[i]);
+  auto owner = [&](const Eigen::Vector3f& p, std::size_t t) {
+    const float own = distanceToBox(p, lo[t], hi[t]);
+    for (std::size_t u = 0; u < tiles.size(); ++u)
+      if (u != t) {
+        const float other = distanceToBox(p, lo[u], hi[u]);
+        if (other < own || (other == own && u < t)) return false;
+      }
+    return true;
+  };
+  LpfResamplingReport report;
+  report.tiles = tiles.size();
+  Positions out;
+  for (std::size_t t = 0; t < tiles.size(); ++t) {
+    std::vector<int> members(tiles[t].core);
+    members.insert(members.end(), tiles[t].halo.begin(), tiles[t].halo.end());
+    report.largest_tile = std::max(report.largest_tile, members.size());
+    const ProgressCallback sub = tileProgress(progress, t, tiles.size());
+    Positions local = gathered(points, members);
+    std::vector<int>().swap(members);
+    local = gathered(local, spatialOrderAll(local));
+    LpfResamplingReport r_t;
+    float tau = 0.f;
+    Positions proposals = proposeInSpatialOrder(local, run, r_t, tau, sub, false);
+    Positions().swap(local);
+    proposals.erase(std::remove_if(proposals.begin(), proposals.end(),
+                                   [&](const Eigen::Vector3f& p) { return !owner(p, t); }),
+                    proposals.end());
+    report.radius = r_t.radius;
+    report.step = r_t.step;
+    report.pattern_nodes = r_t.pattern_nodes;
+    report.fields += r_t.fields;
+    report.proposals += proposals.size();
+    if (proposals.empty()) continue;
+    // The points the tiles before kept within tau of this tile's proposals' box.
+    Eigen::Vector3f plo = Eigen::Vector3f::Constant(INFINITY), phi = -plo;
+    for (const auto& p : proposals) plo = plo.cwiseMin(p), phi = phi.cwiseMax(p);
+    Positions before;
+    for (const auto& q : out)
+      if (distanceToBox(q, plo, phi) <= tau) before.push_back(q);
+    const Positions kept = consensus(proposals, tau, before, sub);
+    out.insert(out.end(), kept.begin(), kept.end());
+  }
+  if (out.empty()) throw noProposal(points);
+  report.output = out.size();
+  if (report_out) *report_out = report;
+  return out;
 }
 
 }  // namespace
@@ -163,6 +271,10 @@ Positions lpfResample(const Positions& points, const LpfResamplingParameters& pa
                       const ProgressCallback& progress) {
   params.validate();
   if (points.empty()) throw InvalidInput("no point to resample (the cloud, or its indices, are empty)");
+  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points) {
+    requireRadiusWithinExtent("radius", params.probing.radius, points);
+    return resampleInTiles(points, params, report, progress);
+  }
   // In spatial order: the output does not depend on the input order.
   const std::vector<int> order = spatialOrderAll(points);
   return resampleInSpatialOrder(gathered(points, order), params, report, progress);

@@ -35,6 +35,16 @@ struct LpfResamplingParameters {
   /// Consensus radius tau_p in metres (> 0), or 0: 0.7 x the pattern step (kept points are
   /// at least tau_p apart; at 1 x the step the output had half the density asked for).
   float tau_p = 0.f;
+  /// A cloud of more finite points is resampled in tiles of at most this many, one after the
+  /// other (the working memory of a tile: about 1.5 KB a point of it at factor 4). The
+  /// pattern radius is chosen on the whole cloud; each tile analyses its own fields (its own
+  /// dictionary) and keeps the proposals nearest its core; the consensus runs on across the
+  /// tiles, so no two output points are closer than tau_p at the seams either. 0: one piece
+  /// whatever the size; else 1000 to 2^31 - 1.
+  std::size_t max_tile_points = 2000000;
+  /// The halo of a tile, in pattern radii (2.5 to 10): the fields that propose in its core
+  /// read their target areas (1.1 radii around their seeds) whole.
+  float tile_margin = 3.f;
   void validate() const;
 };
 
@@ -42,6 +52,8 @@ struct LpfResamplingReport {
   float radius = 0.f, step = 0.f;
   int pattern_nodes = 0;
   std::size_t fields = 0, proposals = 0, output = 0;
+  std::size_t tiles = 1;         ///< tiles the cloud was resampled in (1: one piece)
+  std::size_t largest_tile = 0;  ///< most points a tile held, halo included (one piece: all)
 };
 
 /// Resamples `points` (NaN entries ignored). Deterministic; the output does not depend on

@@ -951,7 +951,7 @@ std::vector<float> spacingsOf(const Positions& p) {
 
 // Tiles (max_tile_points): the radius, the noise and the denoising decision are the whole
 // scan's, the output count is the one-piece count, and the output is as close to the surface,
-// without a crowd of close pairs where the tiles meet.
+// with no more close pairs than one piece where the tiles meet.
 TEST(QuadricSuperResolution, TilesKeepTheAccuracyAndTheChoicesOfTheWholeScan) {
   for (float noise : {0.0005f, 0.005f}) {
     Case c;
@@ -984,7 +984,9 @@ TEST(QuadricSuperResolution, TilesKeepTheAccuracyAndTheChoicesOfTheWholeScan) {
     EXPECT_EQ(tiled.denoised, one.denoised);
     EXPECT_EQ(tiled.grid_lr, one.grid_lr);
     EXPECT_LT(eb, 1.1 * ea);
-    EXPECT_LT(closePairs(sb), closePairs(sa) + static_cast<std::ptrdiff_t>(b.size() / 200));
+    // Each tile's seeds keep their distance from the tiles before (measured: 316 and 76 in
+    // tiles against 372 and 118 in one piece; 410 and 174 when each tile was thinned alone).
+    EXPECT_LE(closePairs(sb), closePairs(sa) + static_cast<std::ptrdiff_t>(b.size() / 1000));
     ASSERT_EQ(source.size(), b.size());
     for (std::size_t i = 0; i < b.size(); ++i) {
       ASSERT_GE(source[i], 0);

@@ -16,16 +16,7 @@
 namespace paps {
 
 namespace {
-struct Box {
-  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = Eigen::Vector3f::Constant(-INFINITY);
-  void add(const Eigen::Vector3f& p) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
-};
-
-Box boxOf(const Positions& points, const std::vector<int>& ids) {
-  Box b;
-  for (const int i : ids) b.add(points[i]);
-  return b;
-}
+using Box = BoundingBox;
 
 // Halves `ids` at the median of the longest side until each part holds at most max_core
 // points. The order key is the coordinate along that side, then the position (x, y, z), and
@@ -36,7 +27,7 @@ void split(const Positions& points, std::vector<int> ids, std::size_t max_core, 
     out.push_back(std::move(ids));
     return;
   }
-  const Box b = boxOf(points, ids);
+  const Box b = boundingBox(points, ids);
   int axis = 0;
   (b.hi - b.lo).maxCoeff(&axis);
   auto before = [&](int i, int j) {
@@ -84,7 +75,7 @@ std::vector<Tile> splitIntoTiles(const Positions& points, std::size_t max_core, 
     tiles[t].core = std::move(cores[t]);
   }
   for (std::size_t t = 0; t < tiles.size(); ++t) {
-    Box b = boxOf(points, tiles[t].core);
+    Box b = boundingBox(points, tiles[t].core);
     b.lo.array() -= margin;
     b.hi.array() += margin;
     for (std::size_t i = 0; i < points.size(); ++i) {
@@ -123,7 +114,7 @@ Positions runInTiles(const Positions& points, const std::vector<std::uint8_t>& m
 }
 
 std::vector<int> pointsAroundTile(const Positions& cloud, const Tile& tile, const Positions& other, float margin) {
-  Box b = boxOf(cloud, tile.core);
+  Box b = boundingBox(cloud, tile.core);
   b.lo.array() -= margin;
   b.hi.array() += margin;
   std::vector<int> inside;
@@ -178,6 +169,19 @@ Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8
     }
     return o;
   });
+}
+
+BoundingBox boundingBox(const Positions& points, const std::vector<int>& ids) {
+  BoundingBox b;
+  for (const int i : ids) b.add(points[i]);
+  return b;
+}
+
+Positions pointsNearBox(const Positions& points, const BoundingBox& box, float margin) {
+  Positions near;
+  for (const Eigen::Vector3f& p : points)
+    if (box.distance(p) <= margin) near.push_back(p);
+  return near;
 }
 
 std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<std::size_t>& weights) {

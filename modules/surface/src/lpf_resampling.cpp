@@ -188,11 +188,6 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
   return kept;
 }
 
-// Distance from p to a box (0 inside).
-float distanceToBox(const Eigen::Vector3f& p, const Eigen::Vector3f& lo, const Eigen::Vector3f& hi) {
-  return (lo - p).cwiseMax(p - hi).cwiseMax(0.f).norm();
-}
-
 // The tiled run (max_tile_points): the pattern radius is chosen once, on the whole cloud in
 // spatial order as one piece chooses it (so the same step and consensus radius); each tile's
 // fields are analysed on its core and halo, and it keeps the proposals nearer its core's box
@@ -213,15 +208,13 @@ Positions resampleInTiles(const Positions& points, const LpfResamplingParameters
   }
   const float r = run.probing.radius;
   const std::vector<Tile> tiles = splitIntoTiles(points, params.max_tile_points, params.tile_margin * r);
-  std::vector<Eigen::Vector3f> lo(tiles.size(), Eigen::Vector3f::Constant(INFINITY)),
-      hi(tiles.size(), Eigen::Vector3f::Constant(-INFINITY));
-  for (std::size_t t = 0; t < tiles.size(); ++t)
-    for (const int i : tiles[t].core) lo[t] = lo[t].cwiseMin(points[i]), hi[t] = hi[t].cwiseMax(points[i]);
+  std::vector<BoundingBox> boxes;
+  for (const Tile& tile : tiles) boxes.push_back(boundingBox(points, tile.core));
   auto owner = [&](const Eigen::Vector3f& p, std::size_t t) {
-    const float own = distanceToBox(p, lo[t], hi[t]);
+    const float own = boxes[t].distance(p);
     for (std::size_t u = 0; u < tiles.size(); ++u)
       if (u != t) {
-        const float other = distanceToBox(p, lo[u], hi[u]);
+        const float other = boxes[u].distance(p);
         if (other < own || (other == own && u < t)) return false;
       }
     return true;
@@ -251,12 +244,9 @@ Positions resampleInTiles(const Positions& points, const LpfResamplingParameters
     report.proposals += proposals.size();
     if (proposals.empty()) continue;
     // The points the tiles before kept within tau of this tile's proposals' box.
-    Eigen::Vector3f plo = Eigen::Vector3f::Constant(INFINITY), phi = -plo;
-    for (const auto& p : proposals) plo = plo.cwiseMin(p), phi = phi.cwiseMax(p);
-    Positions before;
-    for (const auto& q : out)
-      if (distanceToBox(q, plo, phi) <= tau) before.push_back(q);
-    const Positions kept = consensus(proposals, tau, before, sub);
+    BoundingBox around;
+    for (const auto& p : proposals) around.add(p);
+    const Positions kept = consensus(proposals, tau, pointsNearBox(out, around, tau), sub);
     out.insert(out.end(), kept.begin(), kept.end());
   }
   if (out.empty()) throw noProposal(points);

@@ -55,6 +55,20 @@ namespace {
 // thinner built for itself before, grew with the square of the local density (2.4 GB on
 // bun0). Both give exactly the maximal Poisson-disk subset that plain dart throwing in the
 // same visiting order gives (see run()), and the same crowding measure.
+// A cell of a hashed grid, and its hash.
+struct Cell {
+  std::int64_t x, y, z;
+  bool operator==(const Cell& o) const { return x == o.x && y == o.y && z == o.z; }
+};
+struct CellHash {
+  std::size_t operator()(const Cell& c) const {
+    std::uint64_t h = static_cast<std::uint64_t>(c.x) * 0x9E3779B97F4A7C15ULL;
+    h ^= static_cast<std::uint64_t>(c.y) * 0xC2B2AE3D27D4EB4FULL + (h << 6) + (h >> 2);
+    h ^= static_cast<std::uint64_t>(c.z) * 0x165667B19E3779F9ULL + (h << 6) + (h >> 2);
+    return static_cast<std::size_t>(h ^ (h >> 29));
+  }
+};
+
 class SeedThinner {
  public:
   SeedThinner(const Positions& points, const std::vector<int>& ranked, const Positions& cand,
@@ -90,10 +104,15 @@ class SeedThinner {
     side_ = side;
   }
 
+  // Points already kept elsewhere (the seeds of the tiles run before, near this one): no
+  // candidate within d of one is kept. Null or empty: none.
+  void setKeptBefore(const Positions* before) { before_ = before && !before->empty() ? before : nullptr; }
+
   // The kept candidates at radius d: all of them, or (pilot) those of the first
   // `blocks_limit` blocks only (0: all). Pilots, and passes without blocks or with blocks too
   // small for d, visit the candidates in index order, sequentially.
   std::vector<int> run(float d, std::size_t blocks_limit = 0) {
+    if (before_ && d > before_reach_) nearestKeptBefore(1.5f * d);
     if (d * kDenseSeeds < disc_) {
       std::vector<int> kept;
       if (runOnSeedGrid(d, block_start_.empty() || !blocks_limit ? cand_.size()
@@ -184,24 +203,13 @@ class SeedThinner {
     auto cellOf = [&](const Eigen::Vector3f& p, int a) {
       return static_cast<std::int64_t>(std::floor((static_cast<double>(p[a]) - origin[a]) * inv));
     };
-    struct Cell {
-      std::int64_t x, y, z;
-      bool operator==(const Cell& o) const { return x == o.x && y == o.y && z == o.z; }
-    };
-    struct CellHash {
-      std::size_t operator()(const Cell& c) const {
-        std::uint64_t h = static_cast<std::uint64_t>(c.x) * 0x9E3779B97F4A7C15ULL;
-        h ^= static_cast<std::uint64_t>(c.y) * 0xC2B2AE3D27D4EB4FULL + (h << 6) + (h >> 2);
-        h ^= static_cast<std::uint64_t>(c.z) * 0x165667B19E3779F9ULL + (h << 6) + (h >> 2);
-        return static_cast<std::size_t>(h ^ (h >> 29));
-      }
-    };
     std::unordered_map<Cell, int, CellHash> head;  // cell -> last seed filed in it
     std::vector<int> next, seed_c;                // per seed: previous seed of its cell, candidate
     const float d2 = d * d;
     std::fill(count_.begin(), count_.end(), 0);  // keep() files the seeds per input point
     kept.clear();
     for (std::size_t c = 0; c < end; ++c) {
+      if (blockedBefore(c, d2)) continue;
       const Eigen::Vector3f& p = cand_[c];
       const std::int64_t cx = cellOf(p, 0), cy = cellOf(p, 1), cz = cellOf(p, 2);
       float best = INFINITY;
@@ -238,6 +246,7 @@ class SeedThinner {
   // "Tested against" = the seeds of the input points within d + disc of the candidate (the
   // only ones that can conflict with it): the crowding measure does not depend on the cells.
   bool tryKeep(std::size_t c, float d2) {
+    if (blockedBefore(c, d2)) return false;
     const Eigen::Vector3f& p = cand_[c];
     const int k = cand_rank_[c];
     float best = INFINITY;
@@ -280,6 +289,48 @@ class SeedThinner {
     }
     keep(c, k, best, best_c);
     return true;
+  }
+
+  bool blockedBefore(std::size_t c, float d2) const { return before_ && before_d2_[c] < d2; }
+
+  // before_d2_: per candidate, the squared distance to the nearest point kept before, where
+  // it is within `reach` (infinite elsewhere). Those points lie along a seam: a grid of cells
+  // of `reach` holds them, and a candidate looks at the 27 cells around it only when its cell
+  // is marked as next to one.
+  void nearestKeptBefore(float reach) {
+    const Positions& before = *before_;
+    before_reach_ = reach;
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY);
+    for (const Eigen::Vector3f& p : before) lo = lo.cwiseMin(p.cast<double>());
+    const double inv = 1.0 / reach;
+    auto cellOf = [&](const Eigen::Vector3f& p) {
+      const Eigen::Vector3d g = ((p.cast<double>() - lo) * inv).array().floor();
+      return Cell{static_cast<std::int64_t>(g.x()), static_cast<std::int64_t>(g.y()), static_cast<std::int64_t>(g.z())};
+    };
+    std::unordered_map<Cell, std::vector<int>, CellHash> cells;
+    for (std::size_t k = 0; k < before.size(); ++k) cells[cellOf(before[k])].push_back(static_cast<int>(k));
+    std::unordered_map<Cell, std::uint8_t, CellHash> near;  // cells within one of a kept point's
+    for (const auto& [cell, ids] : cells)
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) near[Cell{cell.x + dx, cell.y + dy, cell.z + dz}] = 1;
+    before_d2_.assign(cand_.size(), INFINITY);
+    const std::int64_t n = static_cast<std::int64_t>(cand_.size());
+#pragma omp parallel for schedule(static, 4096)
+    for (std::int64_t c = 0; c < n; ++c) {
+      const Eigen::Vector3f& p = cand_[c];
+      const Cell at = cellOf(p);
+      if (near.find(at) == near.end()) continue;
+      float best = INFINITY;
+      for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx) {
+            const auto it = cells.find(Cell{at.x + dx, at.y + dy, at.z + dz});
+            if (it == cells.end()) continue;
+            for (const int k : it->second) best = std::min(best, (before[k] - p).squaredNorm());
+          }
+      before_d2_[c] = best;
+    }
   }
 
   void keep(std::size_t c, int k, float best, int best_c) {
@@ -462,6 +513,9 @@ class SeedThinner {
   std::vector<std::array<std::int64_t, 3>> block_coord_;
   double side_ = 0;
   float reach1_sq_ = 0.f;
+  const Positions* before_ = nullptr;  // kept before (setKeptBefore)
+  std::vector<float> before_d2_;       // per candidate: squared distance to the nearest of them,
+  float before_reach_ = 0.f;           // known within this reach
 };
 
 }  // namespace
@@ -489,7 +543,8 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
-                          const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale) {
+                          const NeighbourGraph* graph, float graph_radius, const std::vector<float>* disc_scale,
+                          const Positions* kept_before) {
   requirePositive("disc_radius", disc_radius);
   checkOutputCount(count, points.size());
   if (normals.size() != points.size())
@@ -610,6 +665,7 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
   const double d_floor = std::max(1e-4 * disc_radius, 2.0 * (std::nextafter(largest, INFINITY) - largest));
   SeedThinner thinner(points, ranked, cand, cand_rank, per_point, disc_radius, graph, graph_radius);
   thinner.setBlocks(block_start, std::move(block_parity), std::move(block_coord), block);
+  thinner.setKeptBefore(kept_before);
   std::vector<int> best, best_partner;
   std::vector<float> best_m2;
   double lo_fail = 0, hi_ok = 0;  // smallest radius giving too few, largest giving enough
@@ -1089,12 +1145,14 @@ float kernelListReach(float h, float disc, int target_neighbours) {
 
 // What a tile adds to a run (upsampleInTiles): the kernel support and the seed disc, chosen on
 // the whole cloud; in the tile's order, which points seed the output (its core) and the
-// normals of the tiles before it where it meets them (NaN elsewhere); out, its oriented
-// normals, or that no ball of it has a normal (nothing made).
+// normals of the tiles before it where it meets them (NaN elsewhere); what those tiles output
+// near it (its seeds keep their distance); out, its oriented normals, or that no ball of it
+// has a normal (nothing made).
 struct MlsTileRun {
   float h = 0.f, disc = 0.f;
   std::vector<std::uint8_t> seedable;
   Normals hints;
+  Positions kept_before;
   Normals oriented;
   bool no_normal = false;
 };
@@ -1200,7 +1258,8 @@ Positions upsampleInSpatialOrder(const Positions& points, MlsSurface surface, co
   std::vector<int> origin;
   // The lists are complete (and spare the thinner its grid) unless a ball was over the cap.
   Positions out = upsamplingSeeds(points, tile ? core_normals : normals, count, disc, params.seed, &origin,
-                                  capped ? nullptr : &lists, only_h ? h : reach);
+                                  capped ? nullptr : &lists, only_h ? h : reach, nullptr,
+                                  tile ? &tile->kept_before : nullptr);
   Normals().swap(core_normals);
   // Seeds grouped by the input point they were generated from.
   std::vector<std::int64_t> soff(np + 1, 0);
@@ -1335,6 +1394,9 @@ Positions upsampleInTiles(const Positions& points, MlsSurface surface, const Mls
   std::vector<MlsUpsamplingReport> reports(tiles.size());
   std::vector<std::size_t> starts(tiles.size(), 0);
   std::size_t largest = 0;
+  const float spacing = h * std::sqrt(3.14159265f / static_cast<float>(mean_count));  // the mean input spacing
+  std::vector<BoundingBox> boxes;
+  for (const Tile& t : tiles) boxes.push_back(boundingBox(points, t.core));
   auto runTile = [&](std::size_t t, std::size_t count) {
     const Tile& tile = tiles[t];
     std::vector<int> members(tile.core);
@@ -1350,6 +1412,9 @@ Positions upsampleInTiles(const Positions& points, MlsSurface surface, const Mls
     }
     std::vector<int>().swap(members);
     tr.hints = gathered(oriented, sorted);
+    // Seeds lie within the disc of a core point, and keep the Poisson-disk radius (about the
+    // output spacing, below the input's) from what the tiles before made.
+    tr.kept_before = pointsNearBox(out, boxes[t], base.disc + 2.f * spacing);
     run.output_count = count;
     run.seed = params.seed + t;  // each tile draws its own seeds
     Normals n;
@@ -1371,7 +1436,7 @@ Positions upsampleInTiles(const Positions& points, MlsSurface surface, const Mls
   };
   // Each tile's share of the output (runTileShares), by the surface its core covers, counted
   // in cells of the mean spacing or the seed disc, the larger.
-  const float cell = std::max(base.disc, h * std::sqrt(3.14159265f / static_cast<float>(mean_count)));
+  const float cell = std::max(base.disc, spacing);
   std::vector<std::size_t> cells;
   for (const Tile& t : tiles) cells.push_back(occupiedCells(points, t.core, cell));
   const std::vector<std::size_t> made = runTileShares(splitInProportion(total, cells), runTile, [&](std::size_t t) {

@@ -285,6 +285,7 @@ InvalidInput noSurfaceAnywhere(float R) {
 struct TileRun {
   std::vector<std::uint8_t> seedable;
   Normals hints;
+  Positions kept_before;  // what the tiles before made near it: its seeds keep their distance
   Normals oriented;
   bool no_surface = false;  // out: every ball is collinear or one position (nothing made)
 };
@@ -917,7 +918,7 @@ Positions superResolveInSpatialOrder(const std::vector<Positions>& scans, const 
   std::vector<int> origin;
   Positions out = upsamplingSeeds(P0, n0s, count, rep.disc_radius, params.seed,
                                   curvature_out || source_out ? &origin : nullptr,
-                                  nullptr, 0.f, &disc_scale);
+                                  nullptr, 0.f, &disc_scale, tile ? &tile->kept_before : nullptr);
   if (normals_out) normals_out->assign(out.size(), Eigen::Vector3f::Constant(NAN));
   if (curvature_out) {  // PCL's MLS: the surface variation of the ball a point was made from
     curvature_out->assign(out.size(), NAN);
@@ -1060,6 +1061,7 @@ Positions superResolveSorted(const std::vector<Positions>& scans, const QuadricS
   if (tile) {
     sorted_tile.seedable = gathered(tile->seedable, order0);
     sorted_tile.hints = gathered(tile->hints, order0);
+    sorted_tile.kept_before = std::move(tile->kept_before);
   }
   Positions out = superResolveInSpatialOrder(sorted, params, report, progress, normals, curvature, source,
                                              tile ? &sorted_tile : nullptr);
@@ -1140,6 +1142,7 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
   if (normals_out) normals_out->clear();
   if (curvature_out) curvature_out->clear();
   if (source_out) source_out->clear();
+  const float typical_spacing = R * std::sqrt(3.14159265f / params.target_neighbours);  // a typical point's spacing
   // Runs tile t for `count` output points, appended to the outputs; false (nothing appended)
   // when the tile holds no surface.
   std::vector<QuadricSuperResolutionReport> reports(tiles.size());
@@ -1159,6 +1162,9 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
     tr.seedable.assign(members.size(), 0);
     std::fill_n(tr.seedable.begin(), tile.core.size(), 1);
     tr.hints = gathered(oriented, members);
+    // Seeds lie within the seed disc of a core point and keep the Poisson-disk radius (about
+    // the output spacing, below the input's) from what the tiles before made.
+    tr.kept_before = pointsNearBox(out, boundingBox(in[0], tile.core), (params.seed_disc + 2.f) * typical_spacing);
     run.output_count = count;
     run.seed = params.seed + t;  // each tile draws its own seeds
     Normals n;
@@ -1177,7 +1183,7 @@ Positions superResolveInTiles(const std::vector<Positions>& scans, const Quadric
   };
   // Each tile's share of the output (runTileShares), by the surface its core covers, counted
   // in cells of about the seed disc.
-  const float cell = std::max(params.seed_disc, 1.f) * R * std::sqrt(3.14159265f / params.target_neighbours);
+  const float cell = std::max(params.seed_disc, 1.f) * typical_spacing;
   std::vector<std::size_t> cells;
   for (const Tile& t : tiles) cells.push_back(occupiedCells(in[0], t.core, cell));
   const std::vector<std::size_t> made = runTileShares(splitInProportion(total, cells), runTile, [&](std::size_t t) {

@@ -75,6 +75,20 @@ Positions runSortedInTiles(const Positions& points, const std::vector<std::uint8
                            const ProgressCallback& progress = {}, std::vector<std::uint8_t>* status = nullptr,
                            std::uint8_t pile_status = 0, std::size_t* largest_tile = nullptr);
 
+/// An axis-aligned box (empty: lo above hi).
+struct BoundingBox {
+  Eigen::Vector3f lo = Eigen::Vector3f::Constant(INFINITY), hi = Eigen::Vector3f::Constant(-INFINITY);
+  void add(const Eigen::Vector3f& p) { lo = lo.cwiseMin(p); hi = hi.cwiseMax(p); }
+  /// Distance from p to the box (0 inside).
+  float distance(const Eigen::Vector3f& p) const { return (lo - p).cwiseMax(p - hi).cwiseMax(0.f).norm(); }
+};
+/// The box of points[ids] (of a tile's core, say).
+BoundingBox boundingBox(const Positions& points, const std::vector<int>& ids);
+
+/// The points within `margin` of `box`, in order: for a stage run tile by tile that keeps its
+/// output spaced across the seams, what the tiles before made near this one.
+Positions pointsNearBox(const Positions& points, const BoundingBox& box, float margin);
+
 /// `total` split over parts in proportion to `weights` (largest remainders, ties to the first
 /// part); all zero when the weights sum to 0.
 std::vector<std::size_t> splitInProportion(std::size_t total, const std::vector<std::size_t>& weights);

@@ -68,8 +68,8 @@ struct MlsUpsamplingParameters {
   /// halo of every point its fits read), one after the other: the working memory of a tile.
   /// The kernel support and the seed disc are chosen on the whole cloud; each tile gets a
   /// share of the output by the surface it covers and orients its normals as the tiles before
-  /// it where they meet. The seeds of two tiles are thinned apart, so a seam can hold seeds
-  /// closer than the Poisson-disk radius. 0: one piece whatever the size; else 1000 to 2^31 - 1.
+  /// it where they meet; its seeds keep the Poisson-disk radius from those of the tiles before.
+  /// 0: one piece whatever the size; else 1000 to 2^31 - 1.
   std::size_t max_tile_points = 2000000;
   void validate() const;
 };
@@ -117,11 +117,13 @@ Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::
 /// (d the Poisson-disk radius), as is the case for the kernel neighbourhoods of APSS and RIMLS;
 /// the seeds are the same with or without them (null graph: the thinner's own grid). With
 /// `disc_scale`, point i spreads its seeds over a disc of radius (*disc_scale)[i] x disc_radius
-/// (each scale in (0, 1]; null: 1 for every point).
+/// (each scale in (0, 1]; null: 1 for every point). `kept_before` (optional): points already
+/// in the output nearby (a tile's neighbours' seeds): no seed is kept within the Poisson-disk
+/// radius of one, so tiles keep their seeds apart across the seams as one piece does.
 Positions upsamplingSeeds(const Positions& points, const Normals& normals, std::size_t count,
                           float disc_radius, std::uint64_t seed, std::vector<int>* origin,
                           const NeighbourGraph* graph, float graph_radius,
-                          const std::vector<float>* disc_scale = nullptr);
+                          const std::vector<float>* disc_scale = nullptr, const Positions* kept_before = nullptr);
 
 namespace detail {
 /// For tests: one sequential dart-throwing pass of the seed thinner over `cand` in index order

@@ -44,17 +44,6 @@ void checkOutputCount(std::size_t output_count, std::size_t input_points) {
 
 namespace {
 
-// Dart throwing over seed candidates that were generated on the tangent discs (radius `disc`)
-// of input points. Two candidates closer than d come from input points closer than
-// reach = d + 2 disc, so the kept seeds are filed by the input point they come from, and a
-// candidate is only tested against the seeds of the input points within d + disc of it. Those
-// are found through the caller's complete neighbour lists when it has some that reach far
-// enough (APSS and RIMLS: the lists at their kernel support), or else through a grid of cells
-// of side >= reach / 2 (5^3 cells around the candidate's input point). The grid needs memory
-// linear in the input however dense it is; lists of input points within reach, which the
-// thinner built for itself before, grew with the square of the local density (2.4 GB on
-// bun0). Both give exactly the maximal Poisson-disk subset that plain dart throwing in the
-// same visiting order gives (see run()), and the same crowding measure.
 // A cell of a hashed grid, and its hash.
 struct Cell {
   std::int64_t x, y, z;
@@ -69,6 +58,17 @@ struct CellHash {
   }
 };
 
+// Dart throwing over seed candidates that were generated on the tangent discs (radius `disc`)
+// of input points. Two candidates closer than d come from input points closer than
+// reach = d + 2 disc, so the kept seeds are filed by the input point they come from, and a
+// candidate is only tested against the seeds of the input points within d + disc of it. Those
+// are found through the caller's complete neighbour lists when it has some that reach far
+// enough (APSS and RIMLS: the lists at their kernel support), or else through a grid of cells
+// of side >= reach / 2 (5^3 cells around the candidate's input point). The grid needs memory
+// linear in the input however dense it is; lists of input points within reach, which the
+// thinner built for itself before, grew with the square of the local density (2.4 GB on
+// bun0). Both give exactly the maximal Poisson-disk subset that plain dart throwing in the
+// same visiting order gives (see run()), and the same crowding measure.
 class SeedThinner {
  public:
   SeedThinner(const Positions& points, const std::vector<int>& ranked, const Positions& cand,
@@ -112,7 +112,8 @@ class SeedThinner {
   // `blocks_limit` blocks only (0: all). Pilots, and passes without blocks or with blocks too
   // small for d, visit the candidates in index order, sequentially.
   std::vector<int> run(float d, std::size_t blocks_limit = 0) {
-    if (before_ && d > before_reach_) nearestKeptBefore(1.5f * d);
+    // The radius tried grows by a few percent a pass, rarely by half (pilots).
+    if (before_ && d > before_reach_) nearestKeptBefore(2.f * d);
     if (d * kDenseSeeds < disc_) {
       std::vector<int> kept;
       if (runOnSeedGrid(d, block_start_.empty() || !blocks_limit ? cand_.size()
@@ -295,14 +296,15 @@ class SeedThinner {
 
   // before_d2_: per candidate, the squared distance to the nearest point kept before, where
   // it is within `reach` (infinite elsewhere). Those points lie along a seam: a grid of cells
-  // of `reach` holds them, and a candidate looks at the 27 cells around it only when its cell
-  // is marked as next to one.
+  // of reach + disc holds them; an input point whose cell is not next to one of theirs has no
+  // candidate within reach of them (its candidates lie within the disc of it), and the
+  // candidates of the others look at the 27 cells around them.
   void nearestKeptBefore(float reach) {
     const Positions& before = *before_;
     before_reach_ = reach;
     Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY);
     for (const Eigen::Vector3f& p : before) lo = lo.cwiseMin(p.cast<double>());
-    const double inv = 1.0 / reach;
+    const double inv = 1.0 / (static_cast<double>(reach) + disc_);
     auto cellOf = [&](const Eigen::Vector3f& p) {
       const Eigen::Vector3d g = ((p.cast<double>() - lo) * inv).array().floor();
       return Cell{static_cast<std::int64_t>(g.x()), static_cast<std::int64_t>(g.y()), static_cast<std::int64_t>(g.z())};
@@ -314,13 +316,17 @@ class SeedThinner {
       for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy)
           for (int dx = -1; dx <= 1; ++dx) near[Cell{cell.x + dx, cell.y + dy, cell.z + dz}] = 1;
+    const std::int64_t np = static_cast<std::int64_t>(opos_.size());
+    std::vector<std::uint8_t> point_near(opos_.size(), 0);
+#pragma omp parallel for schedule(static, 4096)
+    for (std::int64_t k = 0; k < np; ++k) point_near[k] = near.find(cellOf(opos_[k])) != near.end();
     before_d2_.assign(cand_.size(), INFINITY);
     const std::int64_t n = static_cast<std::int64_t>(cand_.size());
 #pragma omp parallel for schedule(static, 4096)
     for (std::int64_t c = 0; c < n; ++c) {
+      if (!point_near[cand_rank_[c]]) continue;
       const Eigen::Vector3f& p = cand_[c];
       const Cell at = cellOf(p);
-      if (near.find(at) == near.end()) continue;
       float best = INFINITY;
       for (int dz = -1; dz <= 1; ++dz)
         for (int dy = -1; dy <= 1; ++dy)

@@ -221,7 +221,9 @@ TEST(LpfResampling, TilesKeepTheDensityTheAccuracyAndTheConsensusAcrossSeams) {
   auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
   paps::writePositions(in, *cloud);
   paps::LpfResampling<pcl::PointXYZ> stage;
-  stage.setParameters(p);
+  stage.setMaxTilePoints(p.max_tile_points);
+  EXPECT_THROW(stage.setMaxTilePoints(999), paps::InvalidParameter);
+  EXPECT_EQ(stage.getParameters().max_tile_points, p.max_tile_points);
   stage.setInputCloud(cloud);
   pcl::PointCloud<pcl::PointXYZ> out;
   stage.process(out);

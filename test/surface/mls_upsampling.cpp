@@ -864,7 +864,10 @@ TEST(MlsUpsampling, TiledNormalsRunOnAcrossTilesAndTheOutputIsDeterministic) {
   MlsUpsamplingParameters p;
   p.factor = 2;
   p.max_tile_points = 2000;
-  apss.setParameters(p);
+  apss.setUpsamplingFactor(2);
+  apss.setMaxTilePoints(2000);
+  EXPECT_THROW(apss.setMaxTilePoints(999), InvalidParameter);
+  EXPECT_EQ(apss.getParameters().max_tile_points, 2000u);
   apss.setInputCloud(cloud);
   pcl::PointCloud<pcl::PointNormal> cloud_out;
   apss.process(cloud_out);

@@ -71,6 +71,8 @@ class LpfResampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, pub
   const LpfResamplingParameters& getParameters() const { return params_; }
   void setUpsamplingFactor(float f) { auto p = params_; p.factor = f; setParameters(p); }
   void setRadius(float r) { auto p = params_; p.probing.radius = r; setParameters(p); }
+  /// Tiles of at most n points for larger clouds (0: one piece); see max_tile_points.
+  void setMaxTilePoints(std::size_t n) { auto p = params_; p.max_tile_points = n; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const LpfResamplingReport& getReport() const { return report_; }
   /// As pcl::CloudSurfaceProcessing::process, but without an input cloud it throws InvalidInput.

@@ -148,6 +148,8 @@ class MlsUpsampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, pub
   const MlsUpsamplingParameters& getParameters() const { return params_; }
   void setUpsamplingFactor(float f) { auto p = params_; p.factor = f; setParameters(p); }
   void setRadius(float r) { auto p = params_; p.radius = r; setParameters(p); }
+  /// Tiles of at most n points for larger clouds (0: one piece); see max_tile_points.
+  void setMaxTilePoints(std::size_t n) { auto p = params_; p.max_tile_points = n; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const MlsUpsamplingReport& getReport() const { return report_; }
 

@@ -16,6 +16,10 @@
 #include <paps/core/neighbourhood.h>
 #include <paps/core/synthetic.h>
 
+#ifdef PAPS_HAVE_SURFACE
+#include <paps/surface/lpf_resampling.h>
+#endif
+
 #include "bench_worker.h"
 #include "cli_common.h"
 #include "commands.h"
@@ -42,7 +46,11 @@ const char* kUsage =
     "  --resample       instead: LPF resampling x4 against QSR, APSS, RIMLS and PCL MLS\n"
     "                   upsampling at the same output count, on the plate and wires\n"
     "                   (accuracy: outputs to the true shape; coverage: a dense sample of the\n"
-    "                   true shape to the nearest output)\n";
+    "                   true shape to the nearest output); lpf (the default: denoised first\n"
+    "                   when the noise is at least 0.5 x the consensus radius), lpf-raw\n"
+    "                   (never) and lpf-denoised (always) side by side\n"
+    "  --denoise-passes N  with --resample: passes of LPF's first denoising (default 0: from\n"
+    "                   the noise)\n";
 
 struct Method {
   std::string name, setting;
@@ -73,6 +81,7 @@ namespace {
 int runBenchLpfResample(const Arguments& a) {
   const std::string out_dir = a.text("out", "bench_out");
   const std::size_t n_points = a.count("points", 20000);
+  const double passes = a.integer("denoise-passes", LpfResamplingParameters().denoise_passes);
   std::vector<double> noises;
   for (const std::string& s : splitList(a.text("noise", "0.0005,0.002"))) noises.push_back(std::atof(s.c_str()));
   std::filesystem::create_directories(out_dir);
@@ -119,9 +128,10 @@ int runBenchLpfResample(const Arguments& a) {
       return all;
     };
     row("input", in, 0, 0);
-    for (const std::string m : {"lpf", "qsr", "apss", "rimls", "pcl-mls-plane"}) {
+    for (const std::string m : {"lpf", "lpf-raw", "lpf-denoised", "qsr", "apss", "rimls", "pcl-mls-plane"}) {
       const WorkerResult w = spawnWorker({"bench-worker-sr", m, out_dir, "1"},
-                                         {{"count", static_cast<double>(count)}, {"factor", 4}, {"radius", 2 * r}},
+                                         {{"count", static_cast<double>(count)}, {"factor", 4}, {"radius", 2 * r},
+                                          {"passes", passes}},
                                          out_dir + "/sr_out.bin", out_dir + "/sr_log.txt");
       if (!w.ok) {
         std::printf("%-6s %-14s failed: %s\n", fmt("%.2f%%", noise * 100).c_str(), m.c_str(), w.message.c_str());
@@ -130,8 +140,12 @@ int runBenchLpfResample(const Arguments& a) {
       }
       if (m == "lpf") count = w.output.size();  // the others make as many points
       const double acc = row(m == "pcl-mls-plane" ? "pcl-mls (2x r)" : m, w.output, w.seconds, w.peak_mb);
-      if (m == "lpf") lpf_acc = acc;
-      else best_other = std::min(best_other, acc);
+      if (m == "lpf") {
+        lpf_acc = acc;
+        if (!w.chosen.empty()) std::printf("%-6s %-14s (chosen: %s)\n", "", "", w.chosen.c_str());
+      } else if (m.rfind("lpf-", 0) != 0) {
+        best_other = std::min(best_other, acc);
+      }
     }
     if (lpf_acc > 0 && std::isfinite(best_other))
       std::printf("  -> LPF accuracy / best other = %.3f\n", lpf_acc / best_other);
@@ -145,7 +159,7 @@ int runBenchLpfResample(const Arguments& a) {
 int runBenchLpf(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "resample"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "points", "noise", "shapes", "quick", "resample", "samples"});
+  a.allowOnly({"out", "points", "noise", "shapes", "quick", "resample", "samples", "denoise-passes"});
   if (a.has("resample")) {
 #ifdef PAPS_HAVE_SURFACE
     std::setvbuf(stdout, nullptr, _IOLBF, 0);

@@ -384,10 +384,24 @@ int runSuperresWorker(int argc, char** argv) {
       // -wide: seeds spread over discs as wide as QSR's (1.2 mean spacings).
       if (method.find("-wide") != std::string::npos) q.disc_scale = 1.7724539f;
       out = upsampleMls(scans[0], method.rfind("apss", 0) == 0 ? MlsSurface::Apss : MlsSurface::Rimls, q);
-    } else if (method == "lpf") {
+    } else if (method == "lpf" || method == "lpf-raw" || method == "lpf-denoised") {
+      // lpf: the default (denoised first when the noise is thicker than the consensus
+      // radius); lpf-raw never, lpf-denoised always.
       LpfResamplingParameters q;
       q.factor = static_cast<float>(get("factor", q.factor));
-      out = lpfResample(scans[0], q);
+      if (method == "lpf-raw") q.denoise_input = LpfResamplingParameters::Denoise::Off;
+      if (method == "lpf-denoised") q.denoise_input = LpfResamplingParameters::Denoise::On;
+      q.denoise_passes = static_cast<int>(get("passes", q.denoise_passes));
+      q.denoise_ratio = static_cast<float>(get("denoise-ratio", q.denoise_ratio));
+      LpfResamplingReport r;
+      out = lpfResample(scans[0], q, &r);
+      if (method == "lpf") {
+        char b[160];
+        std::snprintf(b, sizeof b, "noise %.3g = %.2f tau_p, %s", r.noise_sigma, r.noise_ratio,
+                      r.denoised ? ("denoised first, " + std::to_string(r.denoise_passes) + (r.denoise_passes == 1 ? " pass" : " passes")).c_str()
+                                 : "not denoised");
+        lf << "chosen " << b << "\n";
+      }
     } else if (method == "seeds-only") {
       // Control, not a method: the Poisson-disk seeds over the noisy input's tangent discs
       // (QSR's disc radius, 1.2 mean spacings), projected on no surface at all. Where this

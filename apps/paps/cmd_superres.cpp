@@ -41,7 +41,10 @@ const char* kSuperresUsage =
     "  --method M             qsr (default), apss, rimls, or lpf (Local Probing Fields\n"
     "                         resampling: wires as well as surfaces; --factor is the density\n"
     "                         ratio on surfaces, --radius the pattern radius, --neighbours its\n"
-    "                         count (default 100); no --count, no --normals)\n"
+    "                         count (default 100); no --count, no --normals; --denoise: auto\n"
+    "                         denoises first with paps denoise --method lpf when the measured\n"
+    "                         noise is at least half the consensus radius, 0.7 x the output\n"
+    "                         spacing, in twice that ratio passes, 1 to 5)\n"
     "  --radius R             patch radius (QSR) or kernel support (APSS/RIMLS) in metres\n"
     "                         (default: from --neighbours)\n"
     "  --neighbours N         neighbour count of a typical point (median) that sets the radius (default 36 QSR, 30 others)\n"
@@ -58,7 +61,7 @@ const char* kSuperresUsage =
     "  --adapt                QSR: widen the kernel with the measured noise (2-4% closer to the\n"
     "                         surface at 0.5% noise, about 3x the time); acts on scans that are\n"
     "                         not denoised first (a denoised scan gets the quiet kernel)\n"
-    "  --denoise WHEN         QSR: denoise the scans first (paps denoise's default): auto (default:\n"
+    "  --denoise WHEN         QSR and LPF: denoise the scans first (paps denoise's default): auto (default:\n"
     "                         when the measured noise is at least 5% of the patch radius), on, off;\n"
     "                         auto also denoises from 0.5% when the surface is smooth at the patch\n"
     "                         scale (scan-line bench: 17% closer to the ground); on denoises always,\n"
@@ -101,7 +104,9 @@ int runSuperres(int argc, char** argv) {
     applies.insert(applies.end(), {"count", "similarity", "grid-lr", "grid-sr", "patches", "kernel", "similarity-scale",
                                    "irls", "noise", "adapt", "denoise", "seed-disc", "thin-disc", "normals", "orient",
                                    "keep-normals"});
-  else if (method != "lpf")
+  else if (method == "lpf")
+    applies.push_back("denoise");
+  else
     applies.insert(applies.end(), {"count", "refit", "max-neighbours", "seed-disc", "normals", "orient", "keep-normals"});
   requireOptionsOf(a, applies, "--method " + method);
   const std::string out_path = a.positional.back();
@@ -159,11 +164,24 @@ int runSuperres(int argc, char** argv) {
     p.probing.radius = a.real("radius", 0);
     p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
     p.max_tile_points = a.count("tile-points", p.max_tile_points);
+    const std::string denoise = a.text("denoise", "auto");
+    if (denoise == "auto") p.denoise_input = LpfResamplingParameters::Denoise::Auto;
+    else if (denoise == "on") p.denoise_input = LpfResamplingParameters::Denoise::On;
+    else if (denoise == "off") p.denoise_input = LpfResamplingParameters::Denoise::Off;
+    else throw InvalidParameter("denoise", denoise, "auto, on or off");
     validateAsOptions({{"max_tile_points", "tile-points"}}, [&] { p.validate(); });
     readScans();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
     LpfResamplingReport r;
     out = lpfResample(scans[0], p, &r, progress);
+    if (r.denoised)
+      std::printf("lpf: the scan was denoised first (paps denoise --method lpf --passes %d): noise %g m measured, "
+                  "%.2f x the consensus radius (%s)\n", r.denoise_passes, r.noise_sigma, r.noise_ratio,
+                  p.denoise_input == LpfResamplingParameters::Denoise::On ? "--denoise on"
+                                                                          : fmt("auto from %g", p.denoise_ratio).c_str());
+    else if (p.denoise_input == LpfResamplingParameters::Denoise::Auto)
+      std::printf("lpf: not denoised first: noise %g m measured, %.2f x the consensus radius (below %g)\n",
+                  r.noise_sigma, r.noise_ratio, p.denoise_ratio);
     std::printf("lpf: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %zu proposals\n", r.radius,
                 p.probing.radius > 0 ? "" : " (chosen)", r.step, r.pattern_nodes, r.fields, r.proposals);
     if (r.tiles > 1)

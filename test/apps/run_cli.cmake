@@ -341,6 +341,25 @@ elseif(CASE STREQUAL "superres_tiles")
   file(REMOVE ${output})
   run_paps(superres ${input} ${output} --method lpf --tile-points 999 --quiet)
   expect_one_error_line("tile-points")
+elseif(CASE STREQUAL "superres_lpf_denoise")
+  # --denoise for LPF resampling: on says it denoised first and in how many passes, with the
+  # noise measured; off never denoises nor measures; auto says which it chose; a bad value is
+  # one error line naming the option.
+  write_input(3000)
+  run_paps(superres ${input} ${output} --method lpf --denoise on --factor 2 --quiet)
+  expect_success_saying("lpf: the scan was denoised first \\(paps denoise --method lpf --passes [1-5]\\): noise [0-9.e-]+ m measured, [0-9.]+ x the consensus radius \\(--denoise on\\)")
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --method lpf --denoise off --factor 2 --quiet)
+  expect_success_saying("wrote")
+  if(out MATCHES "denoised")
+    message(FATAL_ERROR "--denoise off spoke of denoising: ${out}")
+  endif()
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --method lpf --factor 2 --quiet)
+  expect_success_saying("lpf: (the scan was denoised first|not denoised first): noise [0-9.e-]+ m measured")
+  file(REMOVE ${output})
+  run_paps(superres ${input} ${output} --method lpf --denoise sometimes --quiet)
+  expect_one_error_line("denoise")
 elseif(CASE STREQUAL "mesh_tools")
   # sample-mesh and mesh-distance on a unit square (z = 0): clean samples lie on it, noisy
   # ones at the noise asked (Gaussian, 1% of the diagonal on each axis: about 0.0141 from

@@ -1,6 +1,8 @@
 #include <paps/surface/lpf_resampling.h>
 #include <paps/surface/impl/lpf_resampling.hpp>
 
+#include <paps/filters/lpf_denoising.h>
+
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -10,6 +12,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/tiling.h>
 
@@ -23,6 +26,8 @@ void LpfResamplingParameters::validate() const {
   if (max_tile_points != 0 && (max_tile_points < 1000 || max_tile_points >= (std::size_t(1) << 31)))
     throw InvalidParameter("max_tile_points", std::to_string(max_tile_points),
                            "0 (one piece) or a count from 1000 to below 2^31");
+  requireInRange("denoise_ratio", denoise_ratio, 0.01f, 100.f);
+  requireInRange("denoise_passes", denoise_passes, 0, 50);
   if (!(tile_margin >= 2.5f && tile_margin <= 10.f))
     throw InvalidParameter("tile_margin", detail::toString(tile_margin), "2.5 to 10 pattern radii");
 }
@@ -255,19 +260,64 @@ Positions resampleInTiles(const Positions& points, const LpfResamplingParameters
   return out;
 }
 
+// For the Auto rule of denoise_input and the automatic passes: the noise measured on the
+// whole cloud (in spatial order, as the analysis reads it) at the pattern radius the
+// analysis would choose without a noise rule, against the consensus radius that radius
+// implies (report.noise_sigma, noise_ratio).
+void measureNoise(const Positions& sorted, const LpfResamplingParameters& params, LpfResamplingReport& report) {
+  LocalProbingParameters probing = params.probing;
+  probing.noise_sigmas = 0.f;
+  probing.nodes_per_point = params.factor;
+  const SpatialIndex index(sorted);
+  const float r = LocalProbingAnalysis::chooseRadius(sorted, index, probing, nullptr);
+  const float step = probing.step > 0 ? probing.step : r * std::sqrt(3.14159265f / (probing.neighbours * params.factor));
+  const float tau = params.tau_p > 0 ? params.tau_p : 0.7f * step;
+  try {
+    report.noise_sigma = estimateNoiseLevel(sorted, index, r).sigma;
+  } catch (const InvalidInput&) {
+    report.noise_sigma = 0.f;  // no ball to fit a surface in (wires only, or a few points)
+  }
+  report.noise_ratio = report.noise_sigma / tau;
+}
+
 }  // namespace
 
 Positions lpfResample(const Positions& points, const LpfResamplingParameters& params, LpfResamplingReport* report,
                       const ProgressCallback& progress) {
   params.validate();
   if (points.empty()) throw InvalidInput("no point to resample (the cloud, or its indices, are empty)");
-  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points) {
-    requireRadiusWithinExtent("radius", params.probing.radius, points);
-    return resampleInTiles(points, params, report, progress);
-  }
+  const std::size_t finite = countFinite(points);
+  if (finite < 3) throw InvalidInput("LPF resampling needs at least 3 finite points, got " + std::to_string(finite));
+  requireRadiusWithinExtent("radius", params.probing.radius, points);
   // In spatial order: the output does not depend on the input order.
-  const std::vector<int> order = spatialOrderAll(points);
-  return resampleInSpatialOrder(gathered(points, order), params, report, progress);
+  Positions sorted = gathered(points, spatialOrderAll(points));
+  LpfResamplingReport noise;
+  using Denoise = LpfResamplingParameters::Denoise;
+  if (params.denoise_input == Denoise::Auto || (params.denoise_input == Denoise::On && params.denoise_passes == 0))
+    measureNoise(sorted, params, noise);
+  if (params.denoise_input == Denoise::On ||
+      (params.denoise_input == Denoise::Auto && noise.noise_ratio >= params.denoise_ratio)) {
+    LpfDenoisingParameters d;
+    d.probing.neighbours = params.probing.neighbours;
+    d.probing.seed = params.probing.seed;
+    d.max_tile_points = params.max_tile_points;
+    d.iterations = params.denoise_passes > 0
+                       ? params.denoise_passes
+                       : std::clamp(static_cast<int>(std::floor(2.f * noise.noise_ratio)), 1, 5);
+    sorted = lpfDenoisePositions(sorted, d, nullptr, {}, progress);
+    noise.denoised = true;
+    noise.denoise_passes = d.iterations;
+  }
+  Positions out = params.max_tile_points > 0 && finite > params.max_tile_points
+                      ? resampleInTiles(sorted, params, report, progress)
+                      : resampleInSpatialOrder(sorted, params, report, progress);
+  if (report) {
+    report->noise_sigma = noise.noise_sigma;
+    report->noise_ratio = noise.noise_ratio;
+    report->denoised = noise.denoised;
+    report->denoise_passes = noise.denoise_passes;
+  }
+  return out;
 }
 
 template class LpfResampling<pcl::PointXYZ, pcl::PointXYZ>;

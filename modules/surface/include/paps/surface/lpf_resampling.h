@@ -35,6 +35,22 @@ struct LpfResamplingParameters {
   /// Consensus radius tau_p in metres (> 0), or 0: 0.7 x the pattern step (kept points are
   /// at least tau_p apart; at 1 x the step the output had half the density asked for).
   float tau_p = 0.f;
+  /// Noisy clouds are denoised first by paps::LpfDenoising (ours, not in the manuscript; its
+  /// neighbours, seed and tiles follow these parameters). One analysis keeps about half the
+  /// noise in its proposals, and where the noise is thicker than the consensus radius tau_p
+  /// the consensus keeps them in layers: rs1 sampled with 1M points at 0.05% noise, x2 gave
+  /// 2.4x the points at 0.106 RMS to the mesh; denoised first, 1.9x at 0.06 (docs/lpf.md).
+  /// Auto: when the noise sigma measured at the pattern radius (estimateNoiseLevel) is at
+  /// least `denoise_ratio` x tau_p.
+  enum class Denoise { Off, Auto, On };
+  Denoise denoise_input = Denoise::Auto;
+  /// The Auto threshold: noise sigma / tau_p, in [0.01, 100].
+  float denoise_ratio = 0.5f;
+  /// Passes of that first denoising (LpfDenoisingParameters::iterations), 1 to 50, or 0:
+  /// twice the noise ratio, 1 to 5. Every pass also erodes relief finer than the pattern:
+  /// on the rs1 mesh at 0.01% noise the output came 0.032 from the mesh undenoised, 0.042
+  /// after one pass, 0.056 after five, while the plate and wires at 0.5% wanted all five.
+  int denoise_passes = 0;
   /// A cloud of more finite points is resampled in tiles of at most this many, one after the
   /// other (the working memory of a tile: about 1.5 KB a point of it at factor 4). The
   /// pattern radius is chosen on the whole cloud; each tile analyses its own fields (its own
@@ -54,6 +70,11 @@ struct LpfResamplingReport {
   std::size_t fields = 0, proposals = 0, output = 0;
   std::size_t tiles = 1;         ///< tiles the cloud was resampled in (1: one piece)
   std::size_t largest_tile = 0;  ///< most points a tile held, halo included (one piece: all)
+  /// Noise sigma measured for the Auto decision and the automatic passes (0: not measured,
+  /// or no surface to fit), its ratio to tau_p, and whether the cloud was denoised first.
+  float noise_sigma = 0.f, noise_ratio = 0.f;
+  bool denoised = false;
+  int denoise_passes = 0;  ///< passes of the first denoising (0: not denoised)
 };
 
 /// Resamples `points` (NaN entries ignored). Deterministic; the output does not depend on
@@ -73,6 +94,8 @@ class LpfResampling : public pcl::CloudSurfaceProcessing<PointIn, PointOut>, pub
   void setRadius(float r) { auto p = params_; p.probing.radius = r; setParameters(p); }
   /// Tiles of at most n points for larger clouds (0: one piece); see max_tile_points.
   void setMaxTilePoints(std::size_t n) { auto p = params_; p.max_tile_points = n; setParameters(p); }
+  /// Denoise the cloud first: Auto (from the noise), On, Off; see denoise_input.
+  void setDenoiseInput(LpfResamplingParameters::Denoise d) { auto p = params_; p.denoise_input = d; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const LpfResamplingReport& getReport() const { return report_; }
   /// As pcl::CloudSurfaceProcessing::process, but without an input cloud it throws InvalidInput.

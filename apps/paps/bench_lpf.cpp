@@ -65,6 +65,8 @@ std::vector<Method> methods(float r, bool quick) {
   if (!quick) m.push_back({"lpf", "every pass (bend 0)", {{"bend", 0}}, false});
   // The option for curved surfaces: each field's curvature kept out of the L1 penalty.
   if (!quick) m.push_back({"lpf", "free curvature", {{"free-curvature", 1}}, false});
+  if (!quick) m.push_back({"lpf", "1 pass", {{"passes", 1}}, false});
+  if (!quick) m.push_back({"lpf", "2 passes", {{"passes", 2}}, false});
   m.push_back({"ours", "similarity, default", {}});
   for (double f : quick ? std::vector<double>{1} : std::vector<double>{1, 2, 3})
     m.push_back({"mls", "radius x" + fmt("%g", f), {{"radius", r * f}, {"order", 2}, {"threads", 2}}});
@@ -256,6 +258,8 @@ int runBenchLpf(int argc, char** argv) {
         score(w.output, e);
         std::printf("%-12s %-6s %-10s %-24s %8.2f %8.0f %9.3f %9.3f %9.3f\n", shape.c_str(), noise_s.c_str(),
                     m.name.c_str(), m.setting.c_str(), w.seconds, w.peak_mb, e[0], e[1], e[2]);
+        if (m.name == "lpf" && m.setting == "default" && !w.chosen.empty())
+          std::printf("%-12s %-6s %-10s (chosen: %s)\n", "", "", "", w.chosen.c_str());
         csv << shape << "," << noise << "," << m.name << ",\"" << m.setting << "\",1," << w.seconds << "," << w.peak_mb
             << "," << e[0] << "," << e[1] << "," << e[2] << "\n";
         if (!m.compared) continue;

@@ -52,7 +52,8 @@ const char* kDenoiseUsage =
     "                         --radius, --no-adapt, --passes, --refilter or --own-weight)\n"
     "  --iterations N         bilateral passes (default 1)\n"
     "LPF options (--method lpf; --radius is the pattern radius, --neighbours defaults to 100,\n"
-    "--passes to 5):\n"
+    "--passes from the relief: 5 where the surface is smooth at the pattern scale, 2 where it\n"
+    "has relief, by the noise growth from balls of r to 2r; give --passes to set them):\n"
     "  --step S               pattern step in metres (default: as many nodes as points in the ball)\n"
     "  --atoms D              dictionary atoms (default 16)\n"
     "  --lambda L             L1 weight of the codes in metres (default: 0.5 x the step)\n"
@@ -202,13 +203,18 @@ int runDenoise(int argc, char** argv) {
       std::snprintf(chosen, sizeof chosen, " (chosen: noise %.3g m measured, at least %g sigma)", r.noise_sigma,
                     p.probing.noise_sigmas);
     std::printf("LPF denoising: pattern radius %g m%s, step %g m (%d nodes), %zu fields, %d atoms, lambda %g m, "
-                "%d passes%s; moved %zu points\n",
+                "%d pass%s%s%s; moved %zu points\n",
                 r.radius, p.probing.radius > 0 ? "" : chosen, r.step, r.pattern_nodes, r.fields, p.probing.atoms,
-                r.lambda, p.iterations, p.probing.free_curvature ? ", free curvature" : "", r.moved);
+                r.lambda, r.passes, r.passes == 1 ? "" : "es",
+                p.iterations > 0 ? ""
+                : r.noise_growth >= p.relief_growth
+                    ? fmt(" (chosen: relief, noise growth %.3g)", r.noise_growth).c_str()
+                    : fmt(" (chosen: smooth, noise growth %.3g)", r.noise_growth).c_str(),
+                p.probing.free_curvature ? ", free curvature" : "", r.moved);
     if (r.tiles > 1)
       std::printf("in %zu tiles (at most %zu points each, %zu with the halo of %g radii; fields and dictionaries per tile)\n",
                   r.tiles, p.max_tile_points, r.largest_tile, p.tile_margin);
-    if (p.bend_threshold > 0 && p.iterations > 1) {
+    if (p.bend_threshold > 0 && r.passes > 1) {
       std::string by_pass;
       for (std::size_t k = 0; k < r.held_after_pass.size(); ++k)
         by_pass += (k ? ", " : "") + std::to_string(r.held_after_pass[k]) + " after pass " + std::to_string(k + 1);

@@ -52,6 +52,28 @@ TEST(EstimateNoiseLevel, RecoversTheNoiseOfAPlane) {
   }
 }
 
+TEST(NoiseGrowth, NearOneOnSmoothSurfacesAboveWithReliefFinerThanTheBalls) {
+  // A noisy plane and sphere: what the fits leave is the noise at both scales. The plane
+  // with bumps of a wavelength of twice the ball radius: the wider fits leave the bumps too.
+  const Positions plane = noisyPlane(20000, 0.003f, 5);
+  const paps::SpatialIndex pi(plane);
+  const float r = paps::radiusForNeighbourCount(plane, pi, 100);
+  EXPECT_NEAR(paps::noiseGrowth(plane, pi, r), 1.f, 0.08f);
+  const Positions sphere = noisySphere(20000, 1.f, 0.01f, 6);
+  const paps::SpatialIndex si(sphere);
+  EXPECT_NEAR(paps::noiseGrowth(sphere, si, paps::radiusForNeighbourCount(sphere, si, 100)), 1.f, 0.08f);
+  Positions bumpy = plane;
+  const float k = 3.14159265f / r;  // wavelength 2r
+  for (auto& q : bumpy) q.z() += 0.02f * std::sin(k * q.x()) * std::sin(k * q.y());
+  const paps::SpatialIndex bi(bumpy);
+  const float growth = paps::noiseGrowth(bumpy, bi, r);
+  EXPECT_GT(growth, 1.3f) << "radius " << r;
+  // The sigma at r handed in is used as it is.
+  const float at_r = paps::estimateNoiseLevel(bumpy, bi, r).sigma;
+  EXPECT_FLOAT_EQ(paps::noiseGrowth(bumpy, bi, r, at_r), growth);
+  EXPECT_FLOAT_EQ(paps::noiseGrowth(bumpy, bi, r, 2 * at_r), 0.5f * growth);
+}
+
 TEST(EstimateNoiseLevel, CleanSurfacesHaveNoNoiseWhateverTheirCurvature) {
   // A sphere of radius 0.5 sampled with about 30 neighbours a ball: the quadric absorbs the
   // curvature, so the estimate stays far below the sag of the ball (r^2 / 2R ~ 1e-3).

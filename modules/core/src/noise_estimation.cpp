@@ -143,4 +143,10 @@ NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& in
   return est;
 }
 
+float noiseGrowth(const Positions& points, const SpatialIndex& index, float radius, float at_radius) {
+  const float at_r = at_radius > 0 ? at_radius : estimateNoiseLevel(points, index, radius).sigma;
+  if (!(at_r > 0)) return 0.f;
+  return estimateNoiseLevel(points, index, 2 * radius).sigma / at_r;
+}
+
 }  // namespace paps

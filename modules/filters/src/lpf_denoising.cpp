@@ -7,6 +7,7 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/tiling.h>
 
@@ -14,7 +15,8 @@ namespace paps {
 
 void LpfDenoisingParameters::validate() const {
   probing.validate();
-  requireInRange("iterations", iterations, 1, 50);
+  requireInRange("iterations", iterations, 0, 50);
+  requireInRange("relief_growth", relief_growth, 1.f, 10.f);
   requireInRange("rounds_per_pass", rounds_per_pass, 0, 100);
   if (!(rate > 0 && rate <= 1)) throw InvalidParameter("rate", detail::toString(rate), "a value in (0, 1]");
   if (!(bend_threshold >= 0 && bend_threshold <= 10))
@@ -292,13 +294,37 @@ Positions lpfDenoisePositions(const Positions& points, const LpfDenoisingParamet
   params.validate();
   checkMovableInput(points, movable);
   if (leaveOnePositionAsItIs(points, report)) return points;
-  if (params.max_tile_points > 0 && countFinite(points) > params.max_tile_points) {
-    requireRadiusWithinExtent("radius", params.probing.radius, points);
-    return denoiseInTiles(points, params, report, movable, progress);
+  const std::size_t finite = countFinite(points);
+  if (finite >= 3) requireRadiusWithinExtent("radius", params.probing.radius, points);
+  // The automatic passes: the radius is resolved on the whole cloud (in spatial order, as the
+  // analysis reads it) and the noise growth measured at it.
+  LpfDenoisingParameters run = params;
+  float noise_sigma = 0.f, growth = 0.f;
+  if (run.iterations == 0) {
+    run.iterations = 5;
+    if (finite >= 3) {
+      const Positions sorted = gathered(points, spatialOrderAll(points));
+      const SpatialIndex index(sorted);
+      run.probing.radius = LocalProbingAnalysis::chooseRadius(sorted, index, params.probing, &noise_sigma);
+      try {
+        growth = noiseGrowth(sorted, index, run.probing.radius);
+      } catch (const InvalidInput&) {
+        growth = 0.f;  // no ball to fit a surface in (wires only): the full count
+      }
+      if (growth >= params.relief_growth) run.iterations = 2;
+    }
   }
-  return runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
-    return denoiseInSpatialOrder(p, params, report, m, progress);
-  });
+  Positions out = params.max_tile_points > 0 && finite > params.max_tile_points
+                      ? denoiseInTiles(points, run, report, movable, progress)
+                      : runInSpatialOrder(points, movable, [&](const Positions& p, const std::vector<std::uint8_t>& m) {
+                          return denoiseInSpatialOrder(p, run, report, m, progress);
+                        });
+  if (report) {
+    report->passes = run.iterations;
+    report->noise_growth = growth;
+    if (params.iterations == 0 && params.probing.radius == 0) report->noise_sigma = noise_sigma;
+  }
+  return out;
 }
 
 template class LpfDenoising<pcl::PointXYZ>;

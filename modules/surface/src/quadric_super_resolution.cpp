@@ -213,12 +213,8 @@ NoiseChoice chooseNoiseAndDenoising(const Positions& scan0, const SpatialIndex& 
   if (params.denoise_input == Denoise::Auto && R > 0 && c.noise >= kSmoothNoise * R && c.noise < kQuietNoise * R) {
     try {
       // The noise at R is the one measured above, unless the caller gave it.
-      const float at_r = c.estimated ? c.noise : estimateNoiseLevel(scan0, index, R).sigma;
-      const float at_2r = estimateNoiseLevel(scan0, index, 2 * R).sigma;
-      if (at_r > 0) {
-        c.growth = at_2r / at_r;
-        smooth_and_noisy = c.growth < kSmoothGrowth;
-      }
+      c.growth = noiseGrowth(scan0, index, R, c.estimated ? c.noise : 0.f);
+      smooth_and_noisy = c.growth > 0 && c.growth < kSmoothGrowth;
     } catch (const InvalidInput&) {
       // no ball of 2R holds enough points: keep the input as it is
     }

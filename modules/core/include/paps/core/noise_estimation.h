@@ -34,4 +34,11 @@ struct NoiseEstimate {
 NoiseEstimate estimateNoiseLevel(const Positions& points, const SpatialIndex& index, float radius,
                                  int samples = 2000);
 
+/// How much the residual of the quadric fits grows from balls of `radius` to balls of twice
+/// it: sigma(2 radius) / sigma(radius) (estimateNoiseLevel). Near 1 where the surface is smooth
+/// at that scale (what the fits leave is noise), above where it has relief finer than the
+/// balls (the wider fits leave it too). `at_radius` > 0: sigma(radius), already measured.
+/// Returns 0 when sigma(radius) is 0. Throws as estimateNoiseLevel.
+float noiseGrowth(const Positions& points, const SpatialIndex& index, float radius, float at_radius = 0.f);
+
 }  // namespace paps

@@ -31,9 +31,17 @@ struct LpfDenoisingParameters {
     p.seed_spacing_radii = 1.f / 3.f;
     return p;
   }();
-  /// Denoising passes (analysis then consensus), in [1, 50]. Measured on the plate and
-  /// wires of the bench (docs/lpf.md): 3 -> 5 passes took the error from 1.10e-3 to 6.3e-4.
-  int iterations = 5;
+  /// Denoising passes (analysis then consensus), in [1, 50], or 0: from the relief. Measured
+  /// (docs/lpf.md): on the plate and wires 3 -> 5 passes took the error from 1.10e-3 to
+  /// 6.3e-4; on the rs1 mesh, whose relief is finer than the pattern, the passes past the
+  /// second erode it (50,000 points at 0.15% noise: 0.583 / 0.603 / 0.707 after 1 / 2 / 5).
+  /// 0 runs 5 passes where the surface is smooth at the pattern scale (noiseGrowth at the
+  /// pattern radius below `relief_growth`: plate and wires 1.01-1.03, fandisk 1.05-1.06) and
+  /// 2 where it has relief (rs1 1.23-1.32).
+  int iterations = 0;
+  /// The noise growth from which the automatic passes take the surface for relief, in
+  /// [1, 10].
+  float relief_growth = 1.15f;
   /// Rounds of the analysis before each pass after the first (warm-started), in [0, 100].
   int rounds_per_pass = 1;
   /// Fraction of the way to the consensus position a point moves per pass, in (0, 1].
@@ -85,6 +93,9 @@ struct LpfDenoisingReport {
   float radius = 0.f, step = 0.f, lambda = 0.f;
   /// Noise sigma measured for the automatic radius (0: not measured).
   float noise_sigma = 0.f;
+  /// Passes run, and the noise growth the automatic count read (0: not measured).
+  int passes = 0;
+  float noise_growth = 0.f;
   int pattern_nodes = 0;
   std::size_t fields = 0;
   /// Representation error sum_j |V_j - D a_j|^2 / N after each round, all passes.

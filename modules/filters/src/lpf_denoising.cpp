@@ -241,7 +241,7 @@ Positions denoiseInTiles(const Positions& points, const LpfDenoisingParameters& 
   LpfDenoisingReport report;
   LpfDenoisingParameters run = params;
   run.max_tile_points = 0;
-  {
+  if (!(params.probing.radius > 0)) {  // the automatic passes resolve it first
     const Positions sorted = gathered(points, spatialOrderAll(points));
     const SpatialIndex index(sorted);
     run.probing.radius = LocalProbingAnalysis::chooseRadius(sorted, index, params.probing, &report.noise_sigma);

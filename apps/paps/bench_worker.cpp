@@ -16,7 +16,6 @@
 #include <pcl/search/kdtree.h>
 
 #include <paps/core/error.h>
-#include <paps/core/noise_estimation.h>
 #include <paps/filters/lpf_denoising.h>
 #include <paps/filters/point_bilateral_filter.h>
 #include <paps/filters/similarity_denoising.h>
@@ -177,14 +176,9 @@ int runBenchWorker(int argc, char** argv) {
       lf << "radius " << report.radius << "\n";
       {
         char b[160];
-        float growth = 0.f;
-        try {
-          const SpatialIndex gi(input);
-          growth = estimateNoiseLevel(input, gi, 2 * report.radius).sigma / estimateNoiseLevel(input, gi, report.radius).sigma;
-        } catch (...) {
-        }
-        std::snprintf(b, sizeof b, "noise %.3g = %.2f step, growth %.3f", report.noise_sigma,
-                      report.step > 0 ? report.noise_sigma / report.step : 0.f, growth);
+        std::snprintf(b, sizeof b, "noise %.3g = %.2f step, growth %.3f, %d pass%s", report.noise_sigma,
+                      report.step > 0 ? report.noise_sigma / report.step : 0.f, report.noise_growth, report.passes,
+                      report.passes == 1 ? "" : "es");
         lf << "chosen " << b << (report.tiles > 1 ? ", " + std::to_string(report.tiles) + " tiles" : std::string())
            << "\n";
       }

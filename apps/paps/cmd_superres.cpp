@@ -18,6 +18,15 @@
 namespace paps::cli {
 
 namespace {
+// --denoise auto|on|off (QSR and LPF).
+DenoiseFirst denoiseFirstOption(const Arguments& a) {
+  const std::string denoise = a.text("denoise", "auto");
+  if (denoise == "auto") return DenoiseFirst::Auto;
+  if (denoise == "on") return DenoiseFirst::On;
+  if (denoise == "off") return DenoiseFirst::Off;
+  throw InvalidParameter("denoise", denoise, "auto, on or off");
+}
+
 const char* kSuperresUsage =
     "usage: paps superres IN [IN2 ...] OUT --factor F [options]\n"
     "  IN                     the scan to super-resolve (.pcd or .ply)\n"
@@ -164,11 +173,7 @@ int runSuperres(int argc, char** argv) {
     p.probing.radius = a.real("radius", 0);
     p.probing.neighbours = a.integer("neighbours", p.probing.neighbours);
     p.max_tile_points = a.count("tile-points", p.max_tile_points);
-    const std::string denoise = a.text("denoise", "auto");
-    if (denoise == "auto") p.denoise_input = LpfResamplingParameters::Denoise::Auto;
-    else if (denoise == "on") p.denoise_input = LpfResamplingParameters::Denoise::On;
-    else if (denoise == "off") p.denoise_input = LpfResamplingParameters::Denoise::Off;
-    else throw InvalidParameter("denoise", denoise, "auto, on or off");
+    p.denoise_input = denoiseFirstOption(a);
     validateAsOptions({{"max_tile_points", "tile-points"}}, [&] { p.validate(); });
     readScans();
     if (scans.size() > 1) std::fprintf(stderr, "warning: %s uses the first scan only\n", method.c_str());
@@ -204,11 +209,7 @@ int runSuperres(int argc, char** argv) {
     p.seed_disc = a.real("seed-disc", p.seed_disc);
     p.thin_disc = a.real("thin-disc", p.thin_disc);
     p.max_tile_points = a.count("tile-points", p.max_tile_points);
-    const std::string denoise = a.text("denoise", "auto");
-    if (denoise == "auto") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Auto;
-    else if (denoise == "on") p.denoise_input = QuadricSuperResolutionParameters::Denoise::On;
-    else if (denoise == "off") p.denoise_input = QuadricSuperResolutionParameters::Denoise::Off;
-    else throw InvalidParameter("denoise", denoise, "auto, on or off");
+    p.denoise_input = denoiseFirstOption(a);
     p.adapt_to_noise = a.has("adapt") || a.has("noise");
     validateAsOptions({{"target_neighbours", "neighbours"}, {"similarity_scale", "similarity-scale"},
                        {"grid_lr", "grid-lr"}, {"grid_sr", "grid-sr"}, {"similar_patches", "patches"},

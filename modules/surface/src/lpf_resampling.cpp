@@ -1,8 +1,6 @@
 #include <paps/surface/lpf_resampling.h>
 #include <paps/surface/impl/lpf_resampling.hpp>
 
-#include <paps/filters/lpf_denoising.h>
-
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -15,6 +13,7 @@
 #include <paps/core/noise_estimation.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/tiling.h>
+#include <paps/filters/lpf_denoising.h>
 
 namespace paps {
 
@@ -200,11 +199,13 @@ Positions resampleInSpatialOrder(const Positions& points, const LpfResamplingPar
 // tile whose fields see all around it. The consensus runs tile after tile, the points the
 // tiles before kept near this tile's proposals counting as kept: no two output points closer
 // than tau, across the seams too.
-Positions resampleInTiles(const Positions& points, const LpfResamplingParameters& params,
+// `radius` > 0: the pattern radius one piece would choose, already resolved on `points`.
+Positions resampleInTiles(const Positions& points, const LpfResamplingParameters& params, float radius,
                           LpfResamplingReport* report_out, const ProgressCallback& progress) {
   LpfResamplingParameters run = params;
   run.max_tile_points = 0;
-  {
+  run.probing.radius = radius;
+  if (!(radius > 0)) {
     LocalProbingParameters probing = params.probing;
     probing.noise_sigmas = 0.f;  // as the one-piece analysis resolves it
     const Positions sorted = gathered(points, spatialOrderAll(points));
@@ -263,8 +264,8 @@ Positions resampleInTiles(const Positions& points, const LpfResamplingParameters
 // For the Auto rule of denoise_input and the automatic passes: the noise measured on the
 // whole cloud (in spatial order, as the analysis reads it) at the pattern radius the
 // analysis would choose without a noise rule, against the consensus radius that radius
-// implies (report.noise_sigma, noise_ratio).
-void measureNoise(const Positions& sorted, const LpfResamplingParameters& params, LpfResamplingReport& report) {
+// implies (report.noise_sigma, noise_ratio). Returns that radius.
+float measureNoise(const Positions& sorted, const LpfResamplingParameters& params, LpfResamplingReport& report) {
   LocalProbingParameters probing = params.probing;
   probing.noise_sigmas = 0.f;
   probing.nodes_per_point = params.factor;
@@ -278,6 +279,7 @@ void measureNoise(const Positions& sorted, const LpfResamplingParameters& params
     report.noise_sigma = 0.f;  // no ball to fit a surface in (wires only, or a few points)
   }
   report.noise_ratio = report.noise_sigma / tau;
+  return r;
 }
 
 }  // namespace
@@ -293,8 +295,9 @@ Positions lpfResample(const Positions& points, const LpfResamplingParameters& pa
   Positions sorted = gathered(points, spatialOrderAll(points));
   LpfResamplingReport noise;
   using Denoise = LpfResamplingParameters::Denoise;
+  float radius = 0.f;  // the pattern radius of `sorted`, once measured
   if (params.denoise_input == Denoise::Auto || (params.denoise_input == Denoise::On && params.denoise_passes == 0))
-    measureNoise(sorted, params, noise);
+    radius = measureNoise(sorted, params, noise);
   if (params.denoise_input == Denoise::On ||
       (params.denoise_input == Denoise::Auto && noise.noise_ratio >= params.denoise_ratio)) {
     LpfDenoisingParameters d;
@@ -307,9 +310,10 @@ Positions lpfResample(const Positions& points, const LpfResamplingParameters& pa
     sorted = lpfDenoisePositions(sorted, d, nullptr, {}, progress);
     noise.denoised = true;
     noise.denoise_passes = d.iterations;
+    radius = 0.f;  // the points moved
   }
   Positions out = params.max_tile_points > 0 && finite > params.max_tile_points
-                      ? resampleInTiles(sorted, params, report, progress)
+                      ? resampleInTiles(sorted, params, radius, report, progress)
                       : resampleInSpatialOrder(sorted, params, report, progress);
   if (report) {
     report->noise_sigma = noise.noise_sigma;

@@ -8,6 +8,10 @@
 
 namespace paps {
 
+/// Whether an upsampler denoises its input first: from the noise it measures (Auto), always
+/// (On) or never (Off). QSR and LPF resampling each have their own Auto rule.
+enum class DenoiseFirst { Off, Auto, On };
+
 /// What estimateNoiseLevel measured.
 struct NoiseEstimate {
   /// Standard deviation of the points' offsets along the surface normal (metres): the noise,

@@ -11,6 +11,7 @@
 #include <pcl/surface/processing.h>
 
 #include <paps/core/local_probing_field.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
 #include <paps/core/thread_count.h>
@@ -42,7 +43,7 @@ struct LpfResamplingParameters {
   /// 2.4x the points at 0.106 RMS to the mesh; denoised first, 1.9x at 0.06 (docs/lpf.md).
   /// Auto: when the noise sigma measured at the pattern radius (estimateNoiseLevel) is at
   /// least `denoise_ratio` x tau_p.
-  enum class Denoise { Off, Auto, On };
+  using Denoise = DenoiseFirst;
   Denoise denoise_input = Denoise::Auto;
   /// The Auto threshold: noise sigma / tau_p, in [0.01, 100].
   float denoise_ratio = 0.5f;

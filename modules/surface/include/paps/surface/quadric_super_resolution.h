@@ -15,6 +15,7 @@
 #include <pcl/surface/processing.h>
 
 #include <paps/core/thread_count.h>
+#include <paps/core/noise_estimation.h>
 #include <paps/core/view_point_option.h>
 #include <paps/core/positions.h>
 #include <paps/core/progress.h>
@@ -102,7 +103,7 @@ struct QuadricSuperResolutionParameters {
   /// balls of 2R is less than 1.3x that over balls of R: it is noise, not relief; measured on
   /// the scan-line bench, 17% closer to the ground). Otherwise patch similarity already
   /// separates relief from noise and the input is used as it is.
-  enum class Denoise { Off, Auto, On };
+  using Denoise = DenoiseFirst;
   Denoise denoise_input = Denoise::Auto;
   std::uint64_t seed = 1;
   /// A first scan of more finite points than this is super-resolved in tiles of at most this

@@ -490,25 +490,36 @@ TransportPlan::Stencil TransportPlan::vertexStencil(int v) const {
 void TransportPlan::forEachIndependent(const std::vector<int>& items,
                                        const std::function<void(int, std::vector<int>&, std::vector<int>&)>& simplices,
                                        const std::function<void(int)>& work) {
+  // Each item's stencil, listed once (the rounds below read it again and again: the stencils
+  // of a Delaunay complex overlap, so a sweep takes many rounds). Facets are stored as
+  // -1 - f after the vertices.
+  std::vector<std::size_t> first(items.size() + 1, 0);
+  std::vector<int> ids, vs, fs;
+  for (std::size_t k = 0; k < items.size(); ++k) {
+    simplices(items[k], vs, fs);
+    ids.insert(ids.end(), vs.begin(), vs.end());
+    for (int f : fs) ids.push_back(-1 - f);
+    first[k + 1] = ids.size();
+  }
   // Greedy rounds: an item joins the round unless one of its simplices is already taken in it.
   std::vector<int> vertex_round(vertices_.size(), -1), facet_round(facets_.size(), -1);
-  std::vector<int> remaining = items, next, round;
-  std::vector<int> vs, fs;
+  std::vector<int> remaining(items.size()), next, round;
+  std::iota(remaining.begin(), remaining.end(), 0);
   for (int r = 0; !remaining.empty(); ++r) {
     next.clear();
     round.clear();
-    for (int item : remaining) {
-      simplices(item, vs, fs);
+    for (int k : remaining) {
       bool free = true;
-      for (int v : vs) free = free && vertex_round[v] != r;
-      for (int f : fs) free = free && facet_round[f] != r;
-      if (!free) { next.push_back(item); continue; }
-      for (int v : vs) vertex_round[v] = r;
-      for (int f : fs) facet_round[f] = r;
-      round.push_back(item);
+      for (std::size_t i = first[k]; free && i < first[k + 1]; ++i)
+        free = ids[i] >= 0 ? vertex_round[ids[i]] != r : facet_round[-1 - ids[i]] != r;
+      if (!free) { next.push_back(k); continue; }
+      for (std::size_t i = first[k]; i < first[k + 1]; ++i)
+        (ids[i] >= 0 ? vertex_round[ids[i]] : facet_round[-1 - ids[i]]) = r;
+      round.push_back(items[k]);
     }
+    // One item at a time: a round holds tens of items, each a linear program.
     const std::int64_t n = static_cast<std::int64_t>(round.size());
-#pragma omp parallel for schedule(dynamic, 16)
+#pragma omp parallel for schedule(dynamic, 1)
     for (std::int64_t k = 0; k < n; ++k) work(round[k]);
     std::swap(remaining, next);
   }

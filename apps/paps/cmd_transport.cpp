@@ -154,8 +154,9 @@ int runReconstruct(int argc, char** argv) {
   TransportReconstructionReport r;
   const TriangleMesh mesh = transportReconstruct(points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
   std::printf("reconstruct: Delaunay of %d points (%d facets), %d facets with mass; %d collapses (%d simulated, "
-              "%d simulations reused)\n",
-              r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations);
+              "%d simulations reused, %d skipped by their bound)\n",
+              r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations,
+              r.bounded_simulations);
   std::printf("reconstruct: %d facets deleted, %d dangling facets dropped; transport cost %.4g -> %.4g, RMS transport "
               "distance %g m\n",
               r.deleted_facets, r.dangling_facets, r.initial_cost, r.final_cost, r.rms_transport);

@@ -153,6 +153,32 @@ TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
   for (const auto& es : near.entries) EXPECT_LE(es.size(), 8u);
 }
 
+TEST(LocalTransport, NearestBinCostBoundsEveryProgramAndIsReachedWithoutFacets) {
+  // The square of the test above: the uniform measure on the facets costs more than the
+  // nearest bins; with vertices only (no capacity) the program is the nearest-bin plan.
+  paps::Random rng(12);
+  std::vector<Vector3d> pts;
+  for (int i = 0; i < 200; ++i) pts.emplace_back(rng.uniform(), rng.uniform(), 0.02 * rng.uniform());
+  const Vector3d c(0.5, 0.5, 0), q[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  std::vector<paps::FacetBins> bins;
+  for (int k = 0; k < 4; ++k) bins.push_back(paps::centroidalBins(q[k], q[(k + 1) % 4], c, 8));
+  std::vector<paps::TransportTarget> t;
+  for (const Vector3d& v : {q[0], q[1], q[2], q[3], c}) t.push_back({{v, v, v}, nullptr});
+  const std::vector<double> mass(pts.size(), 1.5);
+  const auto vertices_only = paps::solveLocalTransport(pts, mass, t, 0);
+  ASSERT_TRUE(vertices_only.solved);
+  EXPECT_NEAR(paps::nearestBinCost(pts, mass, t), vertices_only.cost, 1e-12 * vertices_only.cost);
+  for (int k = 0; k < 4; ++k) t.push_back({{q[k], q[(k + 1) % 4], c}, &bins[k]});
+  const double bound = paps::nearestBinCost(pts, mass, t);
+  EXPECT_LT(bound, vertices_only.cost);  // the facets' bins are nearer
+  for (int bins_per_point : {0, 4, 8}) {
+    const auto sol = paps::solveLocalTransport(pts, mass, t, bins_per_point);
+    ASSERT_TRUE(sol.solved);
+    EXPECT_GE(sol.cost, bound * (1 - 1e-12)) << bins_per_point;
+    EXPECT_GT(sol.cost, bound * 1.01) << bins_per_point;  // the uniform measure binds here
+  }
+}
+
 // A 3 x 3 grid of vertices and 8 facets over the unit square; returns the facet ids.
 std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
   std::vector<int> facets;

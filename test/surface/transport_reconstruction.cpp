@@ -160,8 +160,37 @@ TEST(TransportReconstruction, ReusedSimulationsGiveTheSameMesh) {
   const TriangleMesh b = paps::transportReconstruct(points, p, &without);
   EXPECT_GT(with.reused_simulations, 0);
   EXPECT_EQ(without.reused_simulations, 0);
-  EXPECT_EQ(with.simulations + with.reused_simulations, without.simulations);
+  // A reused simulation can settle the bound of a step sooner: never more programs.
+  EXPECT_LE(with.simulations + with.reused_simulations, without.simulations + without.bounded_simulations);
+  EXPECT_LE(with.simulations, without.simulations);
   EXPECT_EQ(with.final_cost, without.final_cost);
+  ASSERT_EQ(a.vertices.size(), b.vertices.size());
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
+  for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
+}
+
+TEST(TransportReconstruction, BoundedSimulationsGiveTheSameMeshWithFewerPrograms) {
+  // The collapses skipped by their lower bound could not have been chosen: the mesh is the
+  // one simulating every draw gives, bit for bit.
+  const paps::Positions points = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 4), 400, 9);
+  auto p = smallRun();
+  p.candidates = 20;
+  p.initial_fraction = 0.1f;
+  p.target_vertices = 30;
+  p.transport = paps::TransportParameters();
+  paps::TransportReconstructionReport bounded, every;
+  const TriangleMesh a = paps::transportReconstruct(points, p, &bounded);
+  p.bound_simulations = false;
+  const TriangleMesh b = paps::transportReconstruct(points, p, &every);
+  EXPECT_EQ(every.bounded_simulations, 0);
+  EXPECT_GT(bounded.bounded_simulations, 0);
+  EXPECT_LT(bounded.simulations, every.simulations);
+  // The same draws (the same collapses chosen): each simulated, reused or skipped.
+  EXPECT_EQ(bounded.simulations + bounded.reused_simulations + bounded.bounded_simulations,
+            every.simulations + every.reused_simulations);
+  EXPECT_EQ(bounded.collapses, every.collapses);
+  EXPECT_EQ(bounded.final_cost, every.final_cost);
   ASSERT_EQ(a.vertices.size(), b.vertices.size());
   ASSERT_EQ(a.triangles.size(), b.triangles.size());
   for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);

@@ -76,10 +76,13 @@ class Decimation {
     std::vector<Triple> new_facets;        // u's facets moved onto v
     std::vector<FacetBins> new_bins;
     LocalTransport solution;
-    double delta = INFINITY;
+    double lower_bound = -INFINITY;  // of delta
+    double delta = INFINITY;         // INFINITY: not simulated (or the program failed)
   };
 
-  Collapse simulate(int u, int v) const {
+  // The collapse's stencil, simplices after and new facets' bins, and a lower bound of its
+  // cost change (nearestBinCost after, minus the cost before); no program solved yet.
+  Collapse prepare(int u, int v) const {
     Collapse c;
     c.u = u;
     c.v = v;
@@ -106,26 +109,40 @@ class Decimation {
       if (!seen.insert(sorted(t)).second) continue;  // merges with an existing facet
       c.new_facets.push_back(t);
     }
+    c.new_bins.reserve(c.new_facets.size());
+    for (const auto& t : c.new_facets) {
+      const Eigen::Vector3d &a = plan_.vertex(t[0]), &b = plan_.vertex(t[1]), &d = plan_.vertex(t[2]);
+      c.new_bins.push_back(centroidalBins(a, b, d, plan_.binCountFor(triangleArea(a, b, d))));
+    }
+    c.lower_bound = nearestBinCost(pointsOf(c), c.before.mass, targetsAfter(c)) - c.before.cost;
+    return c;
+  }
+
+  // Solves the prepared collapse's program: its cost change.
+  void simulate(Collapse& c) const {
+    c.solution = solveLocalTransport(pointsOf(c), c.before.mass, targetsAfter(c), plan_.parameters().bins_per_point);
+    if (c.solution.solved) c.delta = c.solution.cost - c.before.cost;
+  }
+
+  std::vector<Eigen::Vector3d> pointsOf(const Collapse& c) const {
+    std::vector<Eigen::Vector3d> pts(c.before.points.size());
+    for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = plan_.point(c.before.points[k]);
+    return pts;
+  }
+
+  // The targets after the collapse: vertices, kept facets, new facets (pointing into c).
+  std::vector<TransportTarget> targetsAfter(const Collapse& c) const {
     std::vector<TransportTarget> targets;
     for (int x : c.vertices_after) targets.push_back({{plan_.vertex(x), plan_.vertex(x), plan_.vertex(x)}, nullptr});
     for (int f : c.kept_facets) {
       const auto& t = plan_.facet(f);
       targets.push_back({{plan_.vertex(t[0]), plan_.vertex(t[1]), plan_.vertex(t[2])}, &plan_.bins(f)});
     }
-    c.new_bins.reserve(c.new_facets.size());
-    for (const auto& t : c.new_facets) {
-      const Eigen::Vector3d &a = plan_.vertex(t[0]), &b = plan_.vertex(t[1]), &d = plan_.vertex(t[2]);
-      c.new_bins.push_back(centroidalBins(a, b, d, plan_.binCountFor(triangleArea(a, b, d))));
-    }
     for (std::size_t k = 0; k < c.new_facets.size(); ++k) {
       const auto& t = c.new_facets[k];
       targets.push_back({{plan_.vertex(t[0]), plan_.vertex(t[1]), plan_.vertex(t[2])}, &c.new_bins[k]});
     }
-    std::vector<Eigen::Vector3d> pts(c.before.points.size());
-    for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = plan_.point(c.before.points[k]);
-    c.solution = solveLocalTransport(pts, c.before.mass, targets, plan_.parameters().bins_per_point);
-    if (c.solution.solved) c.delta = c.solution.cost - c.before.cost;
-    return c;
+    return targets;
   }
 
   void apply(const Collapse& c) {
@@ -357,13 +374,45 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       } else
         missing.push_back(static_cast<std::int64_t>(k));
     }
+    // Branch and bound: the others are prepared (with a lower bound of their cost change) in
+    // parallel, then simulated in order of that bound, a few at a time, until the next bound
+    // exceeds the best change found. The one skipped cannot beat it, so the collapse chosen is
+    // the one simulating them all would choose (rs1, 3,000 points to 100 vertices: 666 of
+    // 17,004 programs needed). The margin keeps near ties, which round-off could
+    // misorder, to be decided by their programs. Batches of fixed size: the programs run do
+    // not depend on the thread count.
     const std::int64_t nm = static_cast<std::int64_t>(missing.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (std::int64_t j = 0; j < nm; ++j)
-      simulated[missing[j]] = dec.simulate(candidates[missing[j]].first, candidates[missing[j]].second);
-    report.simulations += static_cast<int>(nm);
+      simulated[missing[j]] = dec.prepare(candidates[missing[j]].first, candidates[missing[j]].second);
+    std::stable_sort(missing.begin(), missing.end(),
+                     [&](std::int64_t a, std::int64_t b) { return simulated[a].lower_bound < simulated[b].lower_bound; });
+    double best_delta = INFINITY;
+    for (std::size_t k = 0; k < simulated.size(); ++k)
+      if (std::find(missing.begin(), missing.end(), static_cast<std::int64_t>(k)) == missing.end())
+        best_delta = std::min(best_delta, simulated[k].delta);
+    constexpr std::int64_t kBatch = 4;
+    std::vector<std::int64_t> run;
+    for (std::int64_t first = 0; first < nm; first += kBatch) {
+      const auto beaten = [&](const Decimation::Collapse& c) {
+        return c.lower_bound - best_delta > 1e-9 * (std::abs(best_delta) + c.before.cost);
+      };
+      if (params.bound_simulations && std::isfinite(best_delta) && beaten(simulated[missing[first]])) break;
+      const std::int64_t last = std::min(nm, first + kBatch);
+      std::vector<std::int64_t> batch;
+      for (std::int64_t j = first; j < last; ++j)
+        if (!params.bound_simulations || !std::isfinite(best_delta) || !beaten(simulated[missing[j]]))
+          batch.push_back(missing[j]);
+      const std::int64_t nb = static_cast<std::int64_t>(batch.size());
+#pragma omp parallel for schedule(dynamic, 1)
+      for (std::int64_t j = 0; j < nb; ++j) dec.simulate(simulated[batch[j]]);
+      for (std::int64_t k : batch) best_delta = std::min(best_delta, simulated[k].delta);
+      run.insert(run.end(), batch.begin(), batch.end());
+    }
+    report.simulations += static_cast<int>(run.size());
+    report.bounded_simulations += static_cast<int>(nm - static_cast<std::int64_t>(run.size()));
     if (params.reuse_simulations)
-      for (std::int64_t k : missing) cache[candidates[k]] = {simulated[k], dec.step()};
+      for (std::int64_t k : run) cache[candidates[k]] = {simulated[k], dec.step()};
     std::size_t best = 0;
     for (std::size_t k = 1; k < simulated.size(); ++k)
       if (simulated[k].delta < simulated[best].delta) best = k;  // ties: the first in (u, v) order

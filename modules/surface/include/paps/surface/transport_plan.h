@@ -71,6 +71,13 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points,
                                    const std::vector<double>& mass,
                                    const std::vector<TransportTarget>& targets, int bins_per_point = 0);
 
+/// The cost of sending every point's mass to its nearest bin of `targets`, the facets'
+/// uniform measure ignored: no plan of the local problem costs less (solveLocalTransport's
+/// cost is at least this). Cheap next to the program (one pass over points x bins); it lets
+/// a caller skip programs that cannot beat one it already has.
+double nearestBinCost(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
+                      const std::vector<TransportTarget>& targets);
+
 struct TransportParameters {
   /// Facet bins per unit area once the points are scaled into a box of side 0.5 (the
   /// manuscript's 200); a facet has at least one bin and at most max_bins_per_facet.

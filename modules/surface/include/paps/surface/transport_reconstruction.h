@@ -42,6 +42,11 @@ struct TransportReconstructionParameters {
   /// Keep the simulations whose stencil no step has changed, for later draws of the same
   /// half-edge. Exact (the same mesh either way); off only to measure what it saves.
   bool reuse_simulations = true;
+  /// Simulate the drawn collapses in order of a lower bound of their cost change (every
+  /// point to its nearest bin after the collapse), and stop where the bound exceeds the best
+  /// change found: the rest cannot be chosen. Exact (the same mesh either way); off only to
+  /// measure what it saves (rs1, 3,000 points to 100 vertices: 1,735 programs instead of 17,004).
+  bool bound_simulations = true;
   /// Relocation rounds after each collapse (move halfway to the optimum, update the plan).
   int relocation_iterations = 2;
   /// Final relocation sweeps over all vertices (cheap next to the decimation).
@@ -96,6 +101,8 @@ struct TransportReconstructionReport {
   /// Collapse simulations run (local programs solved), and those reused from an earlier step
   /// because nothing in their stencil had changed since.
   int simulations = 0, reused_simulations = 0;
+  /// Drawn collapses not simulated because their lower bound could not beat the best change.
+  int bounded_simulations = 0;
   int deleted_facets = 0;  // by the facet deletion
   int dangling_facets = 0;  // dropped at the end for want of points near a free corner
   int output_vertices = 0, output_facets = 0;

@@ -132,20 +132,36 @@ TEST(LocalTransport, FacetReceivesUniformMeasure) {
   EXPECT_GT(s.cost / 300, 0.001);
 }
 
-TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
-  // Four facets of a square and its vertices; points on the square with a little height.
-  paps::Random rng(11);
-  std::vector<Vector3d> pts;
-  for (int i = 0; i < 200; ++i) pts.emplace_back(rng.uniform(), rng.uniform(), 0.02 * rng.uniform());
-  const Vector3d c(0.5, 0.5, 0), q[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+// Four facets of a unit square around its centre, 8 bins each, and its 5 vertices (the
+// vertices first in the targets); 200 points on the square with a little height.
+struct SquareProblem {
+  std::vector<Vector3d> points;
   std::vector<paps::FacetBins> bins;
-  for (int k = 0; k < 4; ++k) bins.push_back(paps::centroidalBins(q[k], q[(k + 1) % 4], c, 8));
-  std::vector<paps::TransportTarget> t;
-  for (const Vector3d& v : {q[0], q[1], q[2], q[3], c}) t.push_back({{v, v, v}, nullptr});
-  for (int k = 0; k < 4; ++k) t.push_back({{q[k], q[(k + 1) % 4], c}, &bins[k]});
-  const std::vector<double> mass(pts.size(), 1.0);
-  const auto full = paps::solveLocalTransport(pts, mass, t, 0);
-  const auto near = paps::solveLocalTransport(pts, mass, t, 8);
+  std::vector<paps::TransportTarget> vertices, facets;
+  std::vector<paps::TransportTarget> all() const {
+    std::vector<paps::TransportTarget> t = vertices;
+    t.insert(t.end(), facets.begin(), facets.end());
+    return t;
+  }
+};
+
+SquareProblem squareProblem(std::uint64_t seed) {
+  SquareProblem p;
+  paps::Random rng(seed);
+  for (int i = 0; i < 200; ++i) p.points.emplace_back(rng.uniform(), rng.uniform(), 0.02 * rng.uniform());
+  const Vector3d c(0.5, 0.5, 0), q[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  for (int k = 0; k < 4; ++k) p.bins.push_back(paps::centroidalBins(q[k], q[(k + 1) % 4], c, 8));
+  for (const Vector3d& v : {q[0], q[1], q[2], q[3], c}) p.vertices.push_back({{v, v, v}, nullptr});
+  for (int k = 0; k < 4; ++k) p.facets.push_back({{q[k], q[(k + 1) % 4], c}, &p.bins[k]});
+  return p;
+}
+
+TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
+  const SquareProblem sq = squareProblem(11);
+  const auto t = sq.all();
+  const std::vector<double> mass(sq.points.size(), 1.0);
+  const auto full = paps::solveLocalTransport(sq.points, mass, t, 0);
+  const auto near = paps::solveLocalTransport(sq.points, mass, t, 8);
   ASSERT_TRUE(full.solved);
   ASSERT_TRUE(near.solved);
   EXPECT_GE(near.cost, full.cost * (1 - 1e-9));  // a restriction cannot do better
@@ -154,25 +170,18 @@ TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
 }
 
 TEST(LocalTransport, NearestBinCostBoundsEveryProgramAndIsReachedWithoutFacets) {
-  // The square of the test above: the uniform measure on the facets costs more than the
-  // nearest bins; with vertices only (no capacity) the program is the nearest-bin plan.
-  paps::Random rng(12);
-  std::vector<Vector3d> pts;
-  for (int i = 0; i < 200; ++i) pts.emplace_back(rng.uniform(), rng.uniform(), 0.02 * rng.uniform());
-  const Vector3d c(0.5, 0.5, 0), q[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
-  std::vector<paps::FacetBins> bins;
-  for (int k = 0; k < 4; ++k) bins.push_back(paps::centroidalBins(q[k], q[(k + 1) % 4], c, 8));
-  std::vector<paps::TransportTarget> t;
-  for (const Vector3d& v : {q[0], q[1], q[2], q[3], c}) t.push_back({{v, v, v}, nullptr});
-  const std::vector<double> mass(pts.size(), 1.5);
-  const auto vertices_only = paps::solveLocalTransport(pts, mass, t, 0);
+  // With vertices only (no capacity) the program is the nearest-bin plan; with the facets,
+  // their uniform measure costs more than their nearest bins.
+  const SquareProblem sq = squareProblem(12);
+  const std::vector<double> mass(sq.points.size(), 1.5);
+  const auto vertices_only = paps::solveLocalTransport(sq.points, mass, sq.vertices, 0);
   ASSERT_TRUE(vertices_only.solved);
-  EXPECT_NEAR(paps::nearestBinCost(pts, mass, t), vertices_only.cost, 1e-12 * vertices_only.cost);
-  for (int k = 0; k < 4; ++k) t.push_back({{q[k], q[(k + 1) % 4], c}, &bins[k]});
-  const double bound = paps::nearestBinCost(pts, mass, t);
+  EXPECT_NEAR(paps::nearestBinCost(sq.points, mass, sq.vertices), vertices_only.cost, 1e-12 * vertices_only.cost);
+  const auto t = sq.all();
+  const double bound = paps::nearestBinCost(sq.points, mass, t);
   EXPECT_LT(bound, vertices_only.cost);  // the facets' bins are nearer
   for (int bins_per_point : {0, 4, 8}) {
-    const auto sol = paps::solveLocalTransport(pts, mass, t, bins_per_point);
+    const auto sol = paps::solveLocalTransport(sq.points, mass, t, bins_per_point);
     ASSERT_TRUE(sol.solved);
     EXPECT_GE(sol.cost, bound * (1 - 1e-12)) << bins_per_point;
     EXPECT_GT(sol.cost, bound * 1.01) << bins_per_point;  // the uniform measure binds here

@@ -145,15 +145,29 @@ TEST(TransportReconstruction, CopiesOfThePointsGiveTheMeshOfTheDistinctPoints) {
   EXPECT_NEAR(r2.rms_transport, r1.rms_transport, 1e-9);
 }
 
+// The exactness tests: a 400-point cube to 30 vertices, with the manuscript's quadrature
+// (faster, the same property).
+paps::TransportReconstructionParameters exactnessRun(int candidates) {
+  auto p = smallRun();
+  p.candidates = candidates;
+  p.initial_fraction = 0.1f;
+  p.target_vertices = 30;
+  p.transport = paps::TransportParameters();
+  return p;
+}
+
+void expectSameMesh(const TriangleMesh& a, const TriangleMesh& b) {
+  ASSERT_EQ(a.vertices.size(), b.vertices.size());
+  ASSERT_EQ(a.triangles.size(), b.triangles.size());
+  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
+  for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
+}
+
 TEST(TransportReconstruction, ReusedSimulationsGiveTheSameMesh) {
   // A simulation is reused only while nothing in its stencil changed: the mesh must be the one
   // every draw re-simulated gives, bit for bit, with fewer programs solved.
   const paps::Positions points = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 4), 400, 8);
-  auto p = smallRun();
-  p.candidates = 40;  // more draws of the same half-edges: more reuse to check
-  p.initial_fraction = 0.1f;
-  p.target_vertices = 30;
-  p.transport = paps::TransportParameters();  // the manuscript's quadrature: faster, same property
+  auto p = exactnessRun(40);  // more draws of the same half-edges: more reuse to check
   paps::TransportReconstructionReport with, without;
   const TriangleMesh a = paps::transportReconstruct(points, p, &with);
   p.reuse_simulations = false;
@@ -164,21 +178,14 @@ TEST(TransportReconstruction, ReusedSimulationsGiveTheSameMesh) {
   EXPECT_LE(with.simulations + with.reused_simulations, without.simulations + without.bounded_simulations);
   EXPECT_LE(with.simulations, without.simulations);
   EXPECT_EQ(with.final_cost, without.final_cost);
-  ASSERT_EQ(a.vertices.size(), b.vertices.size());
-  ASSERT_EQ(a.triangles.size(), b.triangles.size());
-  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
-  for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
+  expectSameMesh(a, b);
 }
 
 TEST(TransportReconstruction, BoundedSimulationsGiveTheSameMeshWithFewerPrograms) {
   // The collapses skipped by their lower bound could not have been chosen: the mesh is the
   // one simulating every draw gives, bit for bit.
   const paps::Positions points = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 4), 400, 9);
-  auto p = smallRun();
-  p.candidates = 20;
-  p.initial_fraction = 0.1f;
-  p.target_vertices = 30;
-  p.transport = paps::TransportParameters();
+  auto p = exactnessRun(20);
   paps::TransportReconstructionReport bounded, every;
   const TriangleMesh a = paps::transportReconstruct(points, p, &bounded);
   p.bound_simulations = false;
@@ -191,10 +198,7 @@ TEST(TransportReconstruction, BoundedSimulationsGiveTheSameMeshWithFewerPrograms
             every.simulations + every.reused_simulations);
   EXPECT_EQ(bounded.collapses, every.collapses);
   EXPECT_EQ(bounded.final_cost, every.final_cost);
-  ASSERT_EQ(a.vertices.size(), b.vertices.size());
-  ASSERT_EQ(a.triangles.size(), b.triangles.size());
-  for (std::size_t v = 0; v < a.vertices.size(); ++v) ASSERT_EQ(a.vertices[v], b.vertices[v]);
-  for (std::size_t f = 0; f < a.triangles.size(); ++f) ASSERT_EQ(a.triangles[f], b.triangles[f]);
+  expectSameMesh(a, b);
 }
 
 TEST(TransportReconstruction, SameMeshForShuffledPoints) {

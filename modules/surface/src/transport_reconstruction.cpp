@@ -378,8 +378,8 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     // parallel, then simulated in order of that bound, a few at a time, until the next bound
     // exceeds the best change found. The one skipped cannot beat it, so the collapse chosen is
     // the one simulating them all would choose (rs1, 3,000 points to 100 vertices: 666 of
-    // 17,004 programs needed). The margin keeps near ties, which round-off could
-    // misorder, to be decided by their programs. Batches of fixed size: the programs run do
+    // 17,004 programs needed). The margin (1e-6 of the costs, above the programs' tolerances)
+    // keeps near ties, which round-off could misorder, to be decided by their programs. Batches of fixed size: the programs run do
     // not depend on the thread count.
     const std::int64_t nm = static_cast<std::int64_t>(missing.size());
 #pragma omp parallel for schedule(dynamic, 1)
@@ -395,7 +395,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     std::vector<std::int64_t> run;
     for (std::int64_t first = 0; first < nm; first += kBatch) {
       const auto beaten = [&](const Decimation::Collapse& c) {
-        return c.lower_bound - best_delta > 1e-9 * (std::abs(best_delta) + c.before.cost);
+        return c.lower_bound - best_delta > 1e-6 * (std::abs(best_delta) + c.before.cost);
       };
       if (params.bound_simulations && std::isfinite(best_delta) && beaten(simulated[missing[first]])) break;
       const std::int64_t last = std::min(nm, first + kBatch);

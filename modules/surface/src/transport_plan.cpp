@@ -460,18 +460,21 @@ void TransportPlan::apply(const Stencil& s, const LocalTransport& solution) {
   assign(s, s.vertices, s.facets, solution);
 }
 
-LocalTransport TransportPlan::solve(const Stencil& s, const Stencil& targets) const {
+std::vector<Eigen::Vector3d> TransportPlan::positionsOf(const Stencil& s) const {
   std::vector<Eigen::Vector3d> pts(s.points.size());
   for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = points_[s.points[k]];
-  return solveLocalTransport(pts, s.mass, targetsOf(targets), params_.bins_per_point);
+  return pts;
+}
+
+LocalTransport TransportPlan::solve(const Stencil& s, const Stencil& targets) const {
+  return solveLocalTransport(positionsOf(s), s.mass, targetsOf(targets), params_.bins_per_point);
 }
 
 double TransportPlan::improve(const Stencil& s) {
   if (s.points.empty()) return 0;
   // Most stencils already send every point to its nearest bin: no program can lower that
   // (nearestBinCost), so none is solved. The margin leaves out gains of round-off size only.
-  std::vector<Eigen::Vector3d> pts(s.points.size());
-  for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = points_[s.points[k]];
+  const std::vector<Eigen::Vector3d> pts = positionsOf(s);
   const std::vector<TransportTarget> targets = targetsOf(s);
   if (nearestBinCost(pts, s.mass, targets) >= s.cost * (1 - 1e-12)) return 0;
   const LocalTransport sol = solveLocalTransport(pts, s.mass, targets, params_.bins_per_point);

@@ -114,20 +114,14 @@ class Decimation {
       const Eigen::Vector3d &a = plan_.vertex(t[0]), &b = plan_.vertex(t[1]), &d = plan_.vertex(t[2]);
       c.new_bins.push_back(centroidalBins(a, b, d, plan_.binCountFor(triangleArea(a, b, d))));
     }
-    c.lower_bound = nearestBinCost(pointsOf(c), c.before.mass, targetsAfter(c)) - c.before.cost;
+    c.lower_bound = nearestBinCost(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c)) - c.before.cost;
     return c;
   }
 
   // Solves the prepared collapse's program: its cost change.
   void simulate(Collapse& c) const {
-    c.solution = solveLocalTransport(pointsOf(c), c.before.mass, targetsAfter(c), plan_.parameters().bins_per_point);
+    c.solution = solveLocalTransport(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c), plan_.parameters().bins_per_point);
     if (c.solution.solved) c.delta = c.solution.cost - c.before.cost;
-  }
-
-  std::vector<Eigen::Vector3d> pointsOf(const Collapse& c) const {
-    std::vector<Eigen::Vector3d> pts(c.before.points.size());
-    for (std::size_t k = 0; k < pts.size(); ++k) pts[k] = plan_.point(c.before.points[k]);
-    return pts;
   }
 
   // The targets after the collapse: vertices, kept facets, new facets (pointing into c).

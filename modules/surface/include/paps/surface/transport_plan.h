@@ -162,6 +162,8 @@ class TransportPlan {
   Stencil gather(std::vector<int> vertices, std::vector<int> facets) const;
   /// Targets of the stencil's simplices, in order (vertices, then facets).
   std::vector<TransportTarget> targetsOf(const Stencil& s) const;
+  /// Positions of the stencil's points, in the order of s.points (a local program's points).
+  std::vector<Eigen::Vector3d> positionsOf(const Stencil& s) const;
   /// Replaces the plan of the stencil's mass with `solution` (targets as from targetsOf).
   void apply(const Stencil& s, const LocalTransport& solution);
   /// For edits of the complex: release() takes the stencil's mass off the plan (the points

@@ -118,22 +118,10 @@ class Decimation {
     return c;
   }
 
-  // Solves the prepared collapse's program: its cost change. Only the cost matters until the
-  // collapse is chosen, so the simplex starts from the nearest bins (fewer iterations, the same
-  // optimal cost); `planChosen` then solves the one applied from all slack, for the plan.
+  // Solves the prepared collapse's program: its cost change.
   void simulate(Collapse& c) const {
-    c.solution = solveLocalTransport(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c),
-                                     plan_.parameters().bins_per_point, LocalStart::NearestBins);
+    c.solution = solveLocalTransport(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c), plan_.parameters().bins_per_point);
     if (c.solution.solved) c.delta = c.solution.cost - c.before.cost;
-  }
-  // The chosen collapse's plan from the all-slack start (the plans the method was tuned with:
-  // the nearest-bin start's optimal plans gave a worse mesh on the cube); false if it fails.
-  bool planChosen(Collapse& c) const {
-    LocalTransport sol = solveLocalTransport(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c),
-                                             plan_.parameters().bins_per_point, LocalStart::AllSlack);
-    if (!sol.solved) return false;
-    c.solution = std::move(sol);
-    return true;
   }
 
   // The targets after the collapse: vertices, kept facets, new facets (pointing into c).
@@ -424,8 +412,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     for (std::size_t k = 1; k < simulated.size(); ++k)
       if (simulated[k].delta < simulated[best].delta) best = k;  // ties: the first in (u, v) order
     if (!std::isfinite(simulated[best].delta)) break;
-    Decimation::Collapse collapse = std::move(simulated[best]);
-    dec.planChosen(collapse);  // if it fails, the simulation's plan (same cost) serves
+    const Decimation::Collapse collapse = std::move(simulated[best]);
     dec.apply(collapse);
     ++report.collapses;
     for (int it = 0; it < params.relocation_iterations; ++it) plan.relocate(collapse.v);

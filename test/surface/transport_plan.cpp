@@ -188,28 +188,6 @@ TEST(LocalTransport, NearestBinCostBoundsEveryProgramAndIsReachedWithoutFacets) 
   }
 }
 
-TEST(LocalTransport, NearestBinStartReachesTheOptimumInFewerIterations) {
-  // The nearest-bin basis is dual feasible, so the dual simplex from it ends at the same
-  // optimal cost as from all slack. With vertices only it is already optimal (no pivot);
-  // with the facets it only repairs the overfilled bins.
-  const SquareProblem sq = squareProblem(13);
-  const std::vector<double> mass(sq.points.size(), 1.0);
-  const auto vertices_only = paps::solveLocalTransport(sq.points, mass, sq.vertices, 0, paps::LocalStart::NearestBins);
-  ASSERT_TRUE(vertices_only.solved);
-  EXPECT_EQ(vertices_only.iterations, 0);
-  EXPECT_NEAR(vertices_only.cost, paps::nearestBinCost(sq.points, mass, sq.vertices), 1e-12 * vertices_only.cost);
-  const auto t = sq.all();
-  for (int bins_per_point : {0, 8, 16}) {
-    SCOPED_TRACE(testing::Message() << "bins_per_point " << bins_per_point);
-    const auto nearest = paps::solveLocalTransport(sq.points, mass, t, bins_per_point, paps::LocalStart::NearestBins);
-    const auto slack = paps::solveLocalTransport(sq.points, mass, t, bins_per_point, paps::LocalStart::AllSlack);
-    ASSERT_TRUE(nearest.solved);
-    ASSERT_TRUE(slack.solved);
-    EXPECT_NEAR(nearest.cost, slack.cost, 1e-9 * slack.cost);
-    EXPECT_LT(2 * nearest.iterations, slack.iterations);
-  }
-}
-
 // A 3 x 3 grid of vertices and 8 facets over the unit square; returns the facet ids.
 std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
   std::vector<int> facets;

@@ -60,17 +60,8 @@ struct TransportEntry {
 struct LocalTransport {
   bool solved = false;  // false: the LP failed (the caller keeps its old plan)
   double cost = 0;
-  int iterations = 0;  // simplex iterations Clp took
   std::vector<std::vector<TransportEntry>> entries;
 };
-
-/// The basis the simplex starts from. Both reach the optimal cost, but where the program has
-/// several optimal plans they may return different ones, and the plan steers what follows.
-/// NearestBins (every point's mass on its nearest bin, the facet rows slack) is dual feasible
-/// and needs far fewer iterations: for programs whose cost alone is wanted. AllSlack gives
-/// the plans the reconstruction was tuned with (on the cube, NearestBins plans throughout
-/// gave a worse mesh RMS in 7 seeds of 8).
-enum class LocalStart { AllSlack, NearestBins };
 
 /// Optimal transport of `points` (masses `mass`, all > 0) to `targets` with the uniformity
 /// constraint on every facet target: one linear program solved by Clp. With bins_per_point
@@ -78,8 +69,7 @@ enum class LocalStart { AllSlack, NearestBins };
 /// program, exact unless the optimum sends mass farther.
 LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points,
                                    const std::vector<double>& mass,
-                                   const std::vector<TransportTarget>& targets, int bins_per_point = 0,
-                                   LocalStart start = LocalStart::AllSlack);
+                                   const std::vector<TransportTarget>& targets, int bins_per_point = 0);
 
 /// The cost of sending every point's mass to its nearest bin of `targets`, the facets'
 /// uniform measure ignored: no plan of the local problem costs less (solveLocalTransport's

@@ -594,7 +594,7 @@ int runBenchCurvature(int argc, char** argv) {
       Positions p = clean;
       Random rng(seed * 7919 + std::uint64_t(noise * 1e6));
       for (auto& x : p)
-        x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
+        x += rng.gaussian3().cast<float>() * float(noise * radius);
       const MethodEstimates m = runMethods(p, radius, order, tn, true, neighbours, cgal_2r);
       // The cap of narrowing at the automatic radius (paps curvature's defaults) on an evenly
       // sampled surface: counted, expected 0.
@@ -958,7 +958,7 @@ int runBenchCurvature(int argc, char** argv) {
             x += 0.3; y += 0.2;
           }
           Eigen::Vector3f q(float(x), float(y), float(s.f(x, y)));
-          q += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise);
+          q += rng.gaussian3().cast<float>() * float(noise);
           p.push_back(q);
           truth.push_back(truthOf(s, x, y));
         }
@@ -1083,7 +1083,7 @@ int runBenchCurvature(int argc, char** argv) {
       Positions q = p;
       Random rng(777);
       for (auto& x : q)
-        x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(noise * radius);
+        x += rng.gaussian3().cast<float>() * float(noise * radius);
       WavejetParameters dp;
       dp.order = order;
       if (!pilot) dp.order_policy = WavejetParameters::OrderPolicy::fixed;

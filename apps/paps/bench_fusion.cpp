@@ -172,7 +172,7 @@ int benchRegistration(bool quick, const std::string& out_dir) {
     d.yaw = rng.uniform(-5, 5) * M_PI / 180;
     d.pitch = rng.uniform(-5, 5) * M_PI / 180;
     d.roll = rng.uniform(-2, 2) * M_PI / 180;
-    d.translation = Eigen::Vector3d(rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5));
+    d.translation = rng.uniform3(-0.5, 0.5);
     start.push_back(applyPoseDelta(truth.back(), d));
   }
   std::printf("%-24s %-12s %8s %8s %8s %8s %10s %8s\n", "method", "modality", "mean px", "std px", "median", "success",
@@ -330,7 +330,7 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
     d.yaw = rng.uniform(-3, 3) * M_PI / 180;
     d.pitch = rng.uniform(-3, 3) * M_PI / 180;
     d.roll = rng.uniform(-1.5, 1.5) * M_PI / 180;
-    d.translation = Eigen::Vector3d(rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03), rng.uniform(-0.03, 0.03));
+    d.translation = rng.uniform3(-0.03, 0.03);
     start.push_back(applyPoseDelta(real.photo.pose, d));
   }
   if (!out_dir.empty()) {  // the photo beside the synthetic image the metrics compare it with

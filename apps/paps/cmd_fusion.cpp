@@ -159,7 +159,7 @@ int runMakeStreet(int argc, char** argv) {
     d.yaw = rng.uniform(-5, 5) * M_PI / 180;
     d.pitch = rng.uniform(-5, 5) * M_PI / 180;
     d.roll = rng.uniform(-2, 2) * M_PI / 180;
-    d.translation = Eigen::Vector3d(rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5));
+    d.translation = rng.uniform3(-0.5, 0.5);
     e.pose = applyPoseDelta(e.pose, d);
     gps.push_back(e);
   }
@@ -359,8 +359,7 @@ int runRgbdPhoto(int argc, char** argv) {
     d.yaw = rng.uniform(-perturb_deg, perturb_deg) * M_PI / 180;
     d.pitch = rng.uniform(-perturb_deg, perturb_deg) * M_PI / 180;
     d.roll = rng.uniform(-perturb_deg / 2, perturb_deg / 2) * M_PI / 180;
-    d.translation = Eigen::Vector3d(rng.uniform(-perturb_m, perturb_m), rng.uniform(-perturb_m, perturb_m),
-                                    rng.uniform(-perturb_m, perturb_m));
+    d.translation = rng.uniform3(-perturb_m, perturb_m);
     PhotoListEntry wrong = e;
     wrong.pose = applyPoseDelta(e.pose, d);
     savePhotoListAtomic(dir + "/photo_start.txt", {wrong});

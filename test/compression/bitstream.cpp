@@ -17,7 +17,8 @@ TEST(RangeCoder, RoundTripsSkewedAndFlatSymbols) {
   std::vector<int> a, b;
   std::vector<std::uint32_t> bits;
   for (int i = 0; i < 50000; ++i) {
-    a.push_back(rng.uniform() < 0.9 ? 0 : int(rng.below(256)));
+    const bool zero = rng.uniform() < 0.9;
+    a.push_back(zero ? 0 : int(rng.below(256)));
     b.push_back(int(rng.below(3)));
     bits.push_back(std::uint32_t(rng.next()));
   }
@@ -56,7 +57,10 @@ TEST(RangeCoder, GarbageNeverCrashes) {
 TEST(SymbolStreams, AllBackEndsRoundTrip) {
   paps::Random rng(5);
   std::vector<int> s(20000);
-  for (auto& v : s) v = rng.uniform() < 0.5 ? 7 : int(rng.below(40));
+  for (auto& v : s) {
+    const bool seven = rng.uniform() < 0.5;
+    v = seven ? 7 : int(rng.below(40));
+  }
   SymbolWriter w;
   AdaptiveModel m(40);
   for (int v : s) w.put(m, v);

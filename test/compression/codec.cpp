@@ -102,7 +102,8 @@ TEST(SelfSimilarityCodec, EveryTruncationAndManyBitFlipsAreRejected) {
   Random rng(9);
   for (int t = 0; t < 200; ++t) {
     auto bad = bytes;
-    bad[rng.below(bad.size())] ^= std::uint8_t(1u << rng.below(8));
+    const auto bit = std::uint8_t(1u << rng.below(8));  // drawn first: C++17 evaluates the right of ^= first
+    bad[rng.below(bad.size())] ^= bit;
     EXPECT_THROW(decompressPositions(bad.data(), bad.size()), CorruptStream);
   }
 }
@@ -138,7 +139,7 @@ TEST(SelfSimilarityCodec, BadInputGivesClearErrors) {
   Positions around = engraved().points;
   Random rng(4);
   for (std::size_t k = 0; k < around.size(); k += 100) {
-    const Eigen::Vector3f v(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian()));
+    const Eigen::Vector3f v = rng.gaussian3().cast<float>();
     around[k] = 1000.f * v.normalized();
   }
   try {
@@ -156,7 +157,8 @@ TEST(SelfSimilarityCodec, BadInputGivesClearErrors) {
   // to 0 points; refused, at any seed_bits.
   Positions piles;
   for (int k = 0; k < 20; ++k) {
-    const Eigen::Vector3f q(float(rng.uniform()), float(rng.uniform()), float(rng.uniform()));
+    const float z = float(rng.uniform()), y = float(rng.uniform());
+    const Eigen::Vector3f q(float(rng.uniform()), y, z);
     for (int c = 0; c < 1000; ++c) piles.push_back(q);
   }
   EXPECT_THROW(compressPositions(piles, p), InvalidInput);
@@ -328,7 +330,7 @@ TEST(SelfSimilarityCodec, SharedMasksKeepTheHoleAndTheCoverage) {
 TEST(SelfSimilarityCodec, AVolumeOfSeedsIsRefused) {
   Random rng(4);
   Positions cube;
-  for (int i = 0; i < 60000; ++i) cube.emplace_back(4 * rng.uniform(), 4 * rng.uniform(), 4 * rng.uniform());
+  for (int i = 0; i < 60000; ++i) cube.emplace_back((4 * rng.uniform3(0, 1)).cast<float>());
   CompressionParameters p;
   p.patch_radius = 1.f;
   p.seed_spacing = 0.25f;

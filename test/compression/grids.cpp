@@ -21,7 +21,10 @@ namespace {
 Positions randomPoints(std::size_t n, std::uint64_t seed) {
   Random rng(seed);
   Positions p(n);
-  for (auto& q : p) q = Eigen::Vector3f(float(rng.uniform()), float(rng.uniform()), 0.2f * float(rng.uniform()));
+  for (auto& q : p) {
+    const float z = 0.2f * float(rng.uniform()), y = float(rng.uniform());
+    q = Eigen::Vector3f(float(rng.uniform()), y, z);
+  }
   return p;
 }
 }  // namespace

@@ -32,8 +32,7 @@ Positions randomCloud(int count, std::uint64_t seed, float extent = 1.f) {
     } else if (i % 13 == 7 && !p.empty() && paps::isFinite(p.back())) {
       p.push_back(p.back());  // duplicate
     } else {
-      p.emplace_back(static_cast<float>(rng.uniform(0, extent)), static_cast<float>(rng.uniform(0, extent)),
-                     static_cast<float>(rng.uniform(0, extent)));
+      p.emplace_back(rng.uniform3(0, extent).cast<float>());
     }
   }
   return p;
@@ -325,13 +324,14 @@ TEST(CellGrid, CappedListsInACrowdedCellComeFromTheTreeUnchanged) {
   paps::Random rng(12);
   Positions p;
   for (int i = 0; i < 20000; ++i) {
-    p.emplace_back(0.001f * static_cast<float>(rng.uniform(0, 1)), 0.001f * static_cast<float>(rng.uniform(0, 1)),
-                   0.001f * static_cast<float>(rng.uniform(0, 1)));
+    p.emplace_back(0.001f * rng.uniform3(0, 1).cast<float>());
     if (i % 997 == 5)
       for (int c = 0; c < 39; ++c) p.push_back(p.back());
   }
-  for (int i = 0; i < 2000; ++i)
-    p.emplace_back(0.2f + static_cast<float>(rng.uniform(0, 1)), static_cast<float>(rng.uniform(0, 1)), 0.f);
+  for (int i = 0; i < 2000; ++i) {
+    const float y = static_cast<float>(rng.uniform(0, 1));
+    p.emplace_back(0.2f + static_cast<float>(rng.uniform(0, 1)), y, 0.f);
+  }
   const float r = 0.1f;
   const int cap = 25;
   CellGrid grid;
@@ -364,8 +364,8 @@ TEST(CellGrid, CappedListsOfPilesOfCopiesAreTheBruteForceLists) {
   Positions p;
   std::vector<int> left(sizes);
   for (int i = 0; i < 3000; ++i) {
-    p.emplace_back(0.4f * static_cast<float>(rng.uniform(0, 1)), 0.4f * static_cast<float>(rng.uniform(0, 1)),
-                   0.1f * static_cast<float>(rng.uniform(0, 1)));
+    const float z = 0.1f * static_cast<float>(rng.uniform(0, 1)), y = 0.4f * static_cast<float>(rng.uniform(0, 1));
+    p.emplace_back(0.4f * static_cast<float>(rng.uniform(0, 1)), y, z);
     const int k = static_cast<int>(rng.uniform(0, 5));
     if (left[k] > 0) {
       --left[k];

@@ -108,7 +108,8 @@ TEST(LassoDictionary, FindsPlantedAtoms) {
     X.col(c).setZero();
     const int used = 1 + static_cast<int>(rng.below(2));
     for (int u = 0; u < used; ++u) {
-      const float a = static_cast<float>(rng.uniform(1, 3) * (rng.below(2) ? 1 : -1));
+      const double magnitude = rng.uniform(1, 3);
+      const float a = static_cast<float>(magnitude * (rng.below(2) ? 1 : -1));
       X.col(c) += a * planted.col(static_cast<int>(rng.below(d)));
     }
     for (int r = 0; r < k; ++r) X(r, c) += 0.01f * static_cast<float>(rng.gaussian());

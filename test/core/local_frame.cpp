@@ -144,7 +144,10 @@ TEST(EstimateNormals, TiltedPlaneFarFromOriginIsExact) {
   const Eigen::Vector3f o(1000, -2000, 500);
   paps::Random rng(3);
   Positions p;
-  for (int i = 0; i < 2000; ++i) p.push_back(o + rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v);
+  for (int i = 0; i < 2000; ++i) {
+    const double b = rng.uniform(-1, 1), a = rng.uniform(-1, 1);
+    p.push_back(o + a * u + b * v);
+  }
   const Shape s = withRadiusGraph(p, 0.15f);
   for (std::size_t i = 0; i < p.size(); ++i) EXPECT_LT(lineAngleDeg(s.normals[i], n), 0.1) << i;
 }
@@ -181,7 +184,10 @@ TEST(PcaNormal, CollinearAndTinyJudgedRelativeToTheSpread) {
   const Eigen::Vector3f u = n.unitOrthogonal(), v = n.cross(u);
   paps::Random rng(5);
   Positions disc;
-  for (int k = 0; k < 31; ++k) disc.push_back(rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v);
+  for (int k = 0; k < 31; ++k) {
+    const double b = rng.uniform(-1, 1), a = rng.uniform(-1, 1);
+    disc.push_back(a * u + b * v);
+  }
   const Eigen::Vector3f ref = paps::pcaNormal(disc, idx.data(), 31);
   ASSERT_TRUE(paps::isFinite(ref));
   EXPECT_LT(lineAngleDeg(ref, n), 1e-3);
@@ -263,7 +269,7 @@ TEST(OrientNormalsByPropagation, SameSignsWhateverThePointOrder) {
   paps::Random rng(17);
   Normals start = s.normals;
   for (auto& n : start) {
-    n = (n + 0.9f * Eigen::Vector3f(rng.gaussian(), rng.gaussian(), rng.gaussian()).normalized()).normalized();
+    n = (n + 0.9f * rng.gaussian3().cast<float>().normalized()).normalized();
     if (rng.uniform() < 0.5) n = -n;
   }
   std::vector<int> perm(s.points.size());
@@ -342,8 +348,11 @@ TEST(OrientNormalsByPropagation, LargeNoisyPlaneAllUp) {
   // degrees off, their signs random; all must end up pointing up (+z).
   paps::Random rng(4);
   Positions p;
-  for (int i = 0; i < 50000; ++i)
-    p.emplace_back(rng.uniform(), rng.uniform(), 0.2f * 0.0045f * static_cast<float>(rng.uniform(-1, 1)));
+  for (int i = 0; i < 50000; ++i) {
+    const float z = 0.2f * 0.0045f * static_cast<float>(rng.uniform(-1, 1));
+    const double y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, z);
+  }
   Shape s = withRadiusGraph(std::move(p), 0.014f);
   for (auto& n : s.normals)
     if (rng.uniform() < 0.5) n = -n;
@@ -464,7 +473,10 @@ TEST(EstimatePrincipalFrames, SphereFramesOrthonormalRightHanded) {
 TEST(EstimatePrincipalFrames, PlaneGetsADeterministicTangentFrame) {
   paps::Random rng(9);
   Positions p;
-  for (int i = 0; i < 2000; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.f);
+  for (int i = 0; i < 2000; ++i) {
+    const double y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, 0.f);
+  }
   Shape s = withRadiusGraph(p, 0.05f);
   for (auto& n : s.normals) n = Eigen::Vector3f::UnitZ();  // exactly equal normals
   const LocalFrames frames = paps::estimatePrincipalFrames(s.normals, s.graph);

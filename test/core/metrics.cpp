@@ -69,10 +69,9 @@ TriangleMesh randomSoup(int count, std::uint64_t seed) {
   paps::Random rng(seed);
   TriangleMesh m;
   for (int t = 0; t < count; ++t) {
-    const Eigen::Vector3f centre(rng.uniform(), rng.uniform(), rng.uniform());
+    const Eigen::Vector3f centre = rng.uniform3(0, 1).cast<float>();
     for (int k = 0; k < 3; ++k)
-      m.vertices.push_back(centre + 0.1f * Eigen::Vector3f(rng.uniform(-1, 1), rng.uniform(-1, 1),
-                                                           rng.uniform(-1, 1)));
+      m.vertices.push_back(centre + 0.1f * rng.uniform3(-1, 1).cast<float>());
     m.triangles.emplace_back(3 * t, 3 * t + 1, 3 * t + 2);
   }
   return m;
@@ -138,8 +137,10 @@ TEST(PointToMeshDistance, ErrorOfAnOffsetCloud) {
   const paps::PointToMeshDistance d(unitSquare());
   Positions p;
   paps::Random rng(3);
-  for (int i = 0; i < 1000; ++i)
-    p.emplace_back(rng.uniform(-1, 1), rng.uniform(-1, 1), i % 2 ? 0.05f : -0.05f);
+  for (int i = 0; i < 1000; ++i) {
+    const double y = rng.uniform(-1, 1);
+    p.emplace_back(rng.uniform(-1, 1), y, i % 2 ? 0.05f : -0.05f);
+  }
   p.emplace_back(NAN, 0.f, 0.f);
   const paps::ErrorStats s = paps::pointToMeshError(p, d);
   EXPECT_EQ(s.count, 1000u);
@@ -155,8 +156,7 @@ TEST(PointToMeshDistance, BvhEqualsBruteForce) {
   for (int i = 0; i < 400; ++i) {
     // Queries inside, near and well outside the soup.
     const float spread = i < 300 ? 1.2f : 4.f;
-    const Eigen::Vector3f p(rng.uniform(-spread, spread), rng.uniform(-spread, spread),
-                            rng.uniform(-spread, spread));
+    const Eigen::Vector3f p = rng.uniform3(-spread, spread).cast<float>();
     Eigen::Vector3f q;
     int tri = -1;
     const double got = d.distance(p, &q, &tri);

@@ -30,7 +30,7 @@ Positions randomPoints(int count, std::uint64_t seed, int nan_every) {
   paps::Random rng(seed);
   Positions p;
   for (int i = 0; i < count; ++i) {
-    Eigen::Vector3f x(rng.uniform(), rng.uniform(), rng.uniform());
+    Eigen::Vector3f x = rng.uniform3(0, 1).cast<float>();
     if (nan_every > 0 && i % nan_every == nan_every - 1) x[(i / nan_every) % 3] = kNaN;
     p.push_back(x);
   }
@@ -41,7 +41,10 @@ Positions randomPoints(int count, std::uint64_t seed, int nan_every) {
 Positions randomPlane(int count, std::uint64_t seed) {
   paps::Random rng(seed);
   Positions p;
-  for (int i = 0; i < count; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.f);
+  for (int i = 0; i < count; ++i) {
+    const double y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, 0.f);
+  }
   return p;
 }
 
@@ -99,7 +102,7 @@ TEST(SpatialIndex, RadiusSearchMatchesBruteForce) {
   std::vector<int> idx;
   std::vector<float> d2;
   for (int t = 0; t < 200; ++t) {
-    const Eigen::Vector3f q(rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1));
+    const Eigen::Vector3f q = rng.uniform3(-0.1, 1.1).cast<float>();
     const float r = static_cast<float>(rng.uniform(0.02, 0.2));
     const float r2 = r * r;
     const int n = index.radiusSearch(q, r, idx, d2);
@@ -154,7 +157,7 @@ TEST(SpatialIndex, NearestKMatchesBruteForce) {
   std::vector<int> idx;
   std::vector<float> d2;
   for (int t = 0; t < 200; ++t) {
-    const Eigen::Vector3f q(rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1), rng.uniform(-0.1, 1.1));
+    const Eigen::Vector3f q = rng.uniform3(-0.1, 1.1).cast<float>();
     const int k = 1 + static_cast<int>(rng.below(40));
     const int n = index.nearestK(q, k, idx, d2);
     ASSERT_EQ(n, k);
@@ -442,7 +445,10 @@ TEST(RadiusForNeighbourCount, UniformPlaneHitsTheTarget) {
 TEST(RadiusForNeighbourCount, TypicalPointHitsTheTargetOnVeryUnevenDensity) {
   Positions p = randomPlane(14000, 21);
   paps::Random rng(22);
-  for (int i = 0; i < 6000; ++i) p.emplace_back(0.5f + 0.05f * rng.uniform(), 0.5f + 0.05f * rng.uniform(), 0.f);
+  for (int i = 0; i < 6000; ++i) {
+    const auto y = 0.5f + 0.05f * rng.uniform();
+    p.emplace_back(0.5f + 0.05f * rng.uniform(), y, 0.f);
+  }
   const std::size_t unique = p.size();
   for (std::size_t i = 0; i < unique; ++i) p.push_back(p[i]);
   const SpatialIndex index(p);
@@ -503,7 +509,8 @@ TEST(RadiusForNeighbourCount, Errors) {
   Positions huge, tiny;
   paps::Random rng(3);
   for (int i = 0; i < 200; ++i) {
-    const Eigen::Vector3f u(float(rng.uniform()), float(rng.uniform()), 0.f);
+    const float y = float(rng.uniform());
+    const Eigen::Vector3f u(float(rng.uniform()), y, 0.f);
     huge.push_back(1e30f * u);
     tiny.push_back(1e-30f * u);
   }

@@ -23,9 +23,12 @@ using paps::Positions;
 Positions noisyPlane(int count, float sigma, std::uint64_t seed) {
   paps::Random rng(seed);
   Positions p;
-  for (int i = 0; i < count; ++i)
-    p.emplace_back(rng.uniform() + sigma * rng.gaussian(), rng.uniform() + sigma * rng.gaussian(),
-                   sigma * rng.gaussian());
+  for (int i = 0; i < count; ++i) {
+    const double gz = rng.gaussian();
+    const double uy = rng.uniform(), gy = rng.gaussian();
+    const double ux = rng.uniform(), gx = rng.gaussian();
+    p.emplace_back(ux + sigma * gx, uy + sigma * gy, sigma * gz);
+  }
   return p;
 }
 
@@ -34,9 +37,9 @@ Positions noisySphere(int count, float radius, float sigma, std::uint64_t seed) 
   paps::Random rng(seed);
   Positions p;
   for (int i = 0; i < count; ++i) {
-    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3f d = rng.gaussian3().cast<float>();
     d.normalize();
-    p.push_back(radius * d + sigma * Eigen::Vector3f(rng.gaussian(), rng.gaussian(), rng.gaussian()));
+    p.push_back(radius * d + sigma * rng.gaussian3().cast<float>());
   }
   return p;
 }
@@ -145,8 +148,10 @@ TEST(EstimateNoiseLevel, BadInputGivesClearErrors) {
   // capped (no overflow), and the estimate still comes out.
   paps::Random rng(15);
   Positions pile = noisyPlane(500, 0.f, 17);
-  for (int i = 0; i < 3000; ++i)
-    pile.emplace_back(0.5f + 1e-7f * rng.gaussian(), 0.5f + 1e-7f * rng.gaussian(), 1e-7f * rng.gaussian());
+  for (int i = 0; i < 3000; ++i) {
+    const auto z = 1e-7f * rng.gaussian(), y = 0.5f + 1e-7f * rng.gaussian();
+    pile.emplace_back(0.5f + 1e-7f * rng.gaussian(), y, z);
+  }
   const paps::SpatialIndex pile_index(pile);
   const paps::NoiseEstimate e = paps::estimateNoiseLevel(pile, pile_index, 0.2f);
   EXPECT_TRUE(std::isfinite(e.sigma));

@@ -89,7 +89,10 @@ TEST(NormalRefresh, OnlyMovedPointsChangeAndTheRestKeepTheirNormalsBitForBit) {
   const Positions p = flatGrid();
   Normals previous(p.size());
   paps::Random rng(5);
-  for (auto& n : previous) n = Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), 1.f).normalized();
+  for (auto& n : previous) {
+    const float y = float(rng.gaussian());
+    n = Eigen::Vector3f(float(rng.gaussian()), y, 1.f).normalized();
+  }
   std::vector<std::uint8_t> moved(p.size(), 0);
   for (std::size_t i = 0; i < p.size(); i += 3) moved[i] = 1;
   const paps::NormalRefresh r = paps::refreshNormals(p, 0.025f, previous, moved);

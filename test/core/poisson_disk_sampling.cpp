@@ -12,7 +12,10 @@ namespace {
 paps::Positions unitSquare(int n, std::uint64_t seed) {
   paps::Random rng(seed);
   paps::Positions p(n);
-  for (auto& x : p) x = Eigen::Vector3f(rng.uniform(), rng.uniform(), 0.f);
+  for (auto& x : p) {
+    const double y = rng.uniform();
+    x = Eigen::Vector3f(rng.uniform(), y, 0.f);
+  }
   return p;
 }
 }  // namespace

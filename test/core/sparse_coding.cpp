@@ -25,7 +25,8 @@ Eigen::MatrixXf sparseSignals(const Eigen::MatrixXf& D, int n, int t, std::uint6
   Eigen::MatrixXf Y = Eigen::MatrixXf::Zero(D.rows(), n);
   for (int i = 0; i < n; ++i)
     for (int a = 0; a < t; ++a) {
-      const double v = (rng.uniform() < 0.5 ? -1 : 1) * rng.uniform(0.5, 2.0);
+      const double sign = rng.uniform() < 0.5 ? -1 : 1;
+      const double v = sign * rng.uniform(0.5, 2.0);
       Y.col(i) += D.col(static_cast<int>(rng.below(D.cols()))) * static_cast<float>(v);
     }
   return Y;

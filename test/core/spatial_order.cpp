@@ -18,7 +18,7 @@ using paps::Positions;
 TEST(SpatialOrder, FiniteIndicesOnceEach) {
   Positions p;
   paps::Random rng(3);
-  for (int i = 0; i < 1000; ++i) p.emplace_back(rng.uniform(), rng.uniform(), rng.uniform());
+  for (int i = 0; i < 1000; ++i) p.emplace_back(rng.uniform3(0, 1).cast<float>());
   p[7] = Eigen::Vector3f(NAN, 0, 0);
   p[8] = Eigen::Vector3f(0, INFINITY, 0);
   std::vector<int> order = paps::spatialOrder(p);
@@ -79,7 +79,7 @@ Positions shuffledCopy(const Positions& p, std::uint64_t seed) {
 TEST(SpatialOrder, PointsOfOneCellAreOrderedByCoordinates) {
   Positions p;
   paps::Random rng(6);
-  for (int i = 0; i < 500; ++i) p.emplace_back(rng.uniform(), rng.uniform(), rng.uniform());
+  for (int i = 0; i < 500; ++i) p.emplace_back(rng.uniform3(0, 1).cast<float>());
   p.push_back(p[3]);  // a copy
   const Positions q = shuffledCopy(p, 8);
   ASSERT_NE(p, q);
@@ -90,7 +90,7 @@ TEST(SpatialOrder, PointsOfOneCellAreOrderedByCoordinates) {
 TEST(PositionSample, DependsOnThePositionsOnly) {
   Positions p;
   paps::Random rng(7);
-  for (int i = 0; i < 5000; ++i) p.emplace_back(rng.uniform(), rng.uniform(), rng.uniform());
+  for (int i = 0; i < 5000; ++i) p.emplace_back(rng.uniform3(0, 1).cast<float>());
   for (int i = 0; i < 500; ++i) p.push_back(p[static_cast<std::size_t>(i) * 3]);  // copies
   p[10] = Eigen::Vector3f(NAN, 0, 0);
   const Positions q = shuffledCopy(p, 9);

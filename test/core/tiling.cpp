@@ -23,9 +23,10 @@ using paps::Positions;
 Positions randomSlab(std::size_t n, std::uint64_t seed) {
   paps::Random rng(seed);
   Positions p;
-  for (std::size_t i = 0; i < n; ++i)
-    p.emplace_back(static_cast<float>(rng.uniform(0, 4)), static_cast<float>(rng.uniform(0, 1)),
-                   static_cast<float>(rng.uniform(0, 0.1)));
+  for (std::size_t i = 0; i < n; ++i) {
+    const float z = static_cast<float>(rng.uniform(0, 0.1)), y = static_cast<float>(rng.uniform(0, 1));
+    p.emplace_back(static_cast<float>(rng.uniform(0, 4)), y, z);
+  }
   return p;
 }
 

@@ -88,7 +88,7 @@ TEST(Wavejet, SphereCurvatureIsOneOverRadius) {
   Positions p;
   paps::Normals out;
   while (p.size() < 4000) {
-    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3d v = rng.gaussian3();
     v.normalize();
     p.push_back((2.0 * v).cast<float>());
     out.push_back(v.cast<float>());
@@ -150,7 +150,7 @@ TEST(Wavejet, RefitOnlyForTiltsAboveTheNoise) {
   for (std::uint64_t seed = 1; seed <= 400; ++seed) {
     Positions p = heightFieldSamples(f, 18 + static_cast<int>(seed % 7), 0.4, seed);
     paps::Random rng(1000 + seed);
-    for (auto& q : p) q += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * 0.02f;
+    for (auto& q : p) q += rng.gaussian3().cast<float>() * 0.02f;
     paps::WavejetParameters params, no_refit;
     params.refit_angle = 10;
     no_refit.max_refits = 0;
@@ -320,7 +320,7 @@ TEST(WavejetEstimation, PclPrincipalCurvaturesOnASphereAndACylinder) {
   paps::Random rng(8);
   Positions sphere, cylinder;
   while (sphere.size() < 6000) {
-    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3d v = rng.gaussian3();
     sphere.push_back((0.5 * v.normalized()).cast<float>());  // radius 0.5: |k| = 2
   }
   while (cylinder.size() < 8000) {  // radius 0.25 (|k1| = 4, k2 = 0), axis z, height 1
@@ -590,7 +590,7 @@ TEST(Wavejet, CloudRunUsesExactlyTheBallNeighbours) {
   p.emplace_back(-2.f, 0.f, 0.f);
   p.emplace_back(0.f, 0.f, -2.f);
   while (p.size() < 3000) {
-    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3d v = rng.gaussian3();
     p.push_back((2.0 * v.normalized()).cast<float>());
   }
   paps::Normals out(p.size());
@@ -681,7 +681,7 @@ Positions sphereWithDenseCap(std::uint64_t seed, std::size_t uniform, std::size_
   paps::Random rng(seed);
   Positions p;
   auto onSphere = [&]() {
-    const Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    const Eigen::Vector3d v = rng.gaussian3();
     return Eigen::Vector3f(v.normalized().cast<float>());
   };
   while (p.size() < uniform) p.push_back(onSphere());

@@ -27,7 +27,7 @@ Positions unitSphere(std::size_t count, std::uint64_t seed, Normals& out) {
   Positions p;
   out.clear();
   while (p.size() < count) {
-    const Eigen::Vector3d v = Eigen::Vector3d(rng.gaussian(), rng.gaussian(), rng.gaussian()).normalized();
+    const Eigen::Vector3d v = rng.gaussian3().normalized();
     p.push_back(v.cast<float>());
     out.push_back(v.cast<float>());
   }
@@ -60,7 +60,7 @@ Positions monkeySaddle(std::size_t count, std::uint64_t seed, Normals& up) {
 // Isotropic Gaussian noise of `sigma` (metres).
 Positions noisy(Positions p, double sigma, std::uint64_t seed) {
   paps::Random rng(seed);
-  for (auto& x : p) x += Eigen::Vector3f(float(rng.gaussian()), float(rng.gaussian()), float(rng.gaussian())) * float(sigma);
+  for (auto& x : p) x += rng.gaussian3().cast<float>() * float(sigma);
   return p;
 }
 

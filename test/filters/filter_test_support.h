@@ -82,7 +82,7 @@ inline Positions noisySphere(std::size_t count, float noise, std::uint64_t seed)
   Random rng(seed);
   Positions p;
   for (std::size_t i = 0; i < count; ++i) {
-    Eigen::Vector3f d(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3f d = rng.gaussian3().cast<float>();
     p.push_back(d.normalized());
   }
   synthetic::addGaussianNoise(p, noise, seed + 1);
@@ -143,7 +143,10 @@ void expectTinyCloudsGiveFiniteOutput(FilterFn filter) {
   Random rng(77);
   for (int n : {2, 3, 4, 5, 8, 20, 60}) {
     Positions p;
-    for (int i = 0; i < n; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.01 * rng.gaussian());
+    for (int i = 0; i < n; ++i) {
+      const double z = 0.01 * rng.gaussian(), y = rng.uniform();
+      p.emplace_back(rng.uniform(), y, z);
+    }
     const Positions out = filter(p);
     ASSERT_EQ(out.size(), p.size());
     for (int i = 0; i < n; ++i) {
@@ -277,8 +280,7 @@ void expectNormalsRefreshed(const Positions& p, double mean_degrees, Configure c
   const float tilt = static_cast<float>(10.0 * M_PI / 180.0);
   for (std::size_t i = 0; i < p.size(); ++i) {
     const Eigen::Vector3f radial = p[i].normalized();
-    const Eigen::Vector3f any(static_cast<float>(rng.gaussian()), static_cast<float>(rng.gaussian()),
-                              static_cast<float>(rng.gaussian()));
+    const Eigen::Vector3f any = rng.gaussian3().cast<float>();
     const Eigen::Vector3f across = (any - any.dot(radial) * radial).normalized();
     (*in)[i].getNormalVector3fMap() = std::cos(tilt) * radial + std::sin(tilt) * across;
     (*in)[i].curvature = 0.5f;

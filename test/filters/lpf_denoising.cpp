@@ -76,7 +76,10 @@ TEST(LpfDenoising, PassesFollowTheRelief) {
   // which the later passes would erode.
   paps::Random rng(21);
   Positions plane;
-  for (int i = 0; i < 8000; ++i) plane.emplace_back(rng.uniform(), rng.uniform(), 0.f);
+  for (int i = 0; i < 8000; ++i) {
+    const double y = rng.uniform();
+    plane.emplace_back(rng.uniform(), y, 0.f);
+  }
   const paps::SpatialIndex index(plane);
   const float r = paps::radiusForNeighbourCount(plane, index, LpfDenoisingParameters().probing.neighbours);
   const float k = 3.14159265f / r;

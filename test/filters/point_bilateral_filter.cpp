@@ -151,8 +151,10 @@ TEST(PointBilateralFilter, MovesAlongTheNormalOnly) {
   // far less than z.
   paps::Random rng(4);
   Positions p;
-  for (int i = 0; i < 4000; ++i)
-    p.emplace_back(rng.uniform(), rng.uniform(), 0.002 * rng.gaussian());
+  for (int i = 0; i < 4000; ++i) {
+    const double z = 0.002 * rng.gaussian(), y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, z);
+  }
   const Positions q = paps::bilateralFilterPositions(p, {});
   double dxy = 0, dz = 0, z_before = 0, z_after = 0;
   for (std::size_t i = 0; i < p.size(); ++i) {

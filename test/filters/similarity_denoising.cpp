@@ -117,7 +117,10 @@ TEST(SimilarityDenoising, NoiseFreeSurfacesStayPut) {
   const Eigen::Vector3f u = n.unitOrthogonal(), v = n.cross(u), o(100.f, -50.f, 20.f);
   paps::Random rng(31);
   Positions plane;
-  for (int i = 0; i < 3000; ++i) plane.push_back(o + rng.uniform(-1, 1) * u + rng.uniform(-1, 1) * v);
+  for (int i = 0; i < 3000; ++i) {
+    const double b = rng.uniform(-1, 1), a = rng.uniform(-1, 1);
+    plane.push_back(o + a * u + b * v);
+  }
   const Positions out = paps::denoiseBySimilarity(plane, {});
   double worst_height = 0, worst_slide = 0;
   for (std::size_t i = 0; i < plane.size(); ++i) {

@@ -95,7 +95,7 @@ TEST(WavejetEnhancement, ProjectionRemovesNoise) {
   paps::Random rng(5);
   Positions p, truth;
   while (p.size() < 5000) {
-    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3d v = rng.gaussian3();
     v.normalize();
     truth.push_back(v.cast<float>());
     p.push_back((v * (1 + 0.005 * rng.gaussian())).cast<float>());
@@ -120,7 +120,7 @@ TEST(WavejetEnhancement, ProjectionOnVaryingDensityWithDuplicates) {
   paps::Random rng(9);
   Positions p;
   while (p.size() < 7500) {
-    Eigen::Vector3d v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3d v = rng.gaussian3();
     v.normalize();
     if (p.size() >= 1500 && v.z() < std::cos(0.2)) continue;
     p.push_back((v * (1 + 0.003 * rng.gaussian())).cast<float>());

@@ -64,7 +64,7 @@ pcl::PointCloud<pcl::PointXYZRGB> rgbdFrame(const CameraIntrinsics& camera, cons
         continue;
       }
       if (depth_noise > 0) t += depth_noise * random.gaussian();
-      const Eigen::Vector3d jitter(random.gaussian(), random.gaussian(), random.gaussian());
+      const Eigen::Vector3d jitter = random.gaussian3();
       p.getVector3fMap() = (eye + t * d + noise * jitter).cast<float>();
     }
   cloud.is_dense = false;
@@ -194,12 +194,13 @@ TEST(OrganizedCloudCamera, GarbageGivesACameraOrAClearError) {
   paps::Random random(11);
   int refused = 0, fitted = 0;
   for (int trial = 0; trial < 300; ++trial) {
-    pcl::PointCloud<pcl::PointXYZRGB> cloud(8 + int(random.below(24)), 8 + int(random.below(24)));
+    const int rows = 8 + int(random.below(24)), cols = 8 + int(random.below(24));
+    pcl::PointCloud<pcl::PointXYZRGB> cloud(cols, rows);
     const int kind = int(random.below(6));
     const double scale = std::pow(10.0, random.uniform(-30, 30));
     for (auto& p : cloud) {
-      Eigen::Vector3f v(float(random.uniform(-1, 1) * scale), float(random.uniform(-1, 1) * scale),
-                        float(random.uniform(0.1, 1) * scale));
+      const float z = float(random.uniform(0.1, 1) * scale), y = float(random.uniform(-1, 1) * scale);
+      Eigen::Vector3f v(float(random.uniform(-1, 1) * scale), y, z);
       if (kind == 1) v = Eigen::Vector3f(1, 2, 3);                              // one point repeated
       if (kind == 2) v = Eigen::Vector3f(1, 1, 1) * float(random.uniform(0, 5));  // a line
       if (kind == 3 && random.below(3) == 0) v.x() = std::numeric_limits<float>::infinity();

@@ -28,7 +28,10 @@ using paps::Positions;
 Positions plate(int count, std::uint64_t seed) {
   paps::Random rng(seed);
   Positions p;
-  for (int i = 0; i < count; ++i) p.emplace_back(rng.uniform(), rng.uniform(), 0.f);
+  for (int i = 0; i < count; ++i) {
+    const double y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, 0.f);
+  }
   return p;
 }
 

@@ -24,7 +24,7 @@ Positions spherePoints(std::size_t n, float r, std::uint64_t seed) {
   Random rng(seed);
   Positions p;
   while (p.size() < n) {
-    Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3f v = rng.gaussian3().cast<float>();
     if (v.norm() > 1e-3f) p.push_back(r * v.normalized());
   }
   return p;
@@ -412,7 +412,7 @@ TEST(MlsUpsampling, SeedsOnADenseClusterNeedMemoryLinearInTheInput) {
     for (int j = 0; j < 100; ++j) pts.emplace_back(i, j, 0.f);
   Random rng(3);
   for (int k = 0; k < 6000; ++k) {
-    Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3f v = rng.gaussian3().cast<float>();
     const Eigen::Vector3f p = Eigen::Vector3f(50.3f, 50.3f, 0.f) + 0.05f * static_cast<float>(rng.uniform()) * v.normalized();
     pts.push_back(p);
     pts.push_back(p);
@@ -502,7 +502,8 @@ TEST(MlsUpsampling, SeedThinningIsExactDartThrowing) {
     pts.emplace_back(x, y, 0.5f * std::sin(x) * std::cos(y));
   }
   for (int k = 0; k < 250; ++k) {  // 500 points within 0.02 of (5, 5, z)
-    const Eigen::Vector3f p(5.f + 0.02f * static_cast<float>(rng.uniform(-1, 1)), 5.f + 0.02f * static_cast<float>(rng.uniform(-1, 1)),
+    const float y = 5.f + 0.02f * static_cast<float>(rng.uniform(-1, 1));
+    const Eigen::Vector3f p(5.f + 0.02f * static_cast<float>(rng.uniform(-1, 1)), y,
                             0.5f * std::sin(5.f) * std::cos(5.f));
     pts.push_back(p);
     pts.push_back(p);
@@ -513,7 +514,7 @@ TEST(MlsUpsampling, SeedThinningIsExactDartThrowing) {
   std::vector<int> cand_point;
   for (std::size_t i = 0; i < pts.size(); ++i)
     for (int j = 0; j < slots; ++j) {
-      Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+      Eigen::Vector3f v = rng.gaussian3().cast<float>();
       cand.push_back(pts[i] + disc * static_cast<float>(rng.uniform()) * v.normalized());
       cand_point.push_back(static_cast<int>(i));
     }
@@ -634,9 +635,14 @@ TEST(MlsUpsampling, SeedsLeftUnprojectedKeepTheirTangentPlanesNormal) {
   // unit vector and the cloud stays dense.
   Random rng(5);
   Positions in;
-  for (int i = 0; i < 3000; ++i)
-    in.emplace_back(rng.uniform(0, 1), rng.uniform(0, 1), 0.002 * rng.gaussian());
-  for (int i = 0; i < 60; ++i) in.emplace_back(rng.uniform(0, 1), rng.uniform(0, 1), rng.uniform(0.05, 0.3));
+  for (int i = 0; i < 3000; ++i) {
+    const double z = 0.002 * rng.gaussian(), y = rng.uniform(0, 1);
+    in.emplace_back(rng.uniform(0, 1), y, z);
+  }
+  for (int i = 0; i < 60; ++i) {
+    const double z = rng.uniform(0.05, 0.3), y = rng.uniform(0, 1);
+    in.emplace_back(rng.uniform(0, 1), y, z);
+  }
   MlsUpsamplingParameters p;
   p.factor = 4;
   MlsUpsamplingReport r;
@@ -768,7 +774,7 @@ float quantile(const std::vector<float>& sorted, double q) {
 TEST(MlsUpsampling, TilesKeepTheAccuracyAndTheCoverageOfOnePiece) {
   Positions in = spherePoints(16000, 1.f, 21);
   Random rng(22);
-  for (auto& x : in) x += 0.002f * Eigen::Vector3f(rng.gaussian(), rng.gaussian(), rng.gaussian());
+  for (auto& x : in) x += 0.002f * rng.gaussian3().cast<float>();
   const Positions truth = spherePoints(40000, 1.f, 23);
   for (const MlsSurface s : {MlsSurface::Apss, MlsSurface::Rimls}) {
     for (const bool refit : {false, true}) {
@@ -939,7 +945,8 @@ TEST(MlsUpsampling, SeedsKeepTheirDistanceFromSeedsKeptBefore) {
   Positions left, right;
   Random rng(31);
   for (int i = 0; i < 8000; ++i) {
-    const Eigen::Vector3f p(static_cast<float>(rng.uniform()) * 2.f, static_cast<float>(rng.uniform()), 0.f);
+    const float y = static_cast<float>(rng.uniform());
+    const Eigen::Vector3f p(static_cast<float>(rng.uniform()) * 2.f, y, 0.f);
     (p.x() < 1.f ? left : right).push_back(p);
   }
   const Normals nl(left.size(), Eigen::Vector3f::UnitZ()), nr(right.size(), Eigen::Vector3f::UnitZ());

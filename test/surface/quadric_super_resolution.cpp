@@ -271,8 +271,14 @@ TEST(QuadricSuperResolution, CountsFlatAndIllPosedFitsApart) {
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> u(-1.f, 1.f);
   Positions plane, sphere;
-  for (int i = 0; i < 3000; ++i) plane.emplace_back(u(rng), u(rng), 0.f);
-  for (int i = 0; i < 3000; ++i) sphere.push_back(Eigen::Vector3f(u(rng), u(rng), u(rng)).normalized());
+  for (int i = 0; i < 3000; ++i) {  // drawn last to first (paps/core/random.h)
+    const float y = u(rng);
+    plane.emplace_back(u(rng), y, 0.f);
+  }
+  for (int i = 0; i < 3000; ++i) {
+    const float z = u(rng), y = u(rng);
+    sphere.push_back(Eigen::Vector3f(u(rng), y, z).normalized());
+  }
   QuadricSuperResolutionParameters p;
   p.patch_radius = 0.3f;  // about 70 neighbours: every fit is well posed
   QuadricSuperResolutionReport rp, rs;
@@ -742,7 +748,7 @@ namespace {
 // A uniform point of the unit sphere's upper (z > 0) or lower half.
 Eigen::Vector3f onUnitHemisphere(Random& rng, bool upper) {
   for (;;) {
-    Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    Eigen::Vector3f v = rng.gaussian3().cast<float>();
     v.normalize();
     if ((v.z() > 0) == upper) return v;
   }
@@ -1005,7 +1011,7 @@ TEST(QuadricSuperResolution, TiledNormalsRunOnAcrossTiles) {
   Positions sphere;
   Random rng(4);
   while (sphere.size() < 16000) {
-    const Eigen::Vector3f v(rng.gaussian(), rng.gaussian(), rng.gaussian());
+    const Eigen::Vector3f v = rng.gaussian3().cast<float>();
     if (v.norm() > 1e-3f) sphere.push_back(v.normalized());
   }
   QuadricSuperResolutionParameters p;

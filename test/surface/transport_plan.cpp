@@ -22,7 +22,10 @@ using paps::TransportPlan;
 std::vector<Vector3d> squareSamples(int n, std::uint64_t seed, double z = 0) {
   paps::Random rng(seed);
   std::vector<Vector3d> p;
-  for (int i = 0; i < n; ++i) p.emplace_back(rng.uniform(), rng.uniform(), z);
+  for (int i = 0; i < n; ++i) {
+    const double y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, z);
+  }
   return p;
 }
 
@@ -148,7 +151,10 @@ struct SquareProblem {
 SquareProblem squareProblem(std::uint64_t seed) {
   SquareProblem p;
   paps::Random rng(seed);
-  for (int i = 0; i < 200; ++i) p.points.emplace_back(rng.uniform(), rng.uniform(), 0.02 * rng.uniform());
+  for (int i = 0; i < 200; ++i) {
+    const double z = 0.02 * rng.uniform(), y = rng.uniform();
+    p.points.emplace_back(rng.uniform(), y, z);
+  }
   const Vector3d c(0.5, 0.5, 0), q[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
   for (int k = 0; k < 4; ++k) p.bins.push_back(paps::centroidalBins(q[k], q[(k + 1) % 4], c, 8));
   for (const Vector3d& v : {q[0], q[1], q[2], q[3], c}) p.vertices.push_back({{v, v, v}, nullptr});

@@ -225,8 +225,10 @@ Eigen::Matrix3f pcaFrame(const Positions& points, const int* tb, const int* te, 
 
 Eigen::Matrix3f randomFrame(std::uint64_t seed, std::size_t j) {
   Random rng(seed * 0x9e3779b97f4a7c15ULL + j + 1);
-  Eigen::Quaternionf q(static_cast<float>(rng.gaussian()), static_cast<float>(rng.gaussian()),
-                       static_cast<float>(rng.gaussian()), static_cast<float>(rng.gaussian()));
+  // Drawn last to first, as GCC evaluated the four arguments this replaces (random.h).
+  const float z = static_cast<float>(rng.gaussian()), y = static_cast<float>(rng.gaussian());
+  const float x = static_cast<float>(rng.gaussian()), w = static_cast<float>(rng.gaussian());
+  Eigen::Quaternionf q(w, x, y, z);
   if (q.norm() < 1e-6f) q = Eigen::Quaternionf::Identity();
   return q.normalized().toRotationMatrix();
 }

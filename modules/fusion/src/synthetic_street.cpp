@@ -89,7 +89,8 @@ StreetScene::StreetScene(const StreetOptions& options) : options_(options) {
                             detail, false});
       }
       addGroup(first);
-      x += width + (rng.uniform() < 0.3 ? rng.uniform(1.0, 2.5) : 0.0);
+      const bool gap = rng.uniform() < 0.3;
+      x += width + (gap ? rng.uniform(1.0, 2.5) : 0.0);
     }
   }
   // Lamp posts every 12 m on both pavements, each with an arm over the road.

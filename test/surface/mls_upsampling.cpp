@@ -427,7 +427,7 @@ TEST(MlsUpsampling, SeedsOnADenseClusterNeedMemoryLinearInTheInput) {
   EXPECT_EQ(a, b);
   EXPECT_EQ(o1, o2);
   // 22,000 inputs, 66,000 candidates: a few MB.
-  EXPECT_LT(peak, std::size_t(32) << 20) << peak / 1048576.0 << " MB";
+  if (test::allocationCounted()) EXPECT_LT(peak, std::size_t(32) << 20) << peak / 1048576.0 << " MB";
   std::printf("upsamplingSeeds on the clustered input: peak heap %.1f MB\n", peak / 1048576.0);
   // Still Poisson-disk over the plane and the cluster: no pair much closer than the typical
   // nearest-neighbour distance.
@@ -483,7 +483,7 @@ TEST(MlsUpsampling, ClusteredInputCapsTheKernelsAndStillLandsOnTheSurface) {
     EXPECT_NEAR(full.disc_radius, capped.disc_radius, 1e-3f * capped.disc_radius);
     EXPECT_LT(e_capped, 1.25 * e_full) << e_capped << " vs " << e_full;
     EXPECT_LT(e_capped, 2e-3);  // the typical spacing is 0.11
-    EXPECT_LT(peak_capped, peak_full / 2) << peak_capped << " vs " << peak_full;
+    if (test::allocationCounted()) EXPECT_LT(peak_capped, peak_full / 2) << peak_capped << " vs " << peak_full;
     std::printf("%s: %zu kernels capped; vertical RMS %.4g (uncapped %.4g); peak %.1f MB (uncapped %.1f MB)\n",
                 s == MlsSurface::Apss ? "APSS" : "RIMLS", capped.capped, e_capped, e_full, peak_capped / 1048576.0,
                 peak_full / 1048576.0);
@@ -917,7 +917,7 @@ TEST(MlsUpsampling, TilesWithoutNormalsGiveTheirShareAwayAndTilesBoundTheMemory)
   EXPECT_EQ(out.size(), 2 * cloud.size());
   EXPECT_EQ(onWire(one), 0);
   EXPECT_EQ(onWire(out), 0);
-  EXPECT_LT(peak_tiles, peak_one / 2);
+  if (test::allocationCounted()) EXPECT_LT(peak_tiles, peak_one / 2);
   Positions wire(cloud.begin() + 12000, cloud.end());
   p.max_tile_points = 2000;
   EXPECT_THROW(upsampleMls(wire, MlsSurface::Apss, p), InvalidInput);

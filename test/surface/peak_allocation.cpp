@@ -6,6 +6,19 @@
 #include <cstdlib>
 #include <new>
 
+#if defined(__has_feature)
+#if __has_feature(thread_sanitizer)
+#define PAPS_RUNTIME_OWNS_NEW 1  // Clang's TSan runtime defines operator new in the binary
+#endif
+#endif
+
+#ifdef PAPS_RUNTIME_OWNS_NEW
+namespace paps::test {
+void resetAllocationPeak() {}
+std::size_t allocationPeakSinceReset() { return 0; }
+bool allocationCounted() { return false; }
+}  // namespace paps::test
+#else
 namespace {
 std::atomic<std::size_t> held{0}, peak{0}, base{0};
 constexpr std::size_t kHeader = alignof(std::max_align_t);
@@ -34,6 +47,7 @@ void resetAllocationPeak() {
   peak = base.load();
 }
 std::size_t allocationPeakSinceReset() { return peak.load() - base.load(); }
+bool allocationCounted() { return true; }
 }  // namespace paps::test
 
 void* operator new(std::size_t n) { return allocate(n); }
@@ -60,3 +74,4 @@ void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
 }
 void operator delete(void* p, const std::nothrow_t&) noexcept { release(p); }
 void operator delete[](void* p, const std::nothrow_t&) noexcept { release(p); }
+#endif  // PAPS_RUNTIME_OWNS_NEW

@@ -113,8 +113,7 @@ void normalRows(const std::string& rs1, const std::vector<double>& noises, std::
     Cloud::Ptr noisy(new Cloud(truth));
     Random rng(21);
     for (auto& p : *noisy)
-      p.getVector3fMap() += rng.gaussian3().cast<float>() *
-                            float(noise * diagonal);
+      p.getVector3fMap() += rng.gaussian3().cast<float>() * float(noise * diagonal);
     auto report = [&](const std::string& what, const Cloud& c, const pcl::Indices& at, double seconds) {
       std::vector<double> angle;
       std::size_t other = 0;

@@ -15,7 +15,7 @@
 #include <paps/core/random.h>
 #include <paps/surface/mls_upsampling.h>
 
-#include "peak_allocation.h"
+#include "../common/peak_allocation.h"
 
 using namespace paps;
 

@@ -60,9 +60,6 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   const std::int64_t count = static_cast<std::int64_t>(indices.size());
   coefficients_.clear();
   if (keep_coefficients_) coefficients_.resize(indices.size());
-  std::vector<WavejetResult> results(indices.size());
-  std::vector<int> neighbour_count(indices.size(), 0);
-  std::vector<float> variation(variation_out ? indices.size() : 0, NAN);  // as pcl::NormalEstimation's curvature
   const bool by_radius = this->k_ == 0;
   // The order policy: automatic runs the pilot over the search surface at the search radius
   // (for a k search, the radius holding k on average), no support growth.
@@ -95,11 +92,19 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   // Narrowing under the same rule: a ball with more than `narrow_to` points keeps its
   // `narrow_to` nearest (ties by index), at their radius.
   const int narrow_to = wavejetNarrowedNeighbours(run, 50);
-  std::vector<std::uint8_t> widened(indices.size(), 0), narrowed(indices.size(), 0);
   const Eigen::Vector3f nan3 = Eigen::Vector3f::Constant(NAN);
   ProgressReporter reporter(progress_, "wavejets", indices.size());
+  // Each fit goes straight into the output and the report's counts: no per-point copy of the
+  // results (76 bytes a point, a third of the peak at 5M points). The counts are integer
+  // sums and a maximum, so the report does not depend on how the threads split the points.
+  report_ = WavejetReport();
+  std::uint64_t neighbour_sum = 0;
+  bool dense = true;
 #pragma omp parallel
   {
+    WavejetReport counts;
+    std::uint64_t neighbours_here = 0;
+    bool dense_here = true;
     WavejetWorkspacePtr ws = makeWavejetWorkspace();
     pcl::Indices nn;
     std::vector<float> d2;
@@ -110,11 +115,15 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
       if (reporter.cancelled()) continue;
       const auto idx = indices[i];
       const Eigen::Vector3f p = (*this->input_)[idx].getVector3fMap();
+      WavejetResult result;
+      float variation = NAN;  // as pcl::NormalEstimation's curvature
+      int neighbour_count = 0;
+      bool widened = false, narrowed = false;
       if (isFinite(p) && this->searchForNeighbors(idx, this->search_parameter_, nn, d2) > 0) {
         float radius = static_cast<float>(this->search_radius_);
         if (widen && static_cast<int>(nn.size()) < widen_to &&
             this->tree_->nearestKSearch((*this->input_)[idx], widen_to, nn, d2) >= need) {
-          widened[i] = 1;
+          widened = true;
           float m = 0.f;
           for (const float d : d2) m = std::max(m, d);
           radius = std::max(radius, std::sqrt(m));
@@ -127,7 +136,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
           std::sort(order.begin(), order.begin() + narrow_to);
           nn.resize(narrow_to);
           for (int j = 0; j < narrow_to; ++j) nn[j] = order[j].second;
-          narrowed[i] = 1;
+          narrowed = true;
           radius = std::sqrt(order[narrow_to - 1].first);
         }
         if (!by_radius) {
@@ -136,52 +145,63 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
           radius = std::sqrt(m);
         }
         nn_int.assign(nn.begin(), nn.end());
-        neighbour_count[i] = static_cast<int>(nn_int.size());
-        results[i] = fitWavejet(surface, nn_int.data(), static_cast<int>(nn_int.size()), p, radius, run, *ws,
-                                initial_normals_ ? (*initial_normals_)[idx] : nan3,
-                                orientation_ ? (*orientation_)[idx] : nan3,
-                                keep_coefficients_ ? &coefficients_[i] : nullptr);
+        neighbour_count = static_cast<int>(nn_int.size());
+        result = fitWavejet(surface, nn_int.data(), neighbour_count, p, radius, run, *ws,
+                            initial_normals_ ? (*initial_normals_)[idx] : nan3,
+                            orientation_ ? (*orientation_)[idx] : nan3,
+                            keep_coefficients_ ? &coefficients_[i] : nullptr);
         if constexpr (variation_out)
-          if (results[i].valid())
-            pcaNormal(surface, nn_int.data(), static_cast<int>(nn_int.size()), nullptr, &variation[i]);
+          if (result.valid()) pcaNormal(surface, nn_int.data(), neighbour_count, nullptr, &variation);
+      }
+      if constexpr (detail::kWavejetToPoint<PointOutT>) {
+        toPoint(result, output[i]);
+      } else {
+        output[i].getNormalVector3fMap() = result.normal;
+        if constexpr (variation_out) output[i].curvature = variation;
+      }
+      if (!isFinite(p)) {
+        ++counts.non_finite;
+        dense_here = false;
+      } else if (!result.valid()) {
+        ++(neighbour_count >= run.beta * wavejetUnknowns(2) ? counts.failed_fits : counts.too_few_neighbours);
+        dense_here = false;
+      } else {
+        ++counts.fitted;
+        neighbours_here += static_cast<std::uint64_t>(neighbour_count);
+        counts.lowered += result.order < run.order;
+        counts.not_converged += !result.converged && !result.tilt_within_noise;
+        counts.tilt_within_noise += result.tilt_within_noise;
+        counts.max_radius = std::max(counts.max_radius, result.radius);
+        counts.widened += widened;
+        counts.narrowed += narrowed;
       }
       reporter.advance();
+    }
+#pragma omp critical(paps_wavejet_report)
+    {
+      report_.non_finite += counts.non_finite;
+      report_.failed_fits += counts.failed_fits;
+      report_.too_few_neighbours += counts.too_few_neighbours;
+      report_.fitted += counts.fitted;
+      report_.lowered += counts.lowered;
+      report_.not_converged += counts.not_converged;
+      report_.tilt_within_noise += counts.tilt_within_noise;
+      report_.max_radius = std::max(report_.max_radius, counts.max_radius);
+      report_.widened += counts.widened;
+      report_.narrowed += counts.narrowed;
+      neighbour_sum += neighbours_here;
+      dense = dense && dense_here;
     }
   }
   reporter.throwIfCancelled();
   reporter.finish();
-  report_ = WavejetReport();
   report_.radius = static_cast<float>(this->search_radius_);
   report_.noise_measured = measured;
   report_.noise_sigma = measured ? noise.sigma : NAN;
   report_.noise_relative = measured ? noise.relative : NAN;
   report_.select_order = run.select_order;
   report_.beta = run.beta;
-  double sum = 0;
-  bool dense = true;
-  for (std::int64_t i = 0; i < count; ++i) {
-    if constexpr (detail::kWavejetToPoint<PointOutT>) {
-      toPoint(results[i], output[i]);
-    } else {
-      output[i].getNormalVector3fMap() = results[i].normal;
-      if constexpr (variation_out) output[i].curvature = variation[i];
-    }
-    if (!isFinite((*this->input_)[indices[i]].getVector3fMap())) { ++report_.non_finite; dense = false; continue; }
-    if (!results[i].valid()) {
-      ++(neighbour_count[i] >= run.beta * wavejetUnknowns(2) ? report_.failed_fits : report_.too_few_neighbours);
-      dense = false;
-      continue;
-    }
-    ++report_.fitted;
-    sum += neighbour_count[i];
-    report_.lowered += results[i].order < run.order;
-    report_.not_converged += !results[i].converged && !results[i].tilt_within_noise;
-    report_.tilt_within_noise += results[i].tilt_within_noise;
-    report_.max_radius = std::max(report_.max_radius, results[i].radius);
-    report_.widened += widened[i];
-    report_.narrowed += narrowed[i];
-  }
-  report_.mean_neighbours = report_.fitted ? sum / report_.fitted : 0.0;
+  report_.mean_neighbours = report_.fitted ? static_cast<double>(neighbour_sum) / report_.fitted : 0.0;
   output.is_dense = dense;
 }
 

@@ -175,6 +175,39 @@ TEST(LocalTransport, NearestBinsOnlyIsARestrictionThatCostsLittle) {
   for (const auto& es : near.entries) EXPECT_LE(es.size(), 8u);
 }
 
+// A facet with a bin no point may send mass to (none of its bins among a point's nearest)
+// gets measure 0, since its uniform measure ties every bin to that one: the optimum is the
+// program's without it. A facet reached by only some points' lists gets no mass either.
+TEST(LocalTransport, FacetsWithABinNoPointMayReachTakeNoMass) {
+  const SquareProblem sq = squareProblem(13);
+  std::vector<Vector3d> pts;  // the lower half of the square
+  for (const auto& p : sq.points)
+    if (p.y() < 0.5) pts.push_back(p);
+  ASSERT_GT(pts.size(), 30u);
+  const std::vector<double> mass(pts.size(), 1.0);
+  const Vector3d a(0, 0, 5), b(1, 0, 5), c(0, 1, 5);  // a facet far above the square
+  const paps::FacetBins far_bins = paps::centroidalBins(a, b, c, 8);
+  auto with_far = sq.all();
+  with_far.push_back({{a, b, c}, &far_bins});
+  for (int bins_per_point : {4, 8}) {
+    const auto reduced = paps::solveLocalTransport(pts, mass, sq.all(), bins_per_point);
+    const auto full = paps::solveLocalTransport(pts, mass, with_far, bins_per_point);
+    ASSERT_TRUE(reduced.solved);
+    ASSERT_TRUE(full.solved);
+    EXPECT_NEAR(full.cost, reduced.cost, 1e-12 * reduced.cost) << bins_per_point;
+    // The top facet (q[2], q[3], centre) is beyond every point's nearest bins; the side
+    // facets are reached only by their bins below the centre; the bottom one by all.
+    const int first_facet = static_cast<int>(sq.vertices.size());
+    std::vector<double> on(with_far.size(), 0.0);
+    for (const auto& es : full.entries)
+      for (const auto& e : es) on[e.target] += e.mass;
+    for (int f : {1, 2, 3}) EXPECT_EQ(on[first_facet + f], 0.0) << bins_per_point << " " << f;
+    EXPECT_EQ(on.back(), 0.0) << bins_per_point;
+    std::printf("bins_per_point %d: %.1f of %zu on the bottom facet\n", bins_per_point, on[first_facet], pts.size());
+    EXPECT_GT(on[first_facet], 0.25 * pts.size()) << bins_per_point;
+  }
+}
+
 TEST(LocalTransport, NearestBinCostBoundsEveryProgramAndIsReachedWithoutFacets) {
   // With vertices only (no capacity) the program is the nearest-bin plan; with the facets,
   // their uniform measure costs more than their nearest bins.

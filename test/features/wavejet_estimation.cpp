@@ -557,6 +557,74 @@ TEST(WavejetEstimation, SameResultWhateverOrderTheSearchReturns) {
   EXPECT_GT(fitted, out[0].size() * 9 / 10);
 }
 
+// Without a search method the radius balls come from our grid, with one from PCL's kd-tree:
+// the same balls, so the same outputs, bit for bit. A lattice whose spacing divides the
+// radius puts many neighbours at a squared distance within rounding of R^2 (the open ball
+// must be FLANN's); a second case searches another surface.
+TEST(WavejetEstimation, GridBallsAreTheKdTreesBalls) {
+  pcl::PointCloud<pcl::PointXYZ>::Ptr lattice(new pcl::PointCloud<pcl::PointXYZ>);
+  for (int i = 0; i < 60; ++i)
+    for (int j = 0; j < 60; ++j) {
+      const float x = 0.01f * static_cast<float>(i), y = 0.01f * static_cast<float>(j);
+      lattice->push_back(pcl::PointXYZ(x, y, 0.3f * x * x - 0.2f * y * y));
+    }
+  lattice->push_back(pcl::PointXYZ(NAN, 0.f, 0.f));
+  lattice->is_dense = false;
+  const Positions noisy_p = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; }, 6000, 1.0, 21);
+  auto noisy = toCloud(noisy_p);
+  auto half = toCloud(Positions(noisy_p.begin(), noisy_p.begin() + 3000));
+  // A neighbour whose squared distance FLANN sums as (dx^2 + dy^2) + dz^2 just below R^2,
+  // while dx^2 + (dy^2 + dz^2) (Eigen's squaredNorm) rounds to R^2 itself: FLANN keeps it.
+  pcl::PointCloud<pcl::PointXYZ>::Ptr edge(new pcl::PointCloud<pcl::PointXYZ>);
+  double edge_radius = 0;
+  {
+    paps::Random rng(4);
+    for (int tries = 0; tries < 1000000 && edge_radius == 0; ++tries) {
+      const float dz = static_cast<float>(rng.uniform(0.0, 0.02)), dy = static_cast<float>(rng.uniform(0.6, 0.72)),
+                  dx = static_cast<float>(rng.uniform(0.6, 0.72));
+      float flann = dx * dx;
+      flann += dy * dy;
+      flann += dz * dz;
+      float other = dy * dy + dz * dz;
+      other = dx * dx + other;
+      const double r = std::sqrt(static_cast<double>(other));
+      if (flann < other && static_cast<float>(r * r) == other) {
+        edge_radius = r;
+        edge->push_back(pcl::PointXYZ(0.f, 0.f, 0.f));
+        edge->push_back(pcl::PointXYZ(dx, dy, dz));
+      }
+    }
+    ASSERT_GT(edge_radius, 0);
+    for (int i = -6; i <= 6; ++i)  // a patch to fit around the first point
+      for (int j = -6; j <= 6; ++j)
+        if (i != 0 || j != 0) {
+          const float x = 0.1f * static_cast<float>(i), y = 0.1f * static_cast<float>(j);
+          edge->push_back(pcl::PointXYZ(x, y, 0.01f * x * y));
+        }
+  }
+  struct Case { pcl::PointCloud<pcl::PointXYZ>::Ptr input, surface; double radius; };
+  for (const Case& c : {Case{lattice, nullptr, 0.03}, Case{lattice, nullptr, 0.05}, Case{half, noisy, 0.08},
+                        Case{edge, nullptr, edge_radius}}) {
+    pcl::PointCloud<paps::PointWavejet> out[2];
+    paps::WavejetReport report[2];
+    for (int tree = 0; tree < 2; ++tree) {
+      paps::WavejetEstimation<pcl::PointXYZ> est;
+      est.setInputCloud(c.input);
+      if (c.surface) est.setSearchSurface(c.surface);
+      est.setRadiusSearch(c.radius);
+      est.setViewPoint(0, 0, 10);
+      if (tree == 1) est.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+      est.compute(out[tree]);
+      report[tree] = est.getReport();
+    }
+    ASSERT_EQ(out[0].size(), out[1].size());
+    for (std::size_t i = 0; i < out[0].size(); ++i)
+      ASSERT_EQ(std::memcmp(&out[0][i], &out[1][i], sizeof(paps::PointWavejet)), 0) << c.radius << " " << i;
+    EXPECT_EQ(report[0].mean_neighbours, report[1].mean_neighbours) << c.radius;
+    EXPECT_GT(report[0].fitted, c.input->size() * 7 / 10) << c.radius;
+  }
+}
+
 TEST(WavejetEstimation, DeterministicAcrossThreadCounts) {
   Positions p = heightFieldSamples([](double x, double y) { return std::sin(3 * x) * std::cos(2 * y) * 0.2; }, 4000, 1.0, 8);
   paps::Random rng(2);

@@ -1,7 +1,8 @@
 #!/bin/bash
 # The whole test suite under AddressSanitizer, LeakSanitizer and UndefinedBehaviorSanitizer
-# (GCC). Not part of CI: on 2 cores a build from scratch takes about 45 minutes and ctest
-# about 30. A report makes its test fail (ASan and LSan exit 1, UBSan halts on the first).
+# (GCC). Not part of CI: on 2 cores, rebuilding session 47's sanitizer build after session
+# 48's changes took about 45 minutes beside a bench run, and ctest 37 minutes (session 49).
+# A report makes its test fail (ASan and LSan exit 1, UBSan halts on the first).
 #   bash scripts/address_sanitizer.sh [BUILD_DIR] [ctest arguments, e.g. -R Wavejet]
 # Notes (docs/architecture.md, "The whole test suite under ASan/UBSan"):
 #  - EIGEN_MALLOC_ALREADY_ALIGNED=1: without it Eigen switches to its own aligned allocator

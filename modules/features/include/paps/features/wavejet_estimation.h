@@ -13,9 +13,9 @@
 //   wj.compute(out);               // NaN outputs (is_dense false) where too few neighbours
 //
 // Without setSearchMethod, radius balls come from a grid of cells of side R_phi instead of
-// PCL's default kd-tree: the same balls as FLANN's (squared float distances < R_phi^2, as
-// pcl::KdTreeFLANN asks), so the same outputs, in about half the time. A search method the
-// caller sets is used as given.
+// PCL's default kd-tree (when the indices cover at least an eighth of the search surface):
+// the same balls as FLANN's (squared float distances < R_phi^2, as pcl::KdTreeFLANN asks),
+// so the same outputs, 1.24-1.33x faster. A search method the caller sets is used as given.
 //
 // PCL's own output types work too, as drop-ins for PCL's estimators in a pipeline:
 //  - pcl::PrincipalCurvatures (as pcl::PrincipalCurvaturesEstimation): principal_curvature =

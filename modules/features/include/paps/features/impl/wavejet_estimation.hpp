@@ -103,8 +103,11 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   // ((dx^2 + dy^2) + dz^2; Eigen's squaredNorm adds dx^2 + (dy^2 + dz^2), which put a point
   // at exactly R^2 in one ball of 28,572 on rs1). The fit sorts its list, so the outputs
   // are the same bits.
+  // Only for many queries: for a few indices into a large surface (keypoints) the grid's
+  // build and its copy of the surface would cost more than the kd-tree's descents save.
   CellGrid grid;
-  const bool use_grid = grid_search_ && grid.build(surface, static_cast<float>(this->search_radius_));
+  const bool use_grid = grid_search_ && indices.size() * 8 >= surface.size() &&
+                        grid.build(surface, static_cast<float>(this->search_radius_));
   const float grid_r2 = static_cast<float>(this->search_radius_ * this->search_radius_);
   const float grid_reach = static_cast<float>(this->search_radius_) * (1 + 1e-5f);  // the candidates
   const float grid_reach2 = grid_reach * grid_reach;

@@ -8,6 +8,7 @@
 #include <ctime>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -22,6 +23,7 @@
 #include <pcl/features/normal_3d_omp.h>
 #include <pcl/features/principal_curvatures.h>
 #include <pcl/point_types.h>
+#include <pcl/search/kdtree.h>
 
 #ifdef PAPS_HAVE_CGAL
 #include <CGAL/Monge_via_jet_fitting.h>
@@ -34,6 +36,7 @@
 #include <paps/core/random.h>
 #include <paps/core/triangle_mesh.h>
 #include <paps/features/wavejet.h>
+#include <paps/features/wavejet_estimation.h>
 #include <paps/filters/wavejet_enhancement.h>
 
 #include "bench_worker.h"
@@ -1096,6 +1099,36 @@ int runBenchCurvature(int argc, char** argv) {
                   "neighbours, R_phi %.4f, %zu NaN)\n", pilot ? "" : " without pilot (--order-policy fixed)", noise * 100,
                   threads, tw, tc, defaultChoice(dr).c_str(),
                   100 * dr.noise_relative, dr.mean_neighbours, dr.radius, dr.too_few_neighbours);
+    }
+    // The pcl::Feature class on the same points and R_phi, fixed order, as a PCL pipeline
+    // runs it: with PCL's default search (answered by our grid) and with a
+    // pcl::search::KdTree set (PCL's balls); beside PCL's own normal and curvature estimators
+    // on the same balls, all with the same threads.
+    {
+      pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+      cloud->resize(p.size());
+      for (std::size_t i = 0; i < p.size(); ++i) (*cloud)[i].getVector3fMap() = p[i];
+      pcl::PointCloud<PointWavejet> out[2];
+      double secs[2];
+      for (int tree = 0; tree < 2; ++tree) {
+        WavejetEstimation<pcl::PointXYZ> wj;
+        wj.setInputCloud(cloud);
+        wj.setRadiusSearch(radius);
+        wj.setOrder(order);
+        if (tree) wj.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>(false));
+        const auto tw = Clock::now();
+        wj.compute(out[tree]);
+        secs[tree] = since(tw);
+      }
+      std::size_t same = 0;
+      for (std::size_t i = 0; i < p.size(); ++i)
+        same += std::memcmp(&out[0][i], &out[1][i], sizeof(PointWavejet)) == 0;
+      double t_pcl = 0;
+      runPcl(p, radius, t_pcl, true);
+      std::printf("pcl::Feature WavejetEstimation (fixed order, R_phi), %d threads: %.2f s with PCL's default search "
+                  "(our grid), %.2f s with a pcl::search::KdTree set (%.2fx); %zu of %zu outputs identical; PCL "
+                  "NormalEstimationOMP + PrincipalCurvaturesEstimation on the same balls %.2f s\n",
+                  threads, secs[0], secs[1], secs[1] / secs[0], same, p.size(), t_pcl);
     }
     const std::size_t sub = std::min<std::size_t>(p.size(), 100000);
     Positions ps(p.begin(), p.begin() + sub);

@@ -881,6 +881,13 @@ elseif(CASE STREQUAL "bench_files")
   if(NOT left STREQUAL "files.csv")
     message(FATAL_ERROR "bench files left scratch files: ${left}")
   endif()
+elseif(CASE STREQUAL "bench_curvature_speed")
+  # The speed part of `paps bench curvature` on a small surface: the pcl::Feature class with
+  # PCL's default search (answered by our grid) gives the outputs of a pcl::search::KdTree.
+  run_paps(bench curvature --skip analytic,tilt,scan,density,render --speed-points 20000 --out ${dir}/bench_curv)
+  if(NOT rc STREQUAL "0" OR NOT out MATCHES "20000 of 20000 outputs identical")
+    message(FATAL_ERROR "expected the Feature class's grid and kd-tree outputs to agree (${rc}): ${out} ${err}")
+  endif()
 elseif(CASE STREQUAL "bench_lpf_shapes")
   # The tetrahedron and cylinder of `paps bench lpf` end to end (child processes, table, CSV), and a
   # clear error for an unknown shape or a missing real-scan mesh.

@@ -72,6 +72,30 @@ TEST(CellGrid, RadiusSearchEqualsBruteForce) {
   }
 }
 
+// forEachInReach hands over the cells' points without measuring them: every point of the
+// ball, each once, and nothing farther than the cells around it can hold.
+TEST(CellGrid, PointsInReachHoldTheBallOnce) {
+  const Positions p = randomCloud(1500, 3);
+  CellGrid grid;
+  ASSERT_TRUE(grid.build(p, 0.1f));
+  CellGrid::Cursor cursor;
+  std::size_t extra = 0;
+  for (const float r : {0.05f, 0.1f, 0.25f})
+    for (std::size_t i = 0; i < p.size(); i += 11) {
+      if (!paps::isFinite(p[i])) continue;
+      std::vector<int> seen;
+      grid.forEachInReach(p[i], r, cursor, [&](int slot) { seen.push_back(grid.original()[slot]); });
+      std::sort(seen.begin(), seen.end());
+      ASSERT_EQ(std::adjacent_find(seen.begin(), seen.end()), seen.end());  // each point once
+      std::vector<int> ball = bruteBall(p, p[i], r);
+      std::sort(ball.begin(), ball.end());
+      ASSERT_TRUE(std::includes(seen.begin(), seen.end(), ball.begin(), ball.end())) << r << " " << i;
+      for (int j : seen) ASSERT_LE((p[j] - p[i]).cwiseAbs().maxCoeff(), r + 2 * grid.cell()) << r << " " << i;
+      extra += seen.size() - ball.size();
+    }
+  EXPECT_GT(extra, 0u);  // the cells' corners: not a ball
+}
+
 TEST(CellGrid, QueryGivesTheBallInCellOrder) {
   const Positions p = randomCloud(2000, 2);
   const float r = 0.08f;

@@ -52,13 +52,21 @@ class CellGrid {
   /// the cells within `reach` of q (reach >= sqrt(max_d2)). Order: cell order, then slot.
   template <typename F>
   void forEachWithin(const Eigen::Vector3f& q, float reach, float max_d2, Cursor& cursor, F&& f) const {
+    forEachInReach(q, reach, cursor, [&](int s) {
+      const float d2 = (sorted_[s] - q).squaredNorm();
+      if (d2 <= max_d2) f(s, d2);
+    });
+  }
+
+  /// Calls f(slot) for every point of the cells within `reach` of q: every point within
+  /// reach, and others. For a caller that measures distances by its own convention (a
+  /// kd-tree's ball to reproduce). Order: cell order, then slot.
+  template <typename F>
+  void forEachInReach(const Eigen::Vector3f& q, float reach, Cursor& cursor, F&& f) const {
     if (sorted_.empty() || !isFinite(q)) return;
     prepare(q, reach, cursor);
     for (const auto& r : cursor.ranges)
-      for (int s = r.first; s < r.second; ++s) {
-        const float d2 = (sorted_[s] - q).squaredNorm();
-        if (d2 <= max_d2) f(s, d2);
-      }
+      for (int s = r.first; s < r.second; ++s) f(s);
   }
 
   /// Slots of the points within `radius` of q, in cell order then slot order. Throws

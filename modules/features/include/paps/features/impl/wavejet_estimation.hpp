@@ -109,8 +109,8 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   const bool use_grid = grid_search_ && indices.size() * 8 >= surface.size() &&
                         grid.build(surface, static_cast<float>(this->search_radius_));
   const float grid_r2 = static_cast<float>(this->search_radius_ * this->search_radius_);
-  const float grid_reach = static_cast<float>(this->search_radius_) * (1 + 1e-5f);  // the candidates
-  const float grid_reach2 = grid_reach * grid_reach;
+  // Cells a little past R: a point FLANN keeps may lie a rounding beyond it.
+  const float grid_reach = static_cast<float>(this->search_radius_) * (1 + 1e-5f);
   ProgressReporter reporter(progress_, "wavejets", indices.size());
   // Each fit goes straight into the output and the report's counts: no per-point copy of the
   // results (76 bytes a point, a third of the peak at 5M points). The counts are integer
@@ -133,7 +133,7 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
       if (!use_grid) return this->searchForNeighbors(idx, this->search_parameter_, nn, d2);
       nn.clear();
       d2.clear();
-      grid.forEachWithin(q, grid_reach, grid_reach2, cursor, [&](int slot, float) {
+      grid.forEachInReach(q, grid_reach, cursor, [&](int slot) {
         const Eigen::Vector3f d = q - grid.sorted()[static_cast<std::size_t>(slot)];
         float dd = d.x() * d.x();
         dd += d.y() * d.y();

@@ -888,6 +888,10 @@ elseif(CASE STREQUAL "bench_curvature_speed")
   if(NOT rc STREQUAL "0" OR NOT out MATCHES "20000 of 20000 outputs identical")
     message(FATAL_ERROR "expected the Feature class's grid and kd-tree outputs to agree (${rc}): ${out} ${err}")
   endif()
+  # ... and times it with setKSearch beside PCL's estimators, in both point orders.
+  if(NOT out MATCHES "setKSearch\\(50\\), [0-9]+ threads: [0-9.]+ s on the points as sampled \\(random order\\), [0-9.]+ s in space order; PCL [^\n]*setKSearch\\(50\\): [0-9.]+ s / [0-9.]+ s")
+    message(FATAL_ERROR "expected the k-search timings of the Feature class and PCL's: ${out}")
+  endif()
 elseif(CASE STREQUAL "bench_lpf_shapes")
   # The tetrahedron and cylinder of `paps bench lpf` end to end (child processes, table, CSV), and a
   # clear error for an unknown shape or a missing real-scan mesh.

@@ -557,6 +557,48 @@ TEST(WavejetEstimation, SameResultWhateverOrderTheSearchReturns) {
   EXPECT_GT(fitted, out[0].size() * 9 / 10);
 }
 
+// Large index sets are visited in space order (cache locality on shuffled clouds); each
+// output must still be its own point's: the same bits as that point estimated alone (one
+// index, visited as given), by k and by radius, on a shuffled cloud with indices out of order.
+TEST(WavejetEstimation, EachOutputIsItsPointsWhateverOrderThePointsAreVisitedIn) {
+  Positions p = heightFieldSamples([](double x, double y) { return 0.3 * x * x - 0.2 * y * y + 0.1 * x * y; }, 9000, 1.0, 4);
+  paps::Random rng(6);
+  for (auto& x : p) x.z() += static_cast<float>(0.002 * rng.gaussian());
+  std::vector<int> perm = iota(p.size());
+  for (std::size_t i = perm.size() - 1; i > 0; --i) std::swap(perm[i], perm[rng.below(i + 1)]);
+  Positions shuffled(p.size());
+  for (std::size_t k = 0; k < p.size(); ++k) shuffled[k] = p[perm[k]];
+  const auto cloud = toCloud(shuffled);
+  // Every other point, last first: 4,500 indices (the space order starts at 4,096).
+  auto indices = pcl::make_shared<pcl::Indices>();
+  for (int i = static_cast<int>(p.size()) - 1; i >= 0; i -= 2) indices->push_back(i);
+  for (int by_k = 0; by_k < 2; ++by_k) {
+    auto estimate = [&](const pcl::IndicesPtr& idx, pcl::PointCloud<paps::PointWavejet>& out) {
+      paps::WavejetEstimation<pcl::PointXYZ> est;
+      est.setInputCloud(cloud);
+      est.setIndices(idx);
+      if (by_k)
+        est.setKSearch(30);
+      else
+        est.setRadiusSearch(0.05);
+      est.compute(out);
+    };
+    pcl::PointCloud<paps::PointWavejet> all;
+    estimate(indices, all);
+    ASSERT_EQ(all.size(), indices->size());
+    std::size_t fitted = 0;
+    for (std::size_t j = 0; j < all.size(); ++j) fitted += std::isfinite(all[j].k1);
+    EXPECT_GT(fitted, all.size() * 99 / 100) << by_k;
+    for (std::size_t j = 0; j < all.size(); j += 450) {
+      pcl::PointCloud<paps::PointWavejet> one;
+      estimate(pcl::make_shared<pcl::Indices>(1, (*indices)[j]), one);
+      ASSERT_EQ(one.size(), 1u);
+      EXPECT_EQ(std::memcmp(&one[0], &all[j], sizeof(paps::PointWavejet)), 0) << by_k << " " << j;
+      EXPECT_NE(std::memcmp(&one[0], &all[j == 0 ? 1 : j - 1], sizeof(paps::PointWavejet)), 0) << by_k << " " << j;
+    }
+  }
+}
+
 // Without a search method the radius balls come from our grid, with one from PCL's kd-tree:
 // the same balls, so the same outputs, bit for bit. A lattice whose spacing divides the
 // radius puts many neighbours at a squared distance within rounding of R^2 (the open ball

@@ -7,6 +7,7 @@
 #include <paps/core/cell_grid.h>
 #include <paps/core/error.h>
 #include <paps/core/positions.h>
+#include <paps/core/spatial_order.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/features/wavejet_estimation.h>
@@ -111,6 +112,15 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
   const float grid_r2 = static_cast<float>(this->search_radius_ * this->search_radius_);
   // Cells a little past R: a point FLANN keeps may lie a rounding beyond it.
   const float grid_reach = static_cast<float>(this->search_radius_) * (1 + 1e-5f);
+  // The points are visited in space order (Z-order of their positions), each output still
+  // written at its own index: on a shuffled cloud the searches and fits stay in cache
+  // (FLANN's k searches 1.7x faster on rs1 1M in that order, one thread).
+  std::vector<int> visit;
+  if (count >= 4096) {
+    Positions queries(indices.size());
+    for (std::size_t i = 0; i < indices.size(); ++i) queries[i] = (*this->input_)[indices[i]].getVector3fMap();
+    visit = spatialOrderAll(queries);
+  }
   ProgressReporter reporter(progress_, "wavejets", indices.size());
   // Each fit goes straight into the output and the report's counts: no per-point copy of the
   // results (76 bytes a point, a third of the peak at 5M points). The counts are integer
@@ -146,8 +156,9 @@ void WavejetEstimation<PointInT, PointOutT>::computeFeature(PointCloudOut& outpu
       return static_cast<int>(nn.size());
     };
 #pragma omp for schedule(dynamic, 256)
-    for (std::int64_t i = 0; i < count; ++i) {
+    for (std::int64_t k = 0; k < count; ++k) {
       if (reporter.cancelled()) continue;
+      const std::int64_t i = visit.empty() ? k : visit[static_cast<std::size_t>(k)];
       const auto idx = indices[i];
       const Eigen::Vector3f p = (*this->input_)[idx].getVector3fMap();
       WavejetResult result;

@@ -213,8 +213,16 @@ std::string defaultChoice(const WavejetReport& r) {
 // PCL: normals by NormalEstimation, curvatures by PrincipalCurvaturesEstimation (unsigned,
 // variance of the projected normals: pc1 >= pc2). `calibrated` then holds
 // s sqrt(pc) with the least-squares best s against the true magnitudes (an oracle favour).
-std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, bool threads, float curv_radius = 0) {
+// k > 0: both stages search the k nearest instead (radius unused).
+std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, bool threads, float curv_radius = 0,
+                             int k = 0) {
   if (curv_radius <= 0) curv_radius = radius;
+  auto setSearch = [&](auto& stage, float r) {
+    if (k > 0)
+      stage.setKSearch(k);
+    else
+      stage.setRadiusSearch(r);
+  };
   pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
   cloud->resize(p.size());
   for (std::size_t i = 0; i < p.size(); ++i) (*cloud)[i].getVector3fMap() = p[i];
@@ -224,18 +232,18 @@ std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, boo
   if (threads) {
     pcl::NormalEstimationOMP<pcl::PointXYZ, pcl::Normal> ne(omp_get_max_threads());
     ne.setInputCloud(cloud);
-    ne.setRadiusSearch(radius);
+    setSearch(ne, radius);
     ne.compute(*normals);
   } else {
     pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
     ne.setInputCloud(cloud);
-    ne.setRadiusSearch(radius);
+    setSearch(ne, radius);
     ne.compute(*normals);
   }
   pcl::PrincipalCurvaturesEstimation<pcl::PointXYZ, pcl::Normal, pcl::PrincipalCurvatures> pc;
   pc.setInputCloud(cloud);
   pc.setInputNormals(normals);
-  pc.setRadiusSearch(curv_radius);
+  setSearch(pc, curv_radius);
   pc.compute(pcs);
   secs = since(t0);
   std::vector<Estimate> out(p.size());
@@ -1138,10 +1146,10 @@ int runBenchCurvature(int argc, char** argv) {
       double ours_k[2], pcl_k[2];
       const std::vector<int> by_space = spatialOrder(p);
       for (int ordered = 0; ordered < 2; ++ordered) {
+        const Positions q = ordered ? gathered(p, by_space) : p;
         pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-        cloud->resize(p.size());
-        for (std::size_t i = 0; i < p.size(); ++i)
-          (*cloud)[i].getVector3fMap() = p[ordered ? static_cast<std::size_t>(by_space[i]) : i];
+        cloud->resize(q.size());
+        for (std::size_t i = 0; i < q.size(); ++i) (*cloud)[i].getVector3fMap() = q[i];
         WavejetEstimation<pcl::PointXYZ> wj;
         wj.setInputCloud(cloud);
         wj.setKSearch(neighbours);
@@ -1150,19 +1158,7 @@ int runBenchCurvature(int argc, char** argv) {
         auto tw = Clock::now();
         wj.compute(out);
         ours_k[ordered] = since(tw);
-        pcl::PointCloud<pcl::Normal>::Ptr normals(new pcl::PointCloud<pcl::Normal>);
-        pcl::PointCloud<pcl::PrincipalCurvatures> pcs;
-        tw = Clock::now();
-        pcl::NormalEstimationOMP<pcl::PointXYZ, pcl::Normal> ne(omp_get_max_threads());
-        ne.setInputCloud(cloud);
-        ne.setKSearch(neighbours);
-        ne.compute(*normals);
-        pcl::PrincipalCurvaturesEstimation<pcl::PointXYZ, pcl::Normal, pcl::PrincipalCurvatures> pc;
-        pc.setInputCloud(cloud);
-        pc.setInputNormals(normals);
-        pc.setKSearch(neighbours);
-        pc.compute(pcs);
-        pcl_k[ordered] = since(tw);
+        runPcl(q, 0.f, pcl_k[ordered], true, 0.f, neighbours);
       }
       std::printf("pcl::Feature WavejetEstimation with setKSearch(%d), %d threads: %.2f s on the points as sampled "
                   "(random order), %.2f s in space order; PCL NormalEstimationOMP + PrincipalCurvaturesEstimation with "

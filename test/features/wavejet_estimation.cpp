@@ -14,6 +14,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/random.h>
+#include <paps/features/impl/lazy_kd_tree.hpp>
 #include <paps/features/wavejet_estimation.h>
 
 #include "../common/peak_allocation.h"
@@ -597,6 +598,53 @@ TEST(WavejetEstimation, EachOutputIsItsPointsWhateverOrderThePointsAreVisitedIn)
       EXPECT_NE(std::memcmp(&one[0], &all[j == 0 ? 1 : j - 1], sizeof(paps::PointWavejet)), 0) << by_k << " " << j;
     }
   }
+}
+
+// Without a search method the class gives PCL's Feature a kd-tree that builds at its first
+// query: radius balls from the grid never build it; a k search on the same object does, and
+// gives the outputs of an explicit pcl::search::KdTree; the tree answers a user's queries.
+TEST(WavejetEstimation, DefaultKdTreeIsBuiltOnlyWhenQueried) {
+  const Positions p = heightFieldSamples([](double x, double y) { return 0.2 * x * y; }, 6000, 1.0, 12);
+  const auto cloud = toCloud(p);
+  paps::WavejetEstimation<pcl::PointXYZ> est;
+  est.setInputCloud(cloud);
+  est.setRadiusSearch(0.06);
+  pcl::PointCloud<paps::PointWavejet> out;
+  est.compute(out);
+  const auto lazy = std::dynamic_pointer_cast<paps::detail::LazyKdTree<pcl::PointXYZ>>(est.getSearchMethod());
+  ASSERT_TRUE(lazy);
+  EXPECT_FALSE(lazy->built());
+  EXPECT_GT(est.getReport().fitted, p.size() * 9 / 10);
+  est.setRadiusSearch(0);
+  est.setKSearch(25);
+  pcl::PointCloud<paps::PointWavejet> by_k, by_kd;
+  est.compute(by_k);
+  EXPECT_TRUE(lazy->built());
+  EXPECT_EQ(est.getSearchMethod(), lazy);
+  paps::WavejetEstimation<pcl::PointXYZ> kd;
+  kd.setInputCloud(cloud);
+  kd.setKSearch(25);
+  kd.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+  kd.compute(by_kd);
+  ASSERT_EQ(by_k.size(), by_kd.size());
+  for (std::size_t i = 0; i < by_k.size(); ++i)
+    ASSERT_EQ(std::memcmp(&by_k[i], &by_kd[i], sizeof(paps::PointWavejet)), 0) << i;
+  // A user's own query on the tree the class made: the nearest points by brute force.
+  pcl::Indices nn;
+  std::vector<float> d2;
+  ASSERT_EQ(lazy->nearestKSearch(pcl::PointXYZ(0.1f, -0.2f, 0.f), 3, nn, d2), 3);
+  std::vector<std::pair<float, int>> all;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    all.emplace_back((p[i] - Eigen::Vector3f(0.1f, -0.2f, 0.f)).squaredNorm(), static_cast<int>(i));
+  std::sort(all.begin(), all.end());
+  for (int j = 0; j < 3; ++j) EXPECT_EQ(nn[j], all[j].second);
+  // A new cloud resets it: not built again until queried.
+  est.setInputCloud(toCloud(Positions(p.begin(), p.begin() + 5000)));
+  est.setKSearch(0);
+  est.setRadiusSearch(0.06);
+  est.compute(out);
+  EXPECT_EQ(out.size(), 5000u);
+  EXPECT_FALSE(lazy->built());
 }
 
 // Without a search method the radius balls come from our grid, with one from PCL's kd-tree:

@@ -53,7 +53,8 @@ const char* kUsage =
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
     "    (its time: the recovery alone, and Poisson + recovery)\n"
     "(b) reconstruction of a cube (3000 points, noise 0 and 0.5%, and 10% outliers, where ours drops facets\n"
-    "    below 0.5 of the mean density and dangling facets (support 2); --quick: 800 points, noise 0)\n"
+    "    below 0.5 of the mean density and dangling facets (support 2), then the same with the\n"
+    "    outlier weights (outlier_neighbours 8); --quick: 800 points, noise 0)\n"
     "    and of a fandisk block (3000 points, 60 vertices, no noise; not in --quick) and of the\n"
     "    real range-scan mesh rs1_normals.ply (3000 points, 100 vertices, no noise; PCL's\n"
     "    normals turned towards the scanner at the origin; not in --quick):\n"
@@ -225,6 +226,7 @@ int runTransportWorker(int argc, char** argv) {
       p.seed = static_cast<std::uint64_t>(params.get("seed", 1));
       p.candidates = static_cast<int>(params.get("candidates", p.candidates));
       p.dangling_support = static_cast<float>(params.get("dangling", p.dangling_support));
+      p.outlier_neighbours = static_cast<int>(params.get("outlier_neighbours", p.outlier_neighbours));
       TransportReconstructionReport r;
       mesh = transportReconstruct(input, p, &r);
       seconds = elapsed();
@@ -369,6 +371,7 @@ int runBenchTransport(int argc, char** argv) {
       struct Row {
         std::string name, method;
         std::map<std::string, double> params;
+        int group = 0;  // ours: rows of one variant, averaged together
       };
       // Ours first, with seeds 1 to 3 (the initial subset and the candidates are random;
       // --quick: one): the decimated Poisson row takes seed 1's vertex count.
@@ -380,6 +383,13 @@ int runBenchTransport(int argc, char** argv) {
                                            {"candidates", candidates}}}
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates}}});
+      // With outliers, also with the outlier weights (outlier_neighbours 8).
+      if (outliers > 0)
+        for (int seed = 1; seed <= seeds; ++seed)
+          rows.push_back(Row{fmt("ours (as above, weights 8), seed %.0f", seed), "ot-reconstruction",
+                             {{"vertices", shape.vertices}, {"density", 0.5}, {"dangling", 2}, {"outlier_neighbours", 8},
+                              {"seed", seed}, {"candidates", candidates}},
+                             1});
       const double viewpoint = shape.viewpoint ? 1 : 0;
       rows.push_back({"PCL Poisson", "poisson", {{"depth", 5}, {"viewpoint", viewpoint}}});
       rows.push_back({"PCL Poisson + quadric decimation", "poisson-decimated", {{"depth", 5}, {"viewpoint", viewpoint}}});
@@ -390,8 +400,22 @@ int runBenchTransport(int argc, char** argv) {
       std::vector<TriangleMesh> panels{gt};
       MeshScore ours_sum{0, 0, 0, 0, 0};
       double ours_seconds = 0;
-      int ours_runs = 0;
+      int ours_runs = 0, ours_group = 0;
+      // The mean of the seeds of one variant of ours, printed after its rows.
+      auto printMean = [&] {
+        if (ours_runs > 1)
+          std::printf("%-6s %-34s %7s %7s %9.3f %9.2f %9.3f %9.2f %8.2f\n", noise_s.c_str(), "ours, mean of the seeds", "", "",
+                      ours_sum.to_gt_rms / ours_runs, ours_sum.to_gt_max / ours_runs, ours_sum.from_gt_rms / ours_runs,
+                      ours_sum.from_gt_max / ours_runs, ours_seconds / ours_runs);
+        ours_sum = MeshScore{0, 0, 0, 0, 0};
+        ours_seconds = 0;
+        ours_runs = 0;
+      };
       for (Row r : rows) {
+        if ((r.method == "ot-reconstruction" && r.group != ours_group) || r.method == "poisson") {
+          printMean();
+          ours_group = r.group;
+        }
         TriangleMesh m;
         WorkerResult w;
         if (r.method == "poisson-decimated" && ours_vertices == 0) {
@@ -401,7 +425,8 @@ int runBenchTransport(int argc, char** argv) {
           w = runMeshWorker(out_dir, r.method, points, r.params, m);
         }
         if (r.method == "ot-reconstruction" && w.ok && ours_vertices == 0) ours_vertices = m.vertices.size();
-        if (r.method != "ot-reconstruction" || r.params["seed"] == 1) panels.push_back(w.ok ? m : TriangleMesh());
+        if (r.method != "ot-reconstruction" || (r.params["seed"] == 1 && r.group == 0))
+          panels.push_back(w.ok ? m : TriangleMesh());
         if (!w.ok) {
           std::printf("%-6s %-34s failed: %s\n", noise_s.c_str(), r.name.c_str(), w.message.c_str());
           csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, MeshScore());
@@ -416,10 +441,6 @@ int runBenchTransport(int argc, char** argv) {
           ours_seconds += w.seconds;
           ++ours_runs;
         }
-        if (r.method == "poisson" && ours_runs > 1)
-          std::printf("%-6s %-34s %7s %7s %9.3f %9.2f %9.3f %9.2f %8.2f\n", noise_s.c_str(), "ours, mean of the seeds", "", "",
-                      ours_sum.to_gt_rms / ours_runs, ours_sum.to_gt_max / ours_runs, ours_sum.from_gt_rms / ours_runs,
-                      ours_sum.from_gt_max / ours_runs, ours_seconds / ours_runs);
         std::printf("%-6s %-34s %7zu %7zu %9s %9s %9s %9s %8.2f %8.0f\n", noise_s.c_str(), r.name.c_str(),
                     m.vertices.size(), m.triangles.size(), cell("%.3f", s.to_gt_rms).c_str(),
                     cell("%.2f", s.to_gt_max).c_str(), cell("%.3f", s.from_gt_rms).c_str(),

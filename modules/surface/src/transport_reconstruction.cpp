@@ -31,6 +31,7 @@ void TransportReconstructionParameters::validate() const {
     throw InvalidParameter("deletion_threshold", detail::toString(deletion_threshold), "in [0, 1e6]");
   if (!(dangling_support >= 0) || !(dangling_support <= 1000))
     throw InvalidParameter("dangling_support", detail::toString(dangling_support), "in [0, 1000]");
+  requireInRange("outlier_neighbours", outlier_neighbours, 0, 1000);
   transport.validate();
 }
 
@@ -230,6 +231,32 @@ int dropDanglingFacets(TriangleMesh& mesh, const SpatialIndex& points, float rad
   return dropped;
 }
 
+std::vector<double> outlierWeights(const Positions& points, int neighbours) {
+  requireInRange("neighbours", neighbours, 1, 1000);
+  const SpatialIndex index(points);  // finite points only
+  if (index.size() < 2) throw InvalidInput("outlier weights need at least 2 finite points");
+  const int want = std::min<int>(neighbours + 1, static_cast<int>(index.size()));  // self included
+  std::vector<double> reach(points.size(), NAN);
+#pragma omp parallel
+  {
+    std::vector<int> idx;
+    std::vector<float> d2;
+#pragma omp for schedule(static)
+    for (std::int64_t i = 0; i < static_cast<std::int64_t>(points.size()); ++i)
+      if (isFinite(points[i]) && index.nearestK(points[i], want, idx, d2) > 0)
+        reach[i] = std::sqrt(static_cast<double>(d2.back()));
+  }
+  std::vector<double> finite;
+  for (const double r : reach)
+    if (std::isfinite(r)) finite.push_back(r);
+  std::nth_element(finite.begin(), finite.begin() + finite.size() / 2, finite.end());
+  const double limit = kOutlierReach * finite[finite.size() / 2];
+  std::vector<double> w(points.size(), 0.0);
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (std::isfinite(reach[i])) w[i] = reach[i] > limit ? std::pow(limit / reach[i], 4) : 1.0;
+  return w;
+}
+
 TriangleMesh transportReconstruct(const Positions& input, const TransportReconstructionParameters& params,
                                   TransportReconstructionReport* report_out, const ProgressCallback& progress) {
   params.validate();
@@ -256,6 +283,12 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   if (points.size() < 4)
     throw InvalidInput("transport reconstruction needs at least 4 distinct finite points, got " +
                        std::to_string(points.size()));
+  if (params.outlier_neighbours > 0) {
+    Positions distinct(points.size());
+    for (std::size_t i = 0; i < points.size(); ++i) distinct[i] = points[i].cast<float>();
+    const std::vector<double> w = outlierWeights(distinct, params.outlier_neighbours);
+    for (std::size_t i = 0; i < points.size(); ++i) masses[i] *= w[i];
+  }
 
   // Initial subset: a seeded shuffle, so the result does not depend on anything else.
   std::vector<int> order(points.size());

@@ -72,6 +72,14 @@ struct TransportReconstructionParameters {
   /// the real scan rs1 it dropped 2 facets of one seed that covered the scene (coverage RMS
   /// 1.06x -> 1.11x the decimated Poisson's): off by default. 0 disables; in [0, 1000].
   float dangling_support = 0.0f;
+  /// Outlier weights (not in the manuscript), for points with outliers: with k > 0 each
+  /// point's mass is scaled by outlierWeights(points, k), so that points far from the others
+  /// (stray returns inside or around the object) pull the facets little. With 10% outliers
+  /// in a cube, base facets joined vertices of different faces across the inside, fed by the
+  /// outliers there (1 seed in 10 at 9.0 thousandths of the diagonal, 137 at worst); with
+  /// k = 8 (docs/transport.md). Off by default: on a scan whose density varies, sparse parts
+  /// weigh less too. 0 disables (unit masses); in [0, 1000].
+  int outlier_neighbours = 0;
   std::uint64_t seed = 1;
   /// Quadrature: 4x the manuscript's bins per area (800) and up to 64 bins a facet. With the
   /// manuscript's 200 and 16, a 3,000-point cube at 30 vertices kept chamfers and overlapping
@@ -110,6 +118,15 @@ struct TransportReconstructionReport {
   /// sqrt(cost / total mass): root mean square transport distance, metres.
   double rms_transport = 0;
 };
+
+/// Reach beyond which a point counts as an outlier: this many times the median reach.
+constexpr double kOutlierReach = 1.5;
+
+/// Weight of each point against outliers: with r its distance to its `neighbours`-th nearest
+/// finite point (1 to 1000) and m the median of r, 1 where r <= 1.5 m (kOutlierReach; a
+/// surface sampled at random rarely reaches it) and (1.5 m / r)^4 beyond: 1/16 at twice
+/// that reach. 0 for non-finite points. Throws InvalidInput with fewer than 2 finite points.
+std::vector<double> outlierWeights(const Positions& points, int neighbours);
 
 /// Reconstructs a mesh from `points` (NaN entries ignored). Deterministic for a seed, whatever
 /// the thread count. Throws InvalidInput for fewer than 4 distinct finite points, coplanar

@@ -48,6 +48,9 @@ const char* kUsage =
     "              ~/.cache/paps/samples); its rs1_normals.ply is the real-scan shape of (b)\n"
     "  --candidates K  half-edge collapses our reconstruction simulates per step (default 40,\n"
     "              the library's; 0 = all)\n"
+    "  --outlier-seeds N  seeds 1..N for each of our variants on the cube with outliers (default\n"
+    "              3, at most 100; one seed's run takes a minute or two)\n"
+    "  --only-outliers  only the cube with outliers: not (a) nor the other shapes and cases\n"
     "(a) feature recovery on a fandisk block: PCL Poisson (normals by PCL's NormalEstimationOMP,\n"
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
@@ -242,9 +245,14 @@ int runTransportWorker(int argc, char** argv) {
 }
 
 int runBenchTransport(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "only-outliers"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "quick", "samples", "candidates"});
+  a.allowOnly({"out", "quick", "samples", "candidates", "outlier-seeds", "only-outliers"});
+  const int outlier_seeds = a.integer("outlier-seeds", 3);
+  if (outlier_seeds < 1 || outlier_seeds > 100)
+    throw InvalidParameter("outlier-seeds", std::to_string(outlier_seeds), "1 to 100");
+  const bool only_outliers = a.has("only-outliers");
+  if (only_outliers && a.has("quick")) throw InvalidParameter("only-outliers", "with --quick", "one or the other");
   const int candidates = a.integer("candidates", TransportReconstructionParameters().candidates);
   if (candidates < 0) throw InvalidParameter("candidates", std::to_string(candidates), "0 (all half-edges) or more");
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
@@ -262,7 +270,7 @@ int runBenchTransport(int argc, char** argv) {
   };
 
   // (a) Feature recovery.
-  {
+  if (!only_outliers) {
     const std::size_t n = quick ? 20000 : 60000;
     const int depth = quick ? 5 : 6;
     const TriangleMesh gt = synthetic::fandiskBlock(64);
@@ -330,12 +338,14 @@ int runBenchTransport(int argc, char** argv) {
   };
   std::vector<Shape> shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30, false,
                                 quick ? std::vector<std::pair<double, double>>{{0, 0}}
+                                      : only_outliers ? std::vector<std::pair<double, double>>{{0, 0.1}}
                                       : std::vector<std::pair<double, double>>{{0, 0}, {0.005, 0}, {0, 0.1}}}};
-  if (!quick) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, false, {{0, 0}}});
+  if (!quick && !only_outliers) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, false, {{0, 0}}});
   // A real shape: the range-scan mesh of opencv-doc (an open, cluttered scene with borders,
   // which the transport keeps and Poisson closes).
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
-  if (!quick && std::filesystem::exists(rs1))
+  if (only_outliers) {
+  } else if (!quick && std::filesystem::exists(rs1))
     shapes.push_back({"rs1_normals.ply (real range scan)", "reconstruction-rs1", loadTriangleMesh(rs1), 100, true, {{0, 0}}});
   else if (!quick)
     std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): the real-scan rows are skipped\n", rs1.c_str());
@@ -376,7 +386,7 @@ int runBenchTransport(int argc, char** argv) {
       // Ours first, with seeds 1 to 3 (the initial subset and the candidates are random;
       // --quick: one): the decimated Poisson row takes seed 1's vertex count.
       std::vector<Row> rows;
-      const int seeds = quick ? 1 : 3;
+      const int seeds = quick ? 1 : outliers > 0 ? outlier_seeds : 3;
       for (int seed = 1; seed <= seeds; ++seed)
         rows.push_back(outliers > 0 ? Row{fmt("ours (OT, 0.5, dangling 2), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", shape.vertices}, {"density", 0.5}, {"dangling", 2}, {"seed", seed},

@@ -128,6 +128,18 @@ TEST(OutlierWeights, OneOnTheSurfaceAndSmallFarFromIt) {
   EXPECT_GT(far, 50u);
   EXPECT_GT(far_light, far * 9 / 10);
   EXPECT_THROW(paps::outlierWeights(points, 0), paps::InvalidParameter);
+  // Copies: 20 positions stored 10 times each, and one point far off. The median reach is
+  // taken over the points not piled on K others, so the far point alone is light.
+  paps::Positions piles;
+  for (int c = 0; c < 10; ++c)
+    for (int i = 0; i < 20; ++i) piles.emplace_back(0.01f * i, 0.f, 0.f);
+  piles.emplace_back(5.f, 5.f, 5.f);
+  const std::vector<double> pw = paps::outlierWeights(piles, 12);
+  for (std::size_t i = 0; i + 1 < piles.size(); ++i) ASSERT_EQ(pw[i], 1.0) << i;
+  EXPECT_LT(pw.back(), 1e-6);
+  EXPECT_GT(pw.back(), 0.0);
+  const std::vector<double> one_pile = paps::outlierWeights(paps::Positions(30, Eigen::Vector3f::Ones()), 8);
+  for (const double x : one_pile) EXPECT_EQ(x, 1.0);
   EXPECT_THROW(paps::outlierWeights(paps::Positions(1, Eigen::Vector3f::Zero()), 8), paps::InvalidInput);
 }
 

@@ -246,14 +246,19 @@ std::vector<double> outlierWeights(const Positions& points, int neighbours) {
       if (isFinite(points[i]) && index.nearestK(points[i], want, idx, d2) > 0)
         reach[i] = std::sqrt(static_cast<double>(d2.back()));
   }
-  std::vector<double> finite;
+  // The median over the points not at the position of K others (piles of copies would
+  // make it 0 and weigh everything else 0).
+  std::vector<double> positive;
   for (const double r : reach)
-    if (std::isfinite(r)) finite.push_back(r);
-  std::nth_element(finite.begin(), finite.begin() + finite.size() / 2, finite.end());
-  const double limit = kOutlierReach * finite[finite.size() / 2];
+    if (r > 0) positive.push_back(r);
   std::vector<double> w(points.size(), 0.0);
   for (std::size_t i = 0; i < points.size(); ++i)
-    if (std::isfinite(reach[i])) w[i] = reach[i] > limit ? std::pow(limit / reach[i], 4) : 1.0;
+    if (std::isfinite(reach[i])) w[i] = 1.0;
+  if (positive.empty()) return w;
+  std::nth_element(positive.begin(), positive.begin() + positive.size() / 2, positive.end());
+  const double limit = kOutlierReach * positive[positive.size() / 2];
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (reach[i] > limit) w[i] = std::max(kMinOutlierWeight, std::pow(limit / reach[i], 4));
   return w;
 }
 

@@ -165,6 +165,9 @@ int runReconstruct(int argc, char** argv) {
               "%d simulations reused, %d skipped by their bound)\n",
               r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations,
               r.bounded_simulations);
+  if (p.outlier_neighbours > 0)
+    std::printf("reconstruct: outlier weights (%d neighbours): %zu points weigh less than 1, %zu less than 0.1\n",
+                p.outlier_neighbours, r.light_points, r.outlier_points);
   std::printf("reconstruct: %d facets deleted, %d dangling facets dropped; transport cost %.4g -> %.4g, RMS transport "
               "distance %g m\n",
               r.deleted_facets, r.dangling_facets, r.initial_cost, r.final_cost, r.rms_transport);

@@ -292,7 +292,11 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     Positions distinct(points.size());
     for (std::size_t i = 0; i < points.size(); ++i) distinct[i] = points[i].cast<float>();
     const std::vector<double> w = outlierWeights(distinct, params.outlier_neighbours);
-    for (std::size_t i = 0; i < points.size(); ++i) masses[i] *= w[i];
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      masses[i] *= w[i];
+      report.light_points += w[i] < 1;
+      report.outlier_points += w[i] < 0.1;
+    }
   }
 
   // Initial subset: a seeded shuffle, so the result does not depend on anything else.

@@ -114,6 +114,8 @@ struct TransportReconstructionReport {
   int bounded_simulations = 0;
   int deleted_facets = 0;  // by the facet deletion
   int dangling_facets = 0;  // dropped at the end for want of points near a free corner
+  /// With outlier weights: distinct points weighing less than 1, and less than 0.1.
+  std::size_t light_points = 0, outlier_points = 0;
   int output_vertices = 0, output_facets = 0;
   double initial_cost = 0, final_cost = 0;  // transport cost (sum m |p - b|^2, unit masses)
   /// sqrt(cost / total mass): root mean square transport distance, metres.
@@ -155,6 +157,8 @@ class TransportReconstruction : public pcl::SurfaceReconstruction<PointT>, publi
   void setParameters(const TransportReconstructionParameters& p) { p.validate(); params_ = p; }
   const TransportReconstructionParameters& getParameters() const { return params_; }
   void setTargetVertices(int n) { auto p = params_; p.target_vertices = n; setParameters(p); }
+  /// Outlier weights with K neighbours (TransportReconstructionParameters::outlier_neighbours).
+  void setOutlierNeighbours(int k) { auto p = params_; p.outlier_neighbours = k; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const TransportReconstructionReport& getReport() const { return report_; }
   /// As pcl::SurfaceReconstruction::reconstruct, but without an input cloud it throws

@@ -106,6 +106,52 @@ TEST(TransportReconstruction, OutliersStayOffTheMesh) {
   EXPECT_LT(fw.coverage_rms, 0.06);
 }
 
+// Outlier weights: 1 on a surface sampled at random, small for points far from it; NaN
+// points weigh 0.
+TEST(OutlierWeights, OneOnTheSurfaceAndSmallFarFromIt) {
+  const TriangleMesh cube = paps::synthetic::cube(0.5f, 4);
+  paps::Positions points = paps::synthetic::sampleMesh(cube, 3000, 7);
+  const std::vector<int> outliers = paps::synthetic::addOutliers(points, 0.1f, 9);
+  points.push_back(Eigen::Vector3f::Constant(NAN));
+  const std::vector<double> w = paps::outlierWeights(points, 8);
+  ASSERT_EQ(w.size(), points.size());
+  EXPECT_EQ(w.back(), 0.0);
+  std::vector<char> is_outlier(points.size(), 0);
+  for (const int i : outliers) is_outlier[i] = 1;
+  const paps::PointToMeshDistance to_cube(cube);
+  std::size_t surface = 0, surface_full = 0, far = 0, far_light = 0;
+  for (std::size_t i = 0; i + 1 < points.size(); ++i) {
+    EXPECT_GT(w[i], 0.0);
+    EXPECT_LE(w[i], 1.0);
+    if (!is_outlier[i]) {
+      ++surface;
+      surface_full += w[i] == 1.0;
+    } else if (to_cube.distance(points[i]) > 0.1) {  // 0.1 m from a 0.5 m cube
+      ++far;
+      far_light += w[i] < 0.2;
+    }
+  }
+  std::printf("surface points of weight 1: %zu of %zu; outliers over 0.1 m off below 0.2: %zu of %zu\n", surface_full,
+              surface, far_light, far);
+  EXPECT_GT(surface_full, surface * 97 / 100);
+  EXPECT_GT(far, 50u);
+  EXPECT_GT(far_light, far * 9 / 10);
+  EXPECT_THROW(paps::outlierWeights(points, 0), paps::InvalidParameter);
+  // Copies: 20 positions stored 10 times each, and one point far off. The median reach is
+  // taken over the points not piled on K others, so the far point alone is light.
+  paps::Positions piles;
+  for (int c = 0; c < 10; ++c)
+    for (int i = 0; i < 20; ++i) piles.emplace_back(0.01f * i, 0.f, 0.f);
+  piles.emplace_back(5.f, 5.f, 5.f);
+  const std::vector<double> pw = paps::outlierWeights(piles, 12);
+  for (std::size_t i = 0; i + 1 < piles.size(); ++i) ASSERT_EQ(pw[i], 1.0) << i;
+  EXPECT_LT(pw.back(), 1e-6);
+  EXPECT_GT(pw.back(), 0.0);
+  const std::vector<double> one_pile = paps::outlierWeights(paps::Positions(30, Eigen::Vector3f::Ones()), 8);
+  for (const double x : one_pile) EXPECT_EQ(x, 1.0);
+  EXPECT_THROW(paps::outlierWeights(paps::Positions(1, Eigen::Vector3f::Zero()), 8), paps::InvalidInput);
+}
+
 TEST(TransportReconstruction, SameMeshWithOneOrTwoThreadsAndThroughThePclStage) {
   const TriangleMesh cube = paps::synthetic::cube(0.5f, 4);
   const paps::Positions points = paps::synthetic::sampleMesh(cube, 400, 5);

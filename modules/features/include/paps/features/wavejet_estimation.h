@@ -15,7 +15,11 @@
 // Without setSearchMethod, radius balls come from a grid of cells of side R_phi instead of
 // PCL's default kd-tree (when the indices cover at least an eighth of the search surface):
 // the same balls as FLANN's (squared float distances < R_phi^2, as pcl::KdTreeFLANN asks),
-// so the same outputs, 1.24-1.33x faster. A search method the caller sets is used as given.
+// so the same outputs, 1.24-1.33x faster. A search method the caller sets is used as given;
+// the kd-tree PCL would make is one that builds its index at its first query (k searches,
+// widening, or getSearchMethod()'s user), so radius runs never build it. Index sets of 4,096
+// or more are visited in space order (outputs at their own index): a shuffled cloud stays
+// in cache (rs1 1M shuffled by k: 1.43x faster, the same outputs).
 //
 // PCL's own output types work too, as drop-ins for PCL's estimators in a pipeline:
 //  - pcl::PrincipalCurvatures (as pcl::PrincipalCurvaturesEstimation): principal_curvature =

@@ -117,7 +117,8 @@ struct TransportReconstructionReport {
   /// With outlier weights: distinct points weighing less than 1, and less than 0.1.
   std::size_t light_points = 0, outlier_points = 0;
   int output_vertices = 0, output_facets = 0;
-  double initial_cost = 0, final_cost = 0;  // transport cost (sum m |p - b|^2, unit masses)
+  /// Transport cost, sum m |p - b|^2, m = the copies of a position (times its outlier weight).
+  double initial_cost = 0, final_cost = 0;
   /// sqrt(cost / total mass): root mean square transport distance, metres.
   double rms_transport = 0;
 };

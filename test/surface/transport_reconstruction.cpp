@@ -184,6 +184,20 @@ TEST(TransportReconstruction, SameMeshWithOneOrTwoThreadsAndThroughThePclStage) 
   ASSERT_EQ(back.vertices.size(), one.vertices.size());
   for (std::size_t v = 0; v < one.vertices.size(); ++v) ASSERT_EQ(back.vertices[v], one.vertices[v]);
   EXPECT_EQ(stage.getReport().output_facets, static_cast<int>(one.triangles.size()));
+
+  // With outlier weights (setOutlierNeighbours), still the function's mesh and report.
+  p.outlier_neighbours = 4;
+  paps::TransportReconstructionReport r;
+  const TriangleMesh weighted = paps::transportReconstruct(points, p, &r);
+  stage.setOutlierNeighbours(4);
+  EXPECT_EQ(stage.getParameters().outlier_neighbours, 4);
+  EXPECT_THROW(stage.setOutlierNeighbours(-1), paps::InvalidParameter);
+  stage.reconstruct(mesh);
+  const TriangleMesh weighted_back = paps::toTriangleMesh(mesh);
+  ASSERT_EQ(weighted_back.vertices.size(), weighted.vertices.size());
+  for (std::size_t v = 0; v < weighted.vertices.size(); ++v) ASSERT_EQ(weighted_back.vertices[v], weighted.vertices[v]);
+  EXPECT_EQ(stage.getReport().light_points, r.light_points);
+  EXPECT_EQ(stage.getReport().outlier_points, r.outlier_points);
 }
 
 // Copies of every point (overlapping scans) are the same measure at twice the mass (a power

@@ -344,10 +344,10 @@ int runBenchTransport(int argc, char** argv) {
   // A real shape: the range-scan mesh of opencv-doc (an open, cluttered scene with borders,
   // which the transport keeps and Poisson closes).
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
-  if (only_outliers) {
-  } else if (!quick && std::filesystem::exists(rs1))
+  const bool all_shapes = !quick && !only_outliers;
+  if (all_shapes && std::filesystem::exists(rs1))
     shapes.push_back({"rs1_normals.ply (real range scan)", "reconstruction-rs1", loadTriangleMesh(rs1), 100, true, {{0, 0}}});
-  else if (!quick)
+  else if (all_shapes)
     std::fprintf(stderr, "warning: %s missing (run scripts/fetch_samples.sh): the real-scan rows are skipped\n", rs1.c_str());
   // The synthetic shapes seen from above a corner; the scan from the scanner (at the origin,
   // image rows along -y).

@@ -85,14 +85,14 @@ int main(int argc, char** argv) try {
   grid.setLeafSize(synthetic ? 0.05f : 0.01f, synthetic ? 0.05f : 0.01f, synthetic ? 0.05f : 0.01f);
   pcl::PointCloud<pcl::PointXYZRGBA> centroids;
   grid.filter(centroids);
-  pcl::PointCloud<pcl::PointXYZRGB>::Ptr processed(new pcl::PointCloud<pcl::PointXYZRGB>);
-  for (const auto& p : centroids) processed->push_back(pcl::PointXYZRGB(p.x, p.y, p.z, 0, 0, 0));
+  pcl::PointCloud<pcl::PointXYZRGBA>::Ptr processed(new pcl::PointCloud<pcl::PointXYZRGBA>(centroids));
+  for (auto& p : *processed) p.r = p.g = p.b = 0;
 
-  // 3. Colours back from the photo.
-  paps::PointColorization<pcl::PointXYZRGB> colorize;
+  // 3. Colours back from the photo, in the grabber's own point type.
+  paps::PointColorization<pcl::PointXYZRGBA> colorize;
   colorize.setInputCloud(processed);
   colorize.addView(view.photo.image, view.photo.camera, view.photo.pose);
-  pcl::PointCloud<pcl::PointXYZRGB> coloured;
+  pcl::PointCloud<pcl::PointXYZRGBA> coloured;
   colorize.filter(coloured);
 
   // Unseen points keep their input colour (black here): scored are the points the photo sees.

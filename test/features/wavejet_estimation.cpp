@@ -315,6 +315,19 @@ TEST(WavejetEstimation, KSearchAndOtherPointTypes) {
   EXPECT_TRUE(out.is_dense);
   EXPECT_NEAR(out[0].k1, 1.0, 0.01);
   EXPECT_NEAR(out[0].k2, -1.0, 0.01);
+  // An RGB-D camera's type (compiled in the library): the same positions give the same bits.
+  pcl::PointCloud<pcl::PointXYZRGBA>::Ptr rgba(new pcl::PointCloud<pcl::PointXYZRGBA>);
+  for (const auto& x : p) { pcl::PointXYZRGBA q; q.getVector3fMap() = x; q.rgba = 0x80ff0000u; rgba->push_back(q); }
+  paps::WavejetEstimation<pcl::PointXYZRGBA> wj_rgba;
+  wj_rgba.setInputCloud(rgba);
+  wj_rgba.setKSearch(40);
+  pcl::PointCloud<paps::PointWavejet> out_rgba;
+  wj_rgba.compute(out_rgba);
+  ASSERT_EQ(out_rgba.size(), out.size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    ASSERT_EQ(std::memcmp(&out_rgba[i].k1, &out[i].k1, sizeof(float)), 0) << i;
+    ASSERT_EQ(out_rgba[i].getNormalVector3fMap(), out[i].getNormalVector3fMap()) << i;
+  }
 }
 
 // PCL's output types, as drop-ins for pcl::PrincipalCurvaturesEstimation: magnitudes of the

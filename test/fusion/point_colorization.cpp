@@ -87,6 +87,28 @@ TEST(PointColorization, UniformPhotoGivesItsColourAndUnseenPointsKeepTheirs) {
   }
 }
 
+// The type of PCL's RGB-D grabbers: the photo's colour goes to r, g, b; alpha is kept.
+TEST(PointColorization, RgbaCloudsKeepTheirAlpha) {
+  PlaneScene s;
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZRGBA>>();
+  pcl::copyPointCloud(*s.cloud, *cloud);
+  for (std::size_t i = 0; i < cloud->size(); ++i) (*cloud)[i].a = static_cast<std::uint8_t>(i % 200);
+  const cv::Mat image(s.camera.height, s.camera.width, CV_8UC3, cv::Scalar(30, 120, 200));  // BGR
+  paps::PointColorization<pcl::PointXYZRGBA> colorize;
+  colorize.setInputCloud(cloud);
+  colorize.addView(image, s.camera, s.pose);
+  pcl::PointCloud<pcl::PointXYZRGBA> out;
+  colorize.filter(out);
+  ASSERT_EQ(out.size(), cloud->size());
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    EXPECT_EQ(out[i].r, 200) << i;
+    EXPECT_EQ(out[i].g, 120) << i;
+    EXPECT_EQ(out[i].b, 30) << i;
+    EXPECT_EQ(out[i].a, (*cloud)[i].a) << i;
+  }
+  EXPECT_EQ(colorize.getReport().coloured, cloud->size());
+}
+
 TEST(PointColorization, WeightedMedianOfCandidates) {
   paps::ColourCandidates c;
   c.offsets = {0, 2, 5};

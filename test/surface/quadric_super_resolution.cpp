@@ -21,9 +21,6 @@
 #include <paps/filters/similarity_denoising.h>
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
-// Coloured output types are not in the compiled list: their bodies, as PAPS_NO_PRECOMPILE gives.
-#include <paps/surface/impl/mls_upsampling.hpp>
-#include <paps/surface/impl/quadric_super_resolution.hpp>
 
 using namespace paps;
 
@@ -167,40 +164,54 @@ TEST(QuadricSuperResolution, MultiScanAndPclStage) {
 // A coloured output type gets the colour of the input point each new point was made from, as
 // PCL's MLS copies the missing fields (it was left at 0: r = g = b = 0 on all 6,400 points).
 // Two halves of a wavy sheet in two colours; the points away from the seam keep their side's.
-TEST(QuadricSuperResolution, ColouredOutputsKeepTheSourcePointsColour) {
-  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZRGB>>();
+// Run for the coloured pairs the library compiles (no template bodies included here: a pair
+// left out of the list fails to link): RGB, RGBA (alpha kept) and RGB with normals (the
+// normal of the fitted surface, near +-z on this sheet).
+template <typename PointT>
+void expectColouredOutputsKeepTheSourcePointsColour() {
+  auto cloud = pcl::make_shared<pcl::PointCloud<PointT>>();
   paps::Random rng(5);
   for (int i = 0; i < 3000; ++i) {
-    pcl::PointXYZRGB q;
+    PointT q;
     q.x = static_cast<float>(rng.uniform() - 0.5);
     q.y = static_cast<float>(rng.uniform() - 0.5);
     q.z = 0.02f * std::sin(6.f * q.x);
     q.r = q.x < 0 ? 200 : 50;
     q.g = 7;
     q.b = q.x < 0 ? 0 : 99;
+    q.a = q.x < 0 ? 255 : 128;
     cloud->push_back(q);
   }
-  auto check = [&](const pcl::PointCloud<pcl::PointXYZRGB>& out, const char* what) {
+  auto check = [&](const pcl::PointCloud<PointT>& out, const char* what) {
     ASSERT_GT(out.size(), cloud->size()) << what;
-    std::size_t away = 0, right = 0;
+    std::size_t away = 0, right = 0, upright = 0;
     for (const auto& q : out) {
       EXPECT_EQ(q.g, 7) << what;
+      if constexpr (paps::detail::HasNormal<PointT>::value) upright += std::abs(q.normal_z) > 0.9f;
       if (std::abs(q.x) < 0.05f) continue;
       ++away;
-      right += q.x < 0 ? (q.r == 200 && q.b == 0) : (q.r == 50 && q.b == 99);
+      right += q.x < 0 ? (q.r == 200 && q.b == 0 && q.a == 255) : (q.r == 50 && q.b == 99 && q.a == 128);
     }
     EXPECT_GT(away, out.size() / 2) << what;
     EXPECT_EQ(right, away) << what;
+    if constexpr (paps::detail::HasNormal<PointT>::value) EXPECT_EQ(upright, out.size()) << what;
   };
   auto upsample = [&](auto&& stage, const char* what) {
     stage.setInputCloud(cloud);
     stage.setUpsamplingFactor(2);
-    pcl::PointCloud<pcl::PointXYZRGB> out;
+    pcl::PointCloud<PointT> out;
     stage.process(out);
     check(out, what);
   };
-  upsample(QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZRGB>(), "qsr");
-  upsample(APSSUpsampling<pcl::PointXYZRGB, pcl::PointXYZRGB>(), "apss");
+  upsample(QuadricSuperResolution<PointT, PointT>(), "qsr");
+  upsample(APSSUpsampling<PointT, PointT>(), "apss");
+  upsample(RIMLSUpsampling<PointT, PointT>(), "rimls");
+}
+
+TEST(QuadricSuperResolution, ColouredOutputsKeepTheSourcePointsColour) {
+  expectColouredOutputsKeepTheSourcePointsColour<pcl::PointXYZRGB>();
+  expectColouredOutputsKeepTheSourcePointsColour<pcl::PointXYZRGBA>();
+  expectColouredOutputsKeepTheSourcePointsColour<pcl::PointXYZRGBNormal>();
 }
 
 TEST(QuadricSuperResolution, BadInput) {

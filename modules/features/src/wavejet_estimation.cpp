@@ -34,6 +34,7 @@ template class WavejetEstimation<pcl::PointXYZ>;
 template class WavejetEstimation<pcl::PointXYZI>;
 template class WavejetEstimation<pcl::PointNormal>;
 template class WavejetEstimation<pcl::PointXYZRGB>;
+template class WavejetEstimation<pcl::PointXYZRGBA>;  // RGB-D cameras
 template class WavejetEstimation<pcl::PointXYZRGBNormal>;
 // PCL's output types, for the input types most pipelines hold (others: PAPS_NO_PRECOMPILE).
 template class WavejetEstimation<pcl::PointXYZ, pcl::PrincipalCurvatures>;

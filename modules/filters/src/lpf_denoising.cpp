@@ -331,6 +331,7 @@ template class LpfDenoising<pcl::PointXYZ>;
 template class LpfDenoising<pcl::PointXYZI>;
 template class LpfDenoising<pcl::PointNormal>;
 template class LpfDenoising<pcl::PointXYZRGB>;
+template class LpfDenoising<pcl::PointXYZRGBA>;  // RGB-D cameras (PCL's OpenNI2 and RealSense grabbers)
 template class LpfDenoising<pcl::PointXYZRGBNormal>;
 
 }  // namespace paps

@@ -159,6 +159,7 @@ template class PointBilateralFilter<pcl::PointXYZ>;
 template class PointBilateralFilter<pcl::PointXYZI>;
 template class PointBilateralFilter<pcl::PointNormal>;
 template class PointBilateralFilter<pcl::PointXYZRGB>;
+template class PointBilateralFilter<pcl::PointXYZRGBA>;  // RGB-D cameras (PCL's OpenNI2 and RealSense grabbers)
 template class PointBilateralFilter<pcl::PointXYZRGBNormal>;
 
 }  // namespace paps

@@ -801,6 +801,7 @@ template class SimilarityDenoising<pcl::PointXYZ>;
 template class SimilarityDenoising<pcl::PointXYZI>;
 template class SimilarityDenoising<pcl::PointNormal>;
 template class SimilarityDenoising<pcl::PointXYZRGB>;
+template class SimilarityDenoising<pcl::PointXYZRGBA>;  // RGB-D cameras (PCL's OpenNI2 and RealSense grabbers)
 template class SimilarityDenoising<pcl::PointXYZRGBNormal>;
 
 }  // namespace paps

@@ -117,6 +117,7 @@ template class WavejetEnhancement<pcl::PointXYZ>;
 template class WavejetEnhancement<pcl::PointXYZI>;
 template class WavejetEnhancement<pcl::PointNormal>;
 template class WavejetEnhancement<pcl::PointXYZRGB>;
+template class WavejetEnhancement<pcl::PointXYZRGBA>;  // RGB-D cameras (PCL's OpenNI2 and RealSense grabbers)
 template class WavejetEnhancement<pcl::PointXYZRGBNormal>;
 
 }  // namespace paps

@@ -263,6 +263,7 @@ std::vector<Eigen::Vector3f> colorizePoints(const Positions& points, const std::
 }
 
 template class PointColorization<pcl::PointXYZRGB>;
+template class PointColorization<pcl::PointXYZRGBA>;  // RGB-D cameras
 template class PointColorization<pcl::PointXYZRGBNormal>;
 
 }  // namespace paps

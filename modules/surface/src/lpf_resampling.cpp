@@ -327,6 +327,7 @@ Positions lpfResample(const Positions& points, const LpfResamplingParameters& pa
 template class LpfResampling<pcl::PointXYZ, pcl::PointXYZ>;
 template class LpfResampling<pcl::PointXYZI, pcl::PointXYZ>;
 template class LpfResampling<pcl::PointXYZRGB, pcl::PointXYZ>;
+template class LpfResampling<pcl::PointXYZRGBA, pcl::PointXYZ>;
 template class LpfResampling<pcl::PointNormal, pcl::PointXYZ>;
 
 }  // namespace paps

@@ -1499,5 +1499,12 @@ template class MlsUpsampling<pcl::PointXYZI, pcl::PointXYZ, MlsSurface::Apss>;
 template class MlsUpsampling<pcl::PointXYZI, pcl::PointXYZ, MlsSurface::Rimls>;
 template class MlsUpsampling<pcl::PointXYZ, pcl::PointNormal, MlsSurface::Apss>;
 template class MlsUpsampling<pcl::PointXYZ, pcl::PointNormal, MlsSurface::Rimls>;
+// Coloured scans into their own type, as QuadricSuperResolution.
+template class MlsUpsampling<pcl::PointXYZRGB, pcl::PointXYZRGB, MlsSurface::Apss>;
+template class MlsUpsampling<pcl::PointXYZRGB, pcl::PointXYZRGB, MlsSurface::Rimls>;
+template class MlsUpsampling<pcl::PointXYZRGBA, pcl::PointXYZRGBA, MlsSurface::Apss>;
+template class MlsUpsampling<pcl::PointXYZRGBA, pcl::PointXYZRGBA, MlsSurface::Rimls>;
+template class MlsUpsampling<pcl::PointXYZRGBNormal, pcl::PointXYZRGBNormal, MlsSurface::Apss>;
+template class MlsUpsampling<pcl::PointXYZRGBNormal, pcl::PointXYZRGBNormal, MlsSurface::Rimls>;
 
 }  // namespace paps

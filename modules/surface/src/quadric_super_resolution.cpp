@@ -1251,5 +1251,10 @@ template class QuadricSuperResolution<pcl::PointNormal, pcl::PointNormal>;
 template class QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZ>;
 template class QuadricSuperResolution<pcl::PointXYZI, pcl::PointXYZ>;
 template class QuadricSuperResolution<pcl::PointXYZ, pcl::PointNormal>;
+// Coloured scans upsampled into their own type: each new point takes the colour (and the
+// normal, for PointXYZRGBNormal) as PCL's MLS<PointT, PointT> gives them.
+template class QuadricSuperResolution<pcl::PointXYZRGB, pcl::PointXYZRGB>;
+template class QuadricSuperResolution<pcl::PointXYZRGBA, pcl::PointXYZRGBA>;
+template class QuadricSuperResolution<pcl::PointXYZRGBNormal, pcl::PointXYZRGBNormal>;
 
 }  // namespace paps

@@ -12,8 +12,10 @@
 #include <random>
 #include <sstream>
 
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/compression/point_cloud_compression.h>
 #include <paps/core/error.h>
 
@@ -22,7 +24,7 @@ using Cloud = pcl::PointCloud<pcl::PointXYZ>;
 int main(int argc, char** argv) try {
   Cloud::Ptr cloud(new Cloud), decoded(new Cloud);
   if (argc > 1) {
-    if (pcl::io::loadPCDFile(argv[1], *cloud) < 0) return 1;
+    pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), *cloud);  // PCD or PLY; paps::IoError if unreadable
   } else {
     std::mt19937 rng(17);
     std::normal_distribution<float> gauss(0.f, 1.f);

@@ -11,8 +11,10 @@
 #include <random>
 #include <vector>
 
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/features/wavejet_estimation.h>
 
@@ -24,7 +26,7 @@ float median(std::vector<float> v) {
 int main(int argc, char** argv) try {
   pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
   if (argc > 1) {
-    if (pcl::io::loadPCDFile(argv[1], *cloud) < 0) return 1;
+    pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), *cloud);  // PCD or PLY; paps::IoError if unreadable
   } else {
     std::mt19937 rng(3);
     std::uniform_real_distribution<float> angle(0.f, 6.2831853f), height(-1.f, 1.f);

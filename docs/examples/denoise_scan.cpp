@@ -11,11 +11,14 @@
 #include <random>
 #include <string>
 
+#include <pcl/io/pcd_io.h>
+
 #include <paps/core/error.h>
 #include <paps/filters/point_bilateral_filter.h>
 // [readme]
-#include <pcl/io/pcd_io.h>
+#include <pcl/conversions.h>
 #include <pcl/filters/voxel_grid.h>
+#include <paps/core/cloud_io.h>
 #include <paps/filters/similarity_denoising.h>
 // [readme]
 
@@ -42,7 +45,7 @@ int main(int argc, char** argv) try {
   }
   // [readme]
   pcl::PointCloud<pcl::PointXYZ>::Ptr scan(new pcl::PointCloud<pcl::PointXYZ>), clean(new pcl::PointCloud<pcl::PointXYZ>);
-  if (pcl::io::loadPCDFile(path, *scan) < 0) return 1;   // any PCD: a laser scan, a photogrammetry cloud
+  pcl::fromPCLPointCloud2(paps::loadCloud(path), *scan);   // PCD or PLY; paps::IoError if unreadable
 
   paps::SimilarityDenoising<pcl::PointXYZ> denoise;   // a pcl::Filter
   denoise.setInputCloud(scan);

@@ -9,8 +9,10 @@
 #include <iostream>
 #include <random>
 
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/filters/wavejet_enhancement.h>
 
@@ -27,7 +29,7 @@ double interiorAmplitude(const Cloud& c) {
 int main(int argc, char** argv) try {
   Cloud::Ptr cloud(new Cloud);
   if (argc > 1) {
-    if (pcl::io::loadPCDFile(argv[1], *cloud) < 0) return 1;
+    pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), *cloud);  // PCD or PLY; paps::IoError if unreadable
   } else {
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> u(-1.f, 1.f);

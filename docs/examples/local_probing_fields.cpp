@@ -11,8 +11,10 @@
 #include <iostream>
 #include <random>
 
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/filters/lpf_denoising.h>
 #include <paps/surface/lpf_resampling.h>
@@ -30,7 +32,7 @@ double wireRms(const Cloud& cloud) {
 int main(int argc, char** argv) try {
   pcl::PointCloud<pcl::PointXYZ>::Ptr scan(new pcl::PointCloud<pcl::PointXYZ>);
   if (argc > 1) {
-    if (pcl::io::loadPCDFile(argv[1], *scan) < 0) return 1;
+    pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), *scan);  // PCD or PLY; paps::IoError if unreadable
   } else {
     std::mt19937 rng(3);
     std::uniform_real_distribution<float> u(-1.f, 1.f);

@@ -17,10 +17,12 @@
 #include <pcl/common/centroid.h>
 #include <pcl/common/io.h>
 #include <pcl/features/normal_3d.h>
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 #include <pcl/io/ply_io.h>
 #include <pcl/surface/poisson.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/surface/transport_feature_recovery.h>
 #include <paps/surface/transport_reconstruction.h>
@@ -56,7 +58,7 @@ double surfaceRms(const pcl::PolygonMesh& mesh) {
 int main(int argc, char** argv) try {
   pcl::PointCloud<pcl::PointXYZ>::Ptr scan(new pcl::PointCloud<pcl::PointXYZ>);
   if (argc > 1) {
-    if (pcl::io::loadPCDFile(argv[1], *scan) < 0) return 1;
+    pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), *scan);  // PCD or PLY; paps::IoError if unreadable
   } else {
     std::mt19937 rng(5);
     std::uniform_real_distribution<float> u(-0.25f, 0.25f);

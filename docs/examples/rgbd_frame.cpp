@@ -16,8 +16,10 @@
 #include <string>
 
 #include <pcl/filters/voxel_grid.h>
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/fusion/organized_cloud_camera.h>
 #include <paps/fusion/point_colorization.h>
@@ -68,7 +70,7 @@ int main(int argc, char** argv) try {
   const paps::CameraPose truth_pose = paps::lookAt({6.0, -1.5, 1.6}, {1.0, 2.5, 0.4});
   pcl::PointCloud<pcl::PointXYZRGBA> frame;
   if (synthetic) frame = syntheticFrame(truth, truth_pose);
-  else if (pcl::io::loadPCDFile(argv[1], frame) != 0) return std::fprintf(stderr, "cannot read %s\n", argv[1]), 1;
+  else pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), frame);  // paps::IoError if unreadable
 
   // 1. The frame's camera, pose and photo.
   const paps::OrganizedCloudCamera view = paps::cameraOfOrganizedCloud(frame);

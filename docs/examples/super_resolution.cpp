@@ -10,15 +10,17 @@
 #include <iostream>
 #include <random>
 
+#include <pcl/conversions.h>
 #include <pcl/io/pcd_io.h>
 
+#include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
 #include <paps/surface/quadric_super_resolution.h>
 
 int main(int argc, char** argv) try {
   pcl::PointCloud<pcl::PointXYZ>::Ptr scan(new pcl::PointCloud<pcl::PointXYZ>);
   if (argc > 1) {
-    if (pcl::io::loadPCDFile(argv[1], *scan) < 0) return 1;
+    pcl::fromPCLPointCloud2(paps::loadCloud(argv[1]), *scan);  // PCD or PLY; paps::IoError if unreadable
   } else {
     std::mt19937 rng(11);
     std::normal_distribution<float> gauss(0.f, 1.f);

@@ -78,3 +78,7 @@ class TransportFeatureRecovery : public pcl::MeshProcessing, public ThreadCountO
 };
 
 }  // namespace paps
+
+#ifdef PAPS_NO_PRECOMPILE
+#include <paps/surface/impl/transport_feature_recovery.hpp>
+#endif

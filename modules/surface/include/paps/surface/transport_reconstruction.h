@@ -186,3 +186,7 @@ class TransportReconstruction : public pcl::SurfaceReconstruction<PointT>, publi
 };
 
 }  // namespace paps
+
+#ifdef PAPS_NO_PRECOMPILE
+#include <paps/surface/impl/transport_reconstruction.hpp>
+#endif

@@ -2,6 +2,7 @@
 #include <paps/core/spatial_order.h>
 
 #include <algorithm>
+#include <cstring>
 #include <cmath>
 
 #include <pcl/kdtree/kdtree_flann.h>
@@ -116,6 +117,51 @@ class NeighbourGraphBuilder {
     }
     return g;
   }
+
+  // The same rows when none is longer than `max_count`: each written at its point's slot of
+  // one flat buffer, then packed in place. No list per point: at 20M points and 12
+  // neighbours those held about 88 bytes a point (vector, heap block, allocator header)
+  // beside the graph's 56, and their freed blocks stayed in the process.
+  template <typename Query>
+  static NeighbourGraph buildBounded(const Positions& points, std::size_t max_count, const ProgressCallback& progress,
+                                     const char* stage, Query query) {
+    const std::vector<int> order = spatialOrder(points);
+    const std::int64_t n = static_cast<std::int64_t>(order.size());
+    NeighbourGraph g;
+    g.offsets_.assign(points.size() + 1, 0);  // row lengths at i + 1 first, then their sums
+    g.indices_.resize(points.size() * max_count);
+    ProgressReporter report(progress, stage, points.size());
+#pragma omp parallel
+    {
+      std::vector<int> idx;
+      std::vector<float> d2;
+#pragma omp for schedule(dynamic, 256)
+      for (std::int64_t k = 0; k < n; ++k) {
+        if (report.cancelled()) continue;
+        const int i = order[k];
+        query(points[i], idx, d2);
+        putSelfFirst(idx, i);
+        const std::size_t c = std::min(idx.size(), max_count);  // the query's own bound
+        std::copy(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(c),
+                  g.indices_.begin() + static_cast<std::ptrdiff_t>(static_cast<std::size_t>(i) * max_count));
+        g.offsets_[static_cast<std::size_t>(i) + 1] = static_cast<std::int64_t>(c);
+        report.advance();
+      }
+    }
+    report.advance(points.size() - order.size());
+    report.throwIfCancelled();
+    report.finish();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const std::int64_t c = g.offsets_[i + 1];
+      g.offsets_[i + 1] = g.offsets_[i] + c;
+      // Row i moves down to its packed place (never past its own slot): memmove for overlaps.
+      if (c > 0 && static_cast<std::size_t>(g.offsets_[i]) != i * max_count)
+        std::memmove(g.indices_.data() + g.offsets_[i], g.indices_.data() + i * max_count,
+                     static_cast<std::size_t>(c) * sizeof(int));
+    }
+    g.indices_.resize(static_cast<std::size_t>(g.offsets_.back()));
+    return g;
+  }
 };
 
 NeighbourGraph NeighbourGraph::byRadius(const Positions& points, const SpatialIndex& index,
@@ -138,7 +184,9 @@ NeighbourGraph NeighbourGraph::byRadius(const Positions& points, const SpatialIn
 NeighbourGraph NeighbourGraph::byCount(const Positions& points, const SpatialIndex& index, int k,
                                        const ProgressCallback& progress) {
   requirePositive("k", k);
-  return NeighbourGraphBuilder::build(points, progress, "neighbours",
+  // A row holds at most k of the indexed points, or the point itself alone.
+  const std::size_t bound = std::max<std::size_t>(1, std::min<std::size_t>(static_cast<std::size_t>(k), index.size()));
+  return NeighbourGraphBuilder::buildBounded(points, bound, progress, "neighbours",
       [&](const Eigen::Vector3f& q, std::vector<int>& idx, std::vector<float>& d2) {
         index.nearestK(q, k, idx, d2);
       });

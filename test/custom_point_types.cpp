@@ -89,7 +89,9 @@ pcl::PointCloud<LidarPoint>::Ptr noisySphere() {
   auto cloud = pcl::make_shared<pcl::PointCloud<LidarPoint>>();
   paps::Random rng(21);
   for (int i = 0; i < 3000; ++i) {
-    const Eigen::Vector3d d = rng.gaussian3().normalized() * (1.0 + 0.02 * rng.gaussian());
+    const Eigen::Vector3d direction = rng.gaussian3().normalized();
+    const double radius = 1.0 + 0.02 * rng.gaussian();
+    const Eigen::Vector3d d = direction * radius;
     LidarPoint p;
     p.getVector3fMap() = d.cast<float>();
     p.intensity = static_cast<float>(i % 13);

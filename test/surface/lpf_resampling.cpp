@@ -200,6 +200,15 @@ TEST(LpfResampling, PclStageMatchesFunction) {
   ASSERT_EQ(out.size(), expected.size());
   for (std::size_t i = 0; i < out.size(); ++i) EXPECT_EQ(out[i].getVector3fMap(), expected[i]);
   EXPECT_EQ(stage.getReport().output, expected.size());
+  // An RGB-D camera's type in (compiled in the library): the same points out.
+  auto rgba = pcl::make_shared<pcl::PointCloud<pcl::PointXYZRGBA>>();
+  paps::writePositions(in, *rgba);
+  paps::LpfResampling<pcl::PointXYZRGBA, pcl::PointXYZ> from_rgba;
+  from_rgba.setInputCloud(rgba);
+  pcl::PointCloud<pcl::PointXYZ> out_rgba;
+  from_rgba.process(out_rgba);
+  ASSERT_EQ(out_rgba.size(), expected.size());
+  for (std::size_t i = 0; i < out_rgba.size(); ++i) ASSERT_EQ(out_rgba[i].getVector3fMap(), expected[i]);
 }
 
 TEST(LpfResampling, BadInputAndParametersAreNamed) {

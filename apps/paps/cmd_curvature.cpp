@@ -227,7 +227,7 @@ int runCurvature(int argc, char** argv) {
   const float radius = a.real("radius", 0);
   const int neighbours = a.integer("neighbours", 50);
   const pcl::PCLPointCloud2 cloud = loadCloud(a.positional[0], &params.viewpoint);
-  const Positions p = positionsOf(cloud);
+  Positions p = positionsOf(cloud);
   printRead(a.positional[0], p);
   Normals hints;
   const bool have_hints = orientationHints(cloud, p, a.text("orient", "auto"), hints);
@@ -263,21 +263,20 @@ int runCurvature(int argc, char** argv) {
                  "or a radius far beyond the cloud): NaN outputs\n", r.failed_fits);
   if (r.non_finite) std::fprintf(stderr, "warning: %zu NaN input points: NaN outputs\n", r.non_finite);
   // The input's own fields (intensity, colour...) and its width x height are kept; the
-  // Wavejet fields are added (input normals are replaced by the corrected ones).
-  // Each copy is released once the next holds it: the outputs of a large scan are several
-  // times its input.
-  pcl::PCLPointCloud2 b2;
-  {
-    pcl::PointCloud<PointWavejet> wj;
-    wj.resize(p.size());
-    for (std::size_t i = 0; i < p.size(); ++i) toPoint(res[i], wj[i]);
-    std::vector<WavejetResult>().swap(res);
-    pcl::toPCLPointCloud2(wj, b2);
-  }
-  pcl::PCLPointCloud2 out = appendFields(cloud, b2);
-  b2 = pcl::PCLPointCloud2();
-  out.is_dense = r.fitted == p.size();
-  saveCloudAtomic(a.positional[1], out, params.viewpoint);
+  // Wavejet fields are added (input normals are replaced by the corrected ones). The rows are
+  // made a block at a time as the file is written: neither the outputs as a blob nor the
+  // combined cloud is ever held (a large scan's outputs are several times its input).
+  Positions().swap(p);
+  pcl::PCLPointCloud2 wavejet_fields;
+  pcl::toPCLPointCloud2(pcl::PointCloud<PointWavejet>(1, 1), wavejet_fields);
+  CloudRows rows = appendedRows(cloud, wavejet_fields.fields, sizeof(PointWavejet),
+                                [&res](std::size_t i, std::uint8_t* row) {
+                                  PointWavejet w;
+                                  toPoint(res[i], w);
+                                  std::memcpy(row, &w, sizeof(PointWavejet));
+                                });
+  rows.layout.is_dense = r.fitted == res.size();
+  saveCloudAtomic(a.positional[1], rows, params.viewpoint);
   std::printf("wrote %s\n", a.positional[1].c_str());
   return 0;
 }

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -381,6 +382,88 @@ TEST(CloudIo, AppendFieldsKeepsTheOrganisationAndReplacesNamesakes) {
   pcl::PCLPointCloud2 bw;
   pcl::toPCLPointCloud2(wrong, bw);
   EXPECT_THROW(paps::appendFields(ba, bw), paps::InvalidInput);
+}
+
+TEST(CloudIo, RowsWrittenByBlocksAreTheBlobPclWrites) {
+  // A cloud given by rows (appendedRows) is written a block at a time: the file holds the
+  // bytes PCL's binary writer gives for the whole blob (PCL pads its file to a page with
+  // zeros: our file is that file without the zero tail), and loads back to the same blob.
+  // 40,001 points of 268 bytes are three blocks of 4 MB, the last one partial.
+  const std::size_t n = 40001;
+  pcl::PointCloud<pcl::PointXYZI> a = smallCloud(static_cast<int>(n));
+  pcl::PCLPointCloud2 ba;
+  pcl::toPCLPointCloud2(a, ba);
+  pcl::PCLPointField vec;
+  vec.name = "vec";
+  vec.offset = 0;
+  vec.datatype = pcl::PCLPointField::FLOAT32;
+  vec.count = 64;
+  pcl::PCLPointCloud2 extra;
+  extra.fields = {vec};
+  extra.width = std::uint32_t(n);
+  extra.height = 1;
+  extra.point_step = 256;
+  extra.row_step = extra.point_step * extra.width;
+  extra.data.resize(n * 256);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 64; ++k) {
+      const float v = float(i) + 0.01f * float(k);
+      std::memcpy(&extra.data[i * 256 + 4 * k], &v, 4);
+    }
+  const pcl::PCLPointCloud2 whole = paps::appendFields(ba, extra);
+  EXPECT_EQ(whole.point_step, 16u + 256u);  // x y z intensity packed, then vec
+  const paps::CloudRows rows = paps::appendedRows(ba, extra.fields, extra.point_step,
+                                                  [&](std::size_t i, std::uint8_t* row) {
+                                                    std::memcpy(row, &extra.data[i * 256], 256);
+                                                  });
+  EXPECT_EQ(paps::gatherRows(rows).data, whole.data);
+  const fs::path ours = scratch("rows.pcd"), pcls = scratch("rows_pcl.pcd");
+  paps::saveCloudAtomic(ours.string(), rows, Eigen::Vector3f(1.f, 2.f, 3.f));
+  ASSERT_EQ(pcl::PCDWriter().writeBinary(pcls.string(), whole, Eigen::Vector4f(1.f, 2.f, 3.f, 0.f),
+                                         Eigen::Quaternionf::Identity()), 0);
+  const std::string b_ours = readBytes(ours), b_pcl = readBytes(pcls);
+  ASSERT_LE(b_ours.size(), b_pcl.size());
+  EXPECT_GT(b_ours.size(), whole.data.size());
+  EXPECT_EQ(b_pcl.substr(0, b_ours.size()), b_ours);
+  EXPECT_EQ(b_pcl.find_first_not_of('\0', b_ours.size()), std::string::npos);
+  Eigen::Vector3f origin;
+  const pcl::PCLPointCloud2 back = paps::loadCloud(ours.string(), &origin);
+  EXPECT_EQ(back.data, whole.data);
+  EXPECT_EQ(back.point_step, whole.point_step);
+  EXPECT_EQ(origin, Eigen::Vector3f(1.f, 2.f, 3.f));
+  // As .ply, the same rows (gathered whole for PCL's writer).
+  const fs::path ply = scratch("rows.ply");
+  const paps::CloudRows scalar = paps::appendedRows(ba, {}, 0, [](std::size_t, std::uint8_t*) {});
+  paps::saveCloudAtomic(ply.string(), scalar);
+  EXPECT_EQ(paps::loadPositions(ply.string())[40000], a[40000].getVector3fMap());
+}
+
+TEST(CloudIo, RowsThatFailMidwayLeaveTheTargetAsItWas) {
+  // A fill that throws in the second block, and a folder that cannot be written: the error
+  // reaches the caller, the earlier file is intact and no temporary file is left.
+  const std::size_t n = 300000;
+  pcl::PCLPointCloud2 ba;
+  pcl::toPCLPointCloud2(smallCloud(static_cast<int>(n)), ba);
+  const fs::path dir = scratch("rows_fail");
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  const fs::path target = dir / "out.pcd";
+  { std::ofstream(target) << "earlier"; }
+  pcl::PCLPointField f;
+  f.name = "label";
+  f.datatype = pcl::PCLPointField::UINT32;
+  f.count = 1;
+  const paps::CloudRows rows = paps::appendedRows(ba, {f}, 4, [](std::size_t i, std::uint8_t* row) {
+    if (i == 299999) throw paps::InvalidInput("planted failure");
+    const std::uint32_t v = std::uint32_t(i);
+    std::memcpy(row, &v, 4);
+  });
+  EXPECT_THROW(paps::saveCloudAtomic(target.string(), rows), paps::InvalidInput);
+  EXPECT_EQ(readBytes(target), "earlier");
+  EXPECT_EQ(std::distance(fs::directory_iterator(dir), fs::directory_iterator()), 1);
+  EXPECT_THROW(paps::saveCloudAtomic((dir / "missing" / "out.pcd").string(), rows), paps::IoError);
+  EXPECT_THROW(paps::saveCloudAtomic(target.string(), rows, Eigen::Vector3f(NAN, 0.f, 0.f)), paps::InvalidParameter);
+  EXPECT_EQ(readBytes(target), "earlier");
 }
 
 // The fuzzing corpus (test/core/cloud_io_corpus, see fuzz_cloud_io.cpp): the seeds are five

@@ -6,6 +6,7 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -214,47 +215,112 @@ pcl::PCLPointCloud2 gatherPoints(const pcl::PCLPointCloud2& cloud, const std::ve
   return out;
 }
 
-pcl::PCLPointCloud2 appendFields(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointCloud2& extra) {
-  const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
-  if (static_cast<std::size_t>(extra.width) * extra.height != n)
-    throw InvalidInput("appendFields: the clouds differ in size");
+CloudRows appendedRows(const pcl::PCLPointCloud2& cloud, const std::vector<pcl::PCLPointField>& extra_fields,
+                       std::uint32_t extra_step, std::function<void(std::size_t, std::uint8_t*)> fill_extra) {
   // Fields of `cloud` that `extra` does not replace (padding "_" fields are dropped: they
   // carry nothing), packed one after the other; then every field of `extra` but its padding.
-  std::vector<const pcl::PCLPointField*> keep, add;
-  auto named = [](const pcl::PCLPointCloud2& c, const std::string& name) {
-    for (const auto& f : c.fields)
+  auto named = [&](const std::string& name) {
+    for (const auto& f : extra_fields)
       if (f.name == name) return true;
     return false;
   };
-  for (const auto& f : cloud.fields)
-    if (f.name != "_" && !named(extra, f.name)) keep.push_back(&f);
-  for (const auto& f : extra.fields)
-    if (f.name != "_") add.push_back(&f);
-  pcl::PCLPointCloud2 out;
+  struct Copy { bool from_extra; std::uint32_t src, dst, bytes; };
+  auto copies = std::make_shared<std::vector<Copy>>();
+  CloudRows rows;
+  pcl::PCLPointCloud2& out = rows.layout;
   out.header = cloud.header;
   out.width = cloud.width;
   out.height = cloud.height;
   out.is_bigendian = cloud.is_bigendian;
-  out.is_dense = cloud.is_dense && extra.is_dense;
-  struct Copy { const pcl::PCLPointCloud2* from; std::uint32_t src, dst, bytes; };
-  std::vector<Copy> copies;
+  out.is_dense = cloud.is_dense;
   std::uint32_t step = 0;
-  for (const auto* list : {&keep, &add})
-    for (const pcl::PCLPointField* f : *list) {
-      const std::uint32_t bytes = std::uint32_t(pcl::getFieldSize(f->datatype)) * std::max<std::uint32_t>(f->count, 1);
-      pcl::PCLPointField g = *f;
-      g.offset = step;
-      out.fields.push_back(g);
-      copies.push_back({list == &keep ? &cloud : &extra, f->offset, step, bytes});
-      step += bytes;
-    }
+  auto add = [&](const pcl::PCLPointField& f, bool from_extra, std::uint32_t source_step) {
+    const std::uint32_t bytes = std::uint32_t(pcl::getFieldSize(f.datatype)) * std::max<std::uint32_t>(f.count, 1);
+    if (std::uint64_t(f.offset) + bytes > source_step)
+      throw InvalidInput("appendFields: field '" + f.name + "' lies past the end of a point");
+    pcl::PCLPointField g = f;
+    g.offset = step;
+    out.fields.push_back(g);
+    copies->push_back({from_extra, f.offset, step, bytes});
+    step += bytes;
+  };
+  for (const auto& f : cloud.fields)
+    if (f.name != "_" && !named(f.name)) add(f, false, cloud.point_step);
+  for (const auto& f : extra_fields)
+    if (f.name != "_") add(f, true, extra_step);
   out.point_step = step;
   out.row_step = step * out.width;
-  out.data.resize(std::size_t(step) * n);
-  for (std::size_t i = 0; i < n; ++i)
-    for (const Copy& c : copies)
-      std::memcpy(out.data.data() + i * step + c.dst, c.from->data.data() + i * c.from->point_step + c.src, c.bytes);
+  rows.fill = [&cloud, copies, step, extra_step, fill_extra = std::move(fill_extra)](
+                  std::size_t first, std::size_t count, std::uint8_t* dst) {
+    std::vector<std::uint8_t> extra(extra_step);
+    for (std::size_t q = 0; q < count; ++q) {
+      const std::size_t i = first + q;
+      fill_extra(i, extra.data());
+      const std::uint8_t* src = cloud.data.data() + i * cloud.point_step;
+      for (const Copy& c : *copies)
+        std::memcpy(dst + q * step + c.dst, (c.from_extra ? extra.data() : src) + c.src, c.bytes);
+    }
+  };
+  return rows;
+}
+
+pcl::PCLPointCloud2 appendFields(const pcl::PCLPointCloud2& cloud, const pcl::PCLPointCloud2& extra) {
+  const std::size_t n = static_cast<std::size_t>(cloud.width) * cloud.height;
+  if (static_cast<std::size_t>(extra.width) * extra.height != n)
+    throw InvalidInput("appendFields: the clouds differ in size");
+  CloudRows rows = appendedRows(cloud, extra.fields, extra.point_step, [&](std::size_t i, std::uint8_t* row) {
+    std::memcpy(row, extra.data.data() + i * extra.point_step, extra.point_step);
+  });
+  rows.layout.is_dense = cloud.is_dense && extra.is_dense;
+  return gatherRows(rows);
+}
+
+pcl::PCLPointCloud2 gatherRows(const CloudRows& rows) {
+  pcl::PCLPointCloud2 out = rows.layout;
+  const std::size_t n = static_cast<std::size_t>(out.width) * out.height;
+  out.data.resize(n * out.point_step);
+  if (n) rows.fill(0, n, out.data.data());
   return out;
+}
+
+void saveCloudAtomic(const std::string& path, const CloudRows& rows, const Eigen::Vector3f& sensor_origin) {
+  const pcl::PCLPointCloud2& layout = rows.layout;
+  const std::size_t n = static_cast<std::size_t>(layout.width) * layout.height;
+  const bool padded = std::any_of(layout.fields.begin(), layout.fields.end(),
+                                  [](const pcl::PCLPointField& f) { return f.name == "_"; });
+  if (extensionOf(path) != ".pcd" || padded || n == 0) {
+    saveCloudAtomic(path, gatherRows(rows), sensor_origin);
+    return;
+  }
+  checkCloudOutputPath(path);
+  if (!sensor_origin.allFinite()) throw InvalidParameter("sensor_origin", "non-finite", "finite coordinates");
+  const std::filesystem::path target(path);
+  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
+  const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + ".pcd")).string();
+  const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C (installInterruptCleanup)
+  const Eigen::Vector4f origin(sensor_origin.x(), sensor_origin.y(), sensor_origin.z(), 0.f);
+  const std::string header = pcl::PCDWriter().generateHeaderBinary(layout, origin, Eigen::Quaternionf::Identity());
+  std::error_code ec;
+  try {
+    std::ofstream os(tmp, std::ios::binary | std::ios::trunc);
+    os << header << "DATA binary\n";
+    // Blocks of about 4 MB: the rows never exist whole.
+    const std::size_t block = std::max<std::size_t>(1, (std::size_t(4) << 20) / std::max<std::uint32_t>(layout.point_step, 1));
+    std::vector<std::uint8_t> buffer;
+    for (std::size_t first = 0; first < n && os; first += block) {
+      const std::size_t count = std::min(block, n - first);
+      buffer.resize(count * layout.point_step);
+      rows.fill(first, count, buffer.data());
+      os.write(reinterpret_cast<const char*>(buffer.data()), static_cast<std::streamsize>(buffer.size()));
+    }
+    os.flush();
+    if (!os) throw IoError("cannot write '" + path + "': writing the temporary file failed");
+  } catch (...) {
+    // A failed write or a throwing fill: the target stays as it was, no temporary is left.
+    std::filesystem::remove(tmp, ec);
+    throw;
+  }
+  commitTemporaryFile(tmp, path);
 }
 
 }  // namespace paps

@@ -854,18 +854,13 @@ struct TileCount {
 // that each tile fits its core points as the whole cloud would. A tile holds its points in
 // the cloud's relative order (estimateDistinct's canonical neighbour order), and its halo is
 // grown and the tile run again where a fit reached past it (a widened ball in a sparse spot).
-TileCount estimateDistinctInTiles(const Positions& points, float& radius, WavejetParameters run,
+// `radius` is already chosen; `automatic` says whether it was chosen (not given), which
+// decides the widening as in estimateDistinct.
+TileCount estimateDistinctInTiles(const Positions& points, float radius, bool automatic, WavejetParameters run,
                                   const Normals* initial_normals, const Normals* orientation,
-                                  const ProgressCallback& progress, int target_neighbours,
-                                  std::unique_ptr<SpatialIndex> index, float radius_scale, TiledOutputs& to) {
-  const bool automatic = radius == 0;
+                                  const ProgressCallback& progress, int target_neighbours, TiledOutputs& to) {
   const bool widen = run.widening == WavejetParameters::Widening::always ||
                      (run.widening == WavejetParameters::Widening::automatic && automatic);
-  if (automatic) {
-    if (!index) index = std::make_unique<SpatialIndex>(points);
-    radius = radius_scale * radiusForNeighbourCount(points, *index, target_neighbours);
-  }
-  index.reset();
   run.widening = widen ? WavejetParameters::Widening::always : WavejetParameters::Widening::never;
   // Three radii: every ball, and most widened ones (rs1 sampled with 5M points at 0.25%
   // noise: 2% of the points reached past 2 radii, 0.2% past 3), without growing the halo.
@@ -1023,12 +1018,24 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       run.order_policy = WavejetParameters::OrderPolicy::fixed;
     }
   }
+  const bool tiled = params.max_tile_points != 0 && fitted.size() > params.max_tile_points;
+  const bool radius_chosen = radius == 0;
+  if (tiled) {
+    // The radius now, and the index of the whole cloud (the pilot's) released before the
+    // outputs are allocated: the tiles search their own. Both were held at once at the
+    // peak (rs1 sampled with 20M points: the index is about 0.9 GB).
+    if (radius_chosen) {
+      if (!index) index = std::make_unique<SpatialIndex>(fitted);
+      radius = radius_scale * radiusForNeighbourCount(fitted, *index, target_neighbours);
+    }
+    index.reset();
+  }
   std::vector<WavejetResult> out(points.size());
   std::vector<int> neighbour_count(points.size(), 0);
   std::vector<std::uint8_t> support(points.size(), kBall);
   if (coefficients) coefficients->assign(points.size(), WavejetCoefficients());
   TileCount tiles;
-  if (params.max_tile_points == 0 || fitted.size() <= params.max_tile_points) {
+  if (!tiled) {
     std::vector<int> d_count;
     std::vector<std::uint8_t> d_support;
     std::vector<WavejetCoefficients> d_coefficients;
@@ -1050,9 +1057,8 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
       if (rep[i] == static_cast<int>(i)) first[slot[i]] = static_cast<int>(i);
     std::vector<int>().swap(slot);
     TiledOutputs to{first, out, neighbour_count, support, coefficients};
-    tiles = estimateDistinctInTiles(fitted, radius, run, initial_normals ? &d_initial : nullptr,
-                                    orientation ? &d_orientation : nullptr, progress, target_neighbours,
-                                    std::move(index), radius_scale, to);
+    tiles = estimateDistinctInTiles(fitted, radius, radius_chosen, run, initial_normals ? &d_initial : nullptr,
+                                    orientation ? &d_orientation : nullptr, progress, target_neighbours, to);
     for (std::size_t i = 0; i < points.size(); ++i) {
       const int r = rep[i];
       if (r < 0 || r == static_cast<int>(i)) continue;

@@ -13,6 +13,9 @@
 
 #include <gtest/gtest.h>
 
+#include <pcl/kdtree/kdtree_flann.h>
+#include <pcl/point_types.h>
+
 #include <paps/core/error.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
@@ -176,6 +179,56 @@ TEST(SpatialIndex, NearestKMatchesBruteForce) {
     // Random data: ties at the k-th distance have probability zero.
     EXPECT_EQ(got, expected);
   }
+}
+
+TEST(SpatialIndex, SameResultsAsPclKdTreeFlannAmongTies) {
+  // The index runs FLANN's tree itself (without PCL's copies): every list, in its order,
+  // must be what pcl::KdTreeFLANN gives. A lattice with every point stored twice makes many
+  // equal distances, where only the same tree and search break ties alike.
+  Positions p;
+  for (int x = 0; x < 12; ++x)
+    for (int y = 0; y < 12; ++y)
+      for (int z = 0; z < 6; ++z) p.emplace_back(0.1f * float(x), 0.1f * float(y), 0.1f * float(z));
+  const std::size_t lattice = p.size();
+  for (std::size_t i = 0; i < lattice; i += 2) p.push_back(p[i]);
+  p.emplace_back(kNaN, 0.f, 0.f);
+  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
+  std::vector<int> finite;
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (paps::isFinite(p[i])) {
+      cloud->push_back(pcl::PointXYZ(p[i].x(), p[i].y(), p[i].z()));
+      finite.push_back(static_cast<int>(i));
+    }
+  pcl::KdTreeFLANN<pcl::PointXYZ> pcl_tree(/*sorted=*/true);
+  pcl_tree.setInputCloud(cloud);
+  const SpatialIndex index(p);
+  std::vector<int> ours, theirs;
+  std::vector<float> d_ours, d_theirs;
+  pcl::Indices idx;
+  std::size_t compared = 0;
+  for (std::size_t i = 0; i < lattice; i += 7) {
+    const Eigen::Vector3f q = p[i] + Eigen::Vector3f(0.f, 0.f, i % 2 ? 0.f : 0.05f);
+    const pcl::PointXYZ pq(q.x(), q.y(), q.z());
+    for (const int k : {1, 7, 27, 60}) {
+      index.nearestK(q, k, ours, d_ours);
+      pcl_tree.nearestKSearch(pq, k, idx, d_theirs);
+      theirs.clear();
+      for (const auto j : idx) theirs.push_back(finite[j]);
+      ASSERT_EQ(ours, theirs) << "k " << k << " at " << i;
+      ASSERT_EQ(d_ours, d_theirs);
+      ++compared;
+    }
+    for (const int cap : {0, 5, 40}) {
+      index.radiusSearch(q, 0.2f, ours, d_ours, cap);
+      pcl_tree.radiusSearch(pq, 0.2f, idx, d_theirs, cap);
+      theirs.clear();
+      for (const auto j : idx) theirs.push_back(finite[j]);
+      ASSERT_EQ(ours, theirs) << "cap " << cap << " at " << i;
+      ASSERT_EQ(d_ours, d_theirs);
+      ++compared;
+    }
+  }
+  EXPECT_GT(compared, 500u);
 }
 
 TEST(MeanNearestNeighbourDistance, IsTheGridStepAndSkipsNonFinitePoints) {

@@ -5,7 +5,7 @@
 #include <cstring>
 #include <cmath>
 
-#include <pcl/kdtree/kdtree_flann.h>
+#include <flann/flann.hpp>
 #include <pcl/point_types.h>
 
 #include <paps/core/cell_grid.h>
@@ -13,24 +13,40 @@
 
 namespace paps {
 
-struct SpatialIndex::Tree : pcl::KdTreeFLANN<pcl::PointXYZ> {
-  Tree() : pcl::KdTreeFLANN<pcl::PointXYZ>(/*sorted=*/true) {}
+// FLANN's single k-d tree (leaf size 15, exact, sorted results), as pcl::KdTreeFLANN builds
+// it, holding only FLANN's own reordered copy of the finite points: PCL's class also held a
+// PointXYZ cloud and a float array of it (about 0.5 GB more at 20M points), and allocated
+// vectors at every radius query. The tree and the searches are the same, so are the results.
+struct SpatialIndex::Tree {
+  std::vector<float> xyz;  // finite points, 3 floats each, until FLANN has its copy
+  std::unique_ptr<flann::Index<flann::L2_Simple<float>>> index;
+  flann::SearchParams params{-1, 0.f, true};
 };
 
 SpatialIndex::SpatialIndex(const Positions& points) {
-  auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  cloud->reserve(points.size());
+  tree_ = std::make_unique<Tree>();
+  std::size_t count = 0;
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) continue;
     if (points[i].cwiseAbs().maxCoeff() > kMaxCoordinate)
       throw InvalidInput("a point has a coordinate of magnitude " +
                          detail::toString(points[i].cwiseAbs().maxCoeff()) + ", beyond " +
                          detail::toString(kMaxCoordinate) + " (a corrupt file?)");
-    finite_.push_back(static_cast<int>(i));
-    cloud->push_back(pcl::PointXYZ(points[i].x(), points[i].y(), points[i].z()));
+    ++count;
   }
-  tree_ = std::make_unique<Tree>();
-  if (!cloud->empty()) tree_->setInputCloud(cloud);
+  finite_.reserve(count);
+  tree_->xyz.reserve(3 * count);
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    if (!isFinite(points[i])) continue;
+    finite_.push_back(static_cast<int>(i));
+    tree_->xyz.insert(tree_->xyz.end(), {points[i].x(), points[i].y(), points[i].z()});
+  }
+  if (count == 0) return;
+  tree_->index = std::make_unique<flann::Index<flann::L2_Simple<float>>>(
+      flann::Matrix<float>(tree_->xyz.data(), count, 3), flann::KDTreeSingleIndexParams(15, /*reorder=*/true));
+  tree_->index->buildIndex();
+  // Reordered, the tree searches its own copy (leaf by leaf in memory): ours is not read again.
+  std::vector<float>().swap(tree_->xyz);
 }
 
 SpatialIndex::~SpatialIndex() = default;
@@ -40,11 +56,16 @@ int SpatialIndex::radiusSearch(const Eigen::Vector3f& q, float radius, std::vect
   indices.clear();
   sq_distances.clear();
   if (finite_.empty() || !isFinite(q)) return 0;
-  pcl::PointXYZ p(q.x(), q.y(), q.z());
-  pcl::Indices idx;
-  const int n = tree_->radiusSearch(p, radius, idx, sq_distances, max_count > 0 ? max_count : 0);
+  // Kept per thread: FLANN fills vectors of vectors, which would be allocated at every query.
+  thread_local std::vector<std::vector<std::size_t>> idx(1);
+  thread_local std::vector<std::vector<float>> dist(1);
+  float query[3] = {q.x(), q.y(), q.z()};
+  flann::SearchParams params = tree_->params;
+  params.max_neighbors = max_count > 0 && static_cast<std::size_t>(max_count) < finite_.size() ? max_count : -1;
+  const int n = tree_->index->radiusSearch(flann::Matrix<float>(query, 1, 3), idx, dist, radius * radius, params);
   indices.resize(n);
-  for (int i = 0; i < n; ++i) indices[i] = finite_[idx[i]];
+  for (int i = 0; i < n; ++i) indices[i] = finite_[idx[0][i]];
+  sq_distances.assign(dist[0].begin(), dist[0].begin() + n);
   return n;
 }
 
@@ -54,12 +75,16 @@ int SpatialIndex::nearestK(const Eigen::Vector3f& q, int k, std::vector<int>& in
   sq_distances.clear();
   if (finite_.empty() || !isFinite(q) || k <= 0) return 0;
   k = std::min<int>(k, static_cast<int>(finite_.size()));
-  pcl::PointXYZ p(q.x(), q.y(), q.z());
-  pcl::Indices idx;
-  const int n = tree_->nearestKSearch(p, k, idx, sq_distances);
-  indices.resize(n);
-  for (int i = 0; i < n; ++i) indices[i] = finite_[idx[i]];
-  return n;
+  thread_local std::vector<std::size_t> idx;
+  idx.resize(k);
+  sq_distances.resize(k);
+  float query[3] = {q.x(), q.y(), q.z()};
+  flann::Matrix<std::size_t> idx_mat(idx.data(), 1, k);
+  flann::Matrix<float> dist_mat(sq_distances.data(), 1, k);
+  tree_->index->knnSearch(flann::Matrix<float>(query, 1, 3), idx_mat, dist_mat, k, tree_->params);
+  indices.resize(k);
+  for (int i = 0; i < k; ++i) indices[i] = finite_[idx[i]];
+  return k;
 }
 
 namespace {

@@ -388,7 +388,7 @@ TEST(CloudIo, RowsWrittenByBlocksAreTheBlobPclWrites) {
   // A cloud given by rows (appendedRows) is written a block at a time: the file holds the
   // bytes PCL's binary writer gives for the whole blob (PCL pads its file to a page with
   // zeros: our file is that file without the zero tail), and loads back to the same blob.
-  // 40,001 points of 268 bytes are three blocks of 4 MB, the last one partial.
+  // 40,001 points of 272 bytes are three blocks of 4 MB, the last one partial.
   const std::size_t n = 40001;
   pcl::PointCloud<pcl::PointXYZI> a = smallCloud(static_cast<int>(n));
   pcl::PCLPointCloud2 ba;

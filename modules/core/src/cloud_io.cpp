@@ -6,7 +6,6 @@
 #include <exception>
 #include <filesystem>
 #include <fstream>
-#include <memory>
 #include <string>
 #include <vector>
 
@@ -57,6 +56,14 @@ XyzFields findXyz(const pcl::PCLPointCloud2& cloud) {
     throw InvalidInput("the cloud holds " + std::to_string(cloud.data.size()) + " bytes for " + std::to_string(n) +
                        " points of " + std::to_string(cloud.point_step) + " bytes");
   return f;
+}
+
+// The temporary beside `path` that a write goes to before its rename; it keeps the extension
+// (PCL's writers choose the format from it).
+std::string temporaryPathFor(const std::string& path, const std::string& ext) {
+  const std::filesystem::path target(path);
+  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
+  return (dir / ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + ext)).string();
 }
 
 }  // namespace
@@ -128,12 +135,8 @@ void saveCloudAtomic(const std::string& path, const pcl::PCLPointCloud2& cloud, 
         throw IoError("cannot write '" + path + "' as PLY: PCL's PLY writer misaligns an integer 'rgb' field; "
                       "write .pcd to keep every field");
     }
-  const std::filesystem::path target(path);
-  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
   std::error_code ec;
-  // The temporary keeps the extension: PCL's writers choose the format from it.
-  const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" +
-                                  std::to_string(::getpid()) + ext)).string();
+  const std::string tmp = temporaryPathFor(path, ext);
   const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C (installInterruptCleanup)
   if (!sensor_origin.allFinite()) throw InvalidParameter("sensor_origin", "non-finite", "finite coordinates");
   const Eigen::Vector4f origin(sensor_origin.x(), sensor_origin.y(), sensor_origin.z(), 0.f);
@@ -225,7 +228,7 @@ CloudRows appendedRows(const pcl::PCLPointCloud2& cloud, const std::vector<pcl::
     return false;
   };
   struct Copy { bool from_extra; std::uint32_t src, dst, bytes; };
-  auto copies = std::make_shared<std::vector<Copy>>();
+  std::vector<Copy> copies;
   CloudRows rows;
   pcl::PCLPointCloud2& out = rows.layout;
   out.header = cloud.header;
@@ -241,7 +244,7 @@ CloudRows appendedRows(const pcl::PCLPointCloud2& cloud, const std::vector<pcl::
     pcl::PCLPointField g = f;
     g.offset = step;
     out.fields.push_back(g);
-    copies->push_back({from_extra, f.offset, step, bytes});
+    copies.push_back({from_extra, f.offset, step, bytes});
     step += bytes;
   };
   for (const auto& f : cloud.fields)
@@ -250,14 +253,14 @@ CloudRows appendedRows(const pcl::PCLPointCloud2& cloud, const std::vector<pcl::
     if (f.name != "_") add(f, true, extra_step);
   out.point_step = step;
   out.row_step = step * out.width;
-  rows.fill = [&cloud, copies, step, extra_step, fill_extra = std::move(fill_extra)](
+  rows.fill = [&cloud, copies = std::move(copies), step, extra_step, fill_extra = std::move(fill_extra)](
                   std::size_t first, std::size_t count, std::uint8_t* dst) {
     std::vector<std::uint8_t> extra(extra_step);
     for (std::size_t q = 0; q < count; ++q) {
       const std::size_t i = first + q;
       fill_extra(i, extra.data());
       const std::uint8_t* src = cloud.data.data() + i * cloud.point_step;
-      for (const Copy& c : *copies)
+      for (const Copy& c : copies)
         std::memcpy(dst + q * step + c.dst, (c.from_extra ? extra.data() : src) + c.src, c.bytes);
     }
   };
@@ -294,9 +297,7 @@ void saveCloudAtomic(const std::string& path, const CloudRows& rows, const Eigen
   }
   checkCloudOutputPath(path);
   if (!sensor_origin.allFinite()) throw InvalidParameter("sensor_origin", "non-finite", "finite coordinates");
-  const std::filesystem::path target(path);
-  const std::filesystem::path dir = target.has_parent_path() ? target.parent_path() : ".";
-  const std::string tmp = (dir / ("." + target.stem().string() + ".tmp" + std::to_string(::getpid()) + ".pcd")).string();
+  const std::string tmp = temporaryPathFor(path, ".pcd");
   const TemporaryFileGuard guard(tmp);  // removed on Ctrl-C (installInterruptCleanup)
   const Eigen::Vector4f origin(sensor_origin.x(), sensor_origin.y(), sensor_origin.z(), 0.f);
   const std::string header = pcl::PCDWriter().generateHeaderBinary(layout, origin, Eigen::Quaternionf::Identity());

@@ -1023,7 +1023,7 @@ std::vector<WavejetResult> estimateWavejets(const Positions& points, float radiu
   if (tiled) {
     // The radius now, and the index of the whole cloud (the pilot's) released before the
     // outputs are allocated: the tiles search their own. Both were held at once at the
-    // peak (rs1 sampled with 20M points: the index is about 0.9 GB).
+    // peak (`paps curvature` on rs1 sampled with 20M points: 4,639 -> 4,042 MB).
     if (radius_chosen) {
       if (!index) index = std::make_unique<SpatialIndex>(fitted);
       radius = radius_scale * radiusForNeighbourCount(fitted, *index, target_neighbours);

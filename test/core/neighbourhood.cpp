@@ -209,7 +209,9 @@ TEST(SpatialIndex, SameResultsAsPclKdTreeFlannAmongTies) {
   for (std::size_t i = 0; i < lattice; i += 7) {
     const Eigen::Vector3f q = p[i] + Eigen::Vector3f(0.f, 0.f, i % 2 ? 0.f : 0.05f);
     const pcl::PointXYZ pq(q.x(), q.y(), q.z());
-    for (const int k : {1, 7, 27, 60}) {
+    // k past FLANN's heap threshold (250) too; the index keeps a result set per thread
+    // between queries, so the bounds change from query to query.
+    for (const int k : {1, 7, 27, 60, 300, 7}) {
       index.nearestK(q, k, ours, d_ours);
       pcl_tree.nearestKSearch(pq, k, idx, d_theirs);
       theirs.clear();
@@ -218,12 +220,13 @@ TEST(SpatialIndex, SameResultsAsPclKdTreeFlannAmongTies) {
       ASSERT_EQ(d_ours, d_theirs);
       ++compared;
     }
-    for (const int cap : {0, 5, 40}) {
-      index.radiusSearch(q, 0.2f, ours, d_ours, cap);
-      pcl_tree.radiusSearch(pq, 0.2f, idx, d_theirs, cap);
+    for (const auto& [radius, cap] : {std::pair<float, int>{0.2f, 0}, {0.2f, 5}, {0.2f, 40}, {0.35f, 0}, {0.35f, 40},
+                                      {0.2f, 0}}) {
+      index.radiusSearch(q, radius, ours, d_ours, cap);
+      pcl_tree.radiusSearch(pq, radius, idx, d_theirs, cap);
       theirs.clear();
       for (const auto j : idx) theirs.push_back(finite[j]);
-      ASSERT_EQ(ours, theirs) << "cap " << cap << " at " << i;
+      ASSERT_EQ(ours, theirs) << "radius " << radius << ", cap " << cap << " at " << i;
       ASSERT_EQ(d_ours, d_theirs);
       ++compared;
     }

@@ -2,7 +2,6 @@
 // a unit sphere (normal = radial), a cylinder (t1 around the axis, t2 along it), planes.
 #include <algorithm>
 #include <cmath>
-#include <cstring>
 #include <numeric>
 #include <limits>
 #include <vector>
@@ -11,7 +10,6 @@
 
 #include <gtest/gtest.h>
 
-#include <paps/core/error.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/random.h>
@@ -380,57 +378,6 @@ TEST(OrientNormalsByPropagation, SeparatedLargeComponentsEachUpwards) {
     bad += one[i].dot(s.points[i] - c) <= 0;
   }
   EXPECT_EQ(bad, 0u);
-}
-
-// Bits equal, NaN included (vector's == says NaN != NaN).
-bool sameBits(const Normals& a, const Normals& b) {
-  return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(a[0])) == 0;
-}
-
-TEST(EstimateNormalsOrientedByPropagation, TheGraphsNormalsBitForBitWithoutTheGraph) {
-  // Several blocks and components, points whose normal is NaN (a straight line far away:
-  // collinear neighbours), non-finite points, a noisy wavy sheet whose propagation choices
-  // depend on the path: the same normals as estimateNormals then orientNormalsByPropagation
-  // over NeighbourGraph::byCount, with 1 and 2 threads.
-  paps::Random rng(23);
-  Positions p;
-  for (int i = 0; i < 30000; ++i) {
-    const double x = rng.uniform();
-    const double y = rng.uniform();
-    const double z = 0.05 * std::sin(12 * x) * std::cos(9 * y) + 0.004 * rng.gaussian();
-    p.emplace_back(x, y, z);
-  }
-  const Eigen::Vector3f centre(2.f, 0.5f, 0.f);
-  const Positions ball = fibonacciSphere(9000, 0.3f, centre);
-  p.insert(p.end(), ball.begin(), ball.end());
-  // Outliers under the ball: their lists reach the ball, no point of the ball lists them, so
-  // each is a component of its own with edges into another component of its block. Alone
-  // it would be turned up (inward); through those edges it takes the ball's outward side.
-  for (int i = 0; i < 12; ++i) {
-    const double a = 0.5 * i;
-    p.push_back(centre + 0.33f * Eigen::Vector3f(0.4f * std::cos(a), 0.4f * std::sin(a), -0.92f).normalized());
-  }
-  for (int i = 0; i < 40; ++i) p.emplace_back(-3.f + 0.01f * i, 4.f, 1.f);
-  for (const std::size_t i : {5u, 20000u, 35000u}) p.insert(p.begin() + i, Eigen::Vector3f(kNaN, 0, 0));
-  const SpatialIndex index(p);
-  const NeighbourGraph g = NeighbourGraph::byCount(p, index, 12);
-  Normals expected = paps::estimateNormals(p, g);
-  std::size_t nan_normals = 0;
-  for (const auto& n : expected) nan_normals += !std::isfinite(n.x());
-  ASSERT_GE(nan_normals, 43u) << "the line's and the non-finite points";
-  const std::size_t flips = paps::orientNormalsByPropagation(p, expected, g);
-  ASSERT_GT(flips, 0u);
-  const int saved = omp_get_max_threads();
-  for (const int threads : {1, 2}) {
-    omp_set_num_threads(threads);
-    const Normals got = paps::estimateNormalsOrientedByPropagation(p, index, 12);
-    EXPECT_TRUE(sameBits(got, expected)) << threads << " threads";
-    for (std::size_t i = p.size() - 52; i < p.size() - 40; ++i)
-      EXPECT_LT(got[i].z(), 0.f) << "outlier " << i << " outward, with the ball";
-  }
-  omp_set_num_threads(saved);
-  EXPECT_THROW(paps::estimateNormalsOrientedByPropagation(p, index, 0), paps::InvalidParameter);
-  EXPECT_TRUE(paps::estimateNormalsOrientedByPropagation({}, SpatialIndex({}), 12).empty());
 }
 
 // A scan seen from above whose highest points are on a vertical rim: the lower half of a unit

@@ -1,5 +1,4 @@
 #include <paps/core/local_frame.h>
-#include <paps/core/error.h>
 #include <paps/core/spatial_order.h>
 
 #include <algorithm>
@@ -97,43 +96,28 @@ int upwardRule(double z, double a, float top_z) {
   return 1;
 }
 
-// The first kPropagationNeighbours entries of the rows of one block's members, in member
-// order: member r's entries are idx[start[r] .. start[r + 1]).
-struct BlockRows {
-  std::vector<int> idx;
-  std::vector<int> start;
-  void clear() { idx.clear(); start.assign(1, 0); }
-  void add(const int* row, int count) {
-    idx.insert(idx.end(), row, row + std::min(count, kPropagationNeighbours));
-    start.push_back(static_cast<int>(idx.size()));
-  }
-};
-
 // Hoppe-style propagation inside one block: the points `members` (sorted highest first, ties
-// by index; rows[r] is members[r]'s, row_of[i] is i's place among them), edges to points of
-// the same block only. Each component inside the block is seeded at its highest point with
-// the normal up; comp[i] receives the component's number within the block (0, 1, ...).
-// Returns the number of components.
-int propagateInBlock(Normals& normals, const BlockRows& rows, const std::vector<int>& row_of,
+// by index), edges to points of the same block only. Each component inside the block is
+// seeded at its highest point with the normal up; comp[i] receives the component's number
+// within the block (0, 1, ...). Returns the number of components.
+int propagateInBlock(Normals& normals, const NeighbourGraph& graph,
                      const std::vector<int>& members, const std::vector<int>& block_of, int block,
-                     std::vector<int>& comp, std::vector<std::uint8_t>& flipped) {
+                     std::vector<int>& comp, std::vector<std::uint8_t>& flipped,
+                     std::vector<std::pair<float, int>>& offer) {
   using Item = std::tuple<float, int, int>;  // (1 - |ni.nj|, target, source): most parallel first
   std::priority_queue<Item, std::vector<Item>, std::greater<Item>> heap;
-  // offer[row_of[j]]: the best (cost, source) pushed for j so far. An offer that would pop
-  // after it can never be the one that reaches j, so it is not pushed: the same result as
-  // pushing all, with far less heap traffic.
-  std::vector<std::pair<float, int>> offer(members.size(), {INFINITY, -1});
+  // offer[j]: the best (cost, source) pushed for j so far. An offer that would pop after it
+  // can never be the one that reaches j, so it is not pushed: the same result as pushing all,
+  // with far less heap traffic.
   auto pushNeighbours = [&](int i) {
-    const int r = row_of[i];
-    for (int e = rows.start[r]; e != rows.start[r + 1]; ++e) {
-      const int j = rows.idx[e];
-      if (block_of[j] == block && comp[j] < 0) {
-        const std::pair<float, int> o(1.f - std::abs(normals[i].dot(normals[j])), i);
-        if (!(o < offer[row_of[j]])) continue;
-        offer[row_of[j]] = o;
-        heap.emplace(o.first, j, i);
+    const int* last = graph.begin(i) + std::min(graph.count(i), kPropagationNeighbours);
+    for (const int* j = graph.begin(i); j != last; ++j)
+      if (block_of[*j] == block && comp[*j] < 0) {
+        const std::pair<float, int> o(1.f - std::abs(normals[i].dot(normals[*j])), i);
+        if (!(o < offer[*j])) continue;
+        offer[*j] = o;
+        heap.emplace(o.first, *j, i);
       }
-    }
   };
   int comps = 0;
   for (const int seed : members) {
@@ -173,11 +157,10 @@ void sumPerPair(const std::vector<std::tuple<int, int, T>>& sorted, std::vector<
   }
 }
 
-// orientNormalsByPropagation on rows handed over a block at a time: fill(members, rows) puts
-// the rows of `members` (point indices) into `rows`, in their order. The edges that may cross
-// components are kept from step 1 for step 2, so each row is read in one block's turn only.
-template <typename FillRows>
-std::size_t orientByBlocks(const Positions& points, Normals& normals, FillRows fill) {
+}  // namespace
+
+std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
+                                       const NeighbourGraph& graph) {
   const std::size_t n = points.size();
   std::vector<int> order;
   order.reserve(n);
@@ -201,31 +184,14 @@ std::size_t orientByBlocks(const Positions& points, Normals& normals, FillRows f
     return points[a].z() != points[b].z() ? points[a].z() > points[b].z() : a < b;
   };
   // 1. Propagation inside each block, in parallel. Component numbers are made global after.
-  // Each block keeps the edges (i, j) of its rows that step 2 reads: j in another block, or in
-  // another component of the same block; in member then row order.
-  std::vector<int> comp(n, -1), block_comps(blocks, 0), row_of(n, -1);
+  std::vector<int> comp(n, -1), block_comps(blocks, 0);
   std::vector<std::uint8_t> flipped(n, 0);
-  std::vector<std::vector<std::pair<int, int>>> edges(blocks);
-#pragma omp parallel
-  {
-    BlockRows rows;
-#pragma omp for schedule(dynamic, 1)
-    for (int b = 0; b < blocks; ++b) {
-      std::vector<int>& m = members[b];
-      std::sort(m.begin(), m.end(), higher);
-      for (std::size_t r = 0; r < m.size(); ++r) row_of[m[r]] = static_cast<int>(r);
-      rows.clear();
-      fill(m, rows);
-      block_comps[b] = propagateInBlock(normals, rows, row_of, m, block_of, b, comp, flipped);
-      for (std::size_t r = 0; r < m.size(); ++r)
-        for (int e = rows.start[r]; e != rows.start[r + 1]; ++e) {
-          const int j = rows.idx[e];
-          if (block_of[j] >= 0 && (block_of[j] != b || comp[j] != comp[m[r]])) edges[b].emplace_back(m[r], j);
-        }
-      edges[b].shrink_to_fit();
-    }
+  std::vector<std::pair<float, int>> offer(n, {INFINITY, -1});
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int b = 0; b < blocks; ++b) {
+    std::sort(members[b].begin(), members[b].end(), higher);
+    block_comps[b] = propagateInBlock(normals, graph, members[b], block_of, b, comp, flipped, offer);
   }
-  std::vector<int>().swap(row_of);
   std::vector<int> comp_base(blocks + 1, 0);
   for (int b = 0; b < blocks; ++b) comp_base[b + 1] = comp_base[b] + block_comps[b];
   const int ncomp = comp_base[blocks];
@@ -267,11 +233,14 @@ std::size_t orientByBlocks(const Positions& points, Normals& normals, FillRows f
 #pragma omp parallel for schedule(dynamic, 1)
   for (int b = 0; b < blocks; ++b) {
     auto& out = crossing[b];
-    for (const auto& [i, j] : edges[b]) {
-      const int ci = comp[i], cj = comp[j];
-      out.emplace_back(std::min(ci, cj), std::max(ci, cj), normals[i].dot(normals[j]));
+    for (const int i : members[b]) {
+      const int* last = graph.begin(i) + std::min(graph.count(i), kPropagationNeighbours);
+      for (const int* j = graph.begin(i); j != last; ++j) {
+        const int cj = comp[*j];
+        if (cj < 0 || cj == comp[i]) continue;
+        out.emplace_back(std::min(comp[i], cj), std::max(comp[i], cj), normals[i].dot(normals[*j]));
+      }
     }
-    std::vector<std::pair<int, int>>().swap(edges[b]);
     std::stable_sort(out.begin(), out.end(), byPair<float>);
   }
   // Sums per pair, in block order then pair order.
@@ -341,42 +310,6 @@ std::size_t orientByBlocks(const Positions& points, Normals& normals, FillRows f
     flips += flipped[i];
   }
   return flips;
-}
-
-}  // namespace
-
-std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals, const NeighbourGraph& graph) {
-  return orientByBlocks(points, normals, [&](const std::vector<int>& members, BlockRows& rows) {
-    for (const int i : members) rows.add(graph.begin(i), graph.count(i));
-  });
-}
-
-Normals estimateNormalsOrientedByPropagation(const Positions& points, const SpatialIndex& index, int k) {
-  requirePositive("k", k);
-  // Pass 1, the normals: every block's propagation reads its neighbours' normals.
-  Normals normals(points.size(), kNaN3);
-  const std::int64_t n = static_cast<std::int64_t>(points.size());
-#pragma omp parallel
-  {
-    std::vector<int> row;
-    std::vector<float> d2;
-#pragma omp for schedule(dynamic, 512)
-    for (std::int64_t i = 0; i < n; ++i)
-      if (isFinite(points[i])) {
-        nearestRow(points, index, static_cast<int>(i), k, row, d2);
-        normals[i] = pcaNormal(points, row.data(), static_cast<int>(row.size()));
-      }
-  }
-  // Pass 2, the orientation: the rows queried again, a block at a time.
-  orientByBlocks(points, normals, [&](const std::vector<int>& members, BlockRows& rows) {
-    std::vector<int> row;
-    std::vector<float> d2;
-    for (const int i : members) {
-      nearestRow(points, index, i, k, row, d2);
-      rows.add(row.data(), static_cast<int>(row.size()));
-    }
-  });
-  return normals;
 }
 
 void turnComponentsToHints(Normals& normals, const NeighbourGraph& g, const Normals& hints) {

@@ -4,12 +4,13 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
 #include <utility>
 
-#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
 
 namespace paps {
@@ -289,42 +290,31 @@ ErrorStats pointToMeshError(const Positions& points, const PointToMeshDistance& 
 namespace {
 
 /// Squared distance from every finite point of `query` to its nearest neighbour in `tree`.
-std::vector<double> nearestSquaredDistances(const Positions& query,
-                                            const pcl::KdTreeFLANN<pcl::PointXYZ>& tree) {
+std::vector<double> nearestSquaredDistances(const Positions& query, const SpatialIndex& tree) {
   std::vector<double> d2(query.size(), kNaN);
   const long n = static_cast<long>(query.size());
 #pragma omp parallel
   {
-    pcl::Indices index(1);
-    std::vector<float> dist(1);
+    std::vector<int> index;
+    std::vector<float> dist;
 #pragma omp for schedule(dynamic, 1024)
-    for (long i = 0; i < n; ++i) {
-      if (!isFinite(query[i])) continue;
-      pcl::PointXYZ p;
-      p.getVector3fMap() = query[i];
-      if (tree.nearestKSearch(p, 1, index, dist) == 1) d2[i] = dist[0];
-    }
+    for (long i = 0; i < n; ++i)
+      if (isFinite(query[i]) && tree.nearestK(query[i], 1, index, dist) == 1) d2[i] = dist[0];
   }
   return d2;
 }
 
-pcl::PointCloud<pcl::PointXYZ>::Ptr finiteCloud(const Positions& p, const char* name) {
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->reserve(p.size());
-  for (const auto& x : p)
-    if (isFinite(x)) {
-      pcl::PointXYZ q;
-      q.getVector3fMap() = x;
-      cloud->push_back(q);
-    }
-  if (cloud->empty())
+/// The index of the finite points of `p`; InvalidInput naming the cloud when there are none.
+std::unique_ptr<SpatialIndex> finiteIndex(const Positions& p, const char* name) {
+  auto index = std::make_unique<SpatialIndex>(p);
+  if (index->size() == 0)
     throw InvalidInput(std::string("cloud '") + name + "' has no finite point (" +
                        std::to_string(p.size()) + " points)");
-  return cloud;
+  return index;
 }
 
 /// Mean squared nearest-neighbour distance from the finite points of `from` to `to`.
-double oneSidedMse(const Positions& from, const pcl::KdTreeFLANN<pcl::PointXYZ>& to) {
+double oneSidedMse(const Positions& from, const SpatialIndex& to) {
   const std::vector<double> d2 = nearestSquaredDistances(from, to);
   double sum = 0;
   std::size_t n = 0;
@@ -337,10 +327,9 @@ double oneSidedMse(const Positions& from, const pcl::KdTreeFLANN<pcl::PointXYZ>&
 }
 
 double symmetricMse(const Positions& a, const Positions& b) {
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree_a, tree_b;
-  tree_a.setInputCloud(finiteCloud(a, "a"));
-  tree_b.setInputCloud(finiteCloud(b, "b"));
-  return std::max(oneSidedMse(a, tree_b), oneSidedMse(b, tree_a));
+  const auto tree_a = finiteIndex(a, "a");
+  const auto tree_b = finiteIndex(b, "b");
+  return std::max(oneSidedMse(a, *tree_b), oneSidedMse(b, *tree_a));
 }
 
 }  // namespace

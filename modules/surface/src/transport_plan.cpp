@@ -7,10 +7,10 @@
 #include <numeric>
 
 #include <ClpSimplex.hpp>
-#include <pcl/kdtree/kdtree_flann.h>
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/neighbourhood.h>
 
 namespace paps {
 
@@ -339,23 +339,21 @@ double TransportPlan::facetArea(int f) const {
 
 void TransportPlan::assignToNearestVertices() {
   std::vector<int> alive;
-  pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
+  Positions alive_positions;
   for (int v = 0; v < vertexCount(); ++v)
     if (vertex_alive_[v]) {
       alive.push_back(v);
-      const Eigen::Vector3f p = vertices_[v].cast<float>();
-      cloud->push_back(pcl::PointXYZ(p.x(), p.y(), p.z()));
+      alive_positions.push_back(vertices_[v].cast<float>());
     }
   if (alive.empty()) throw InvalidInput("optimal transport: the complex has no vertex");
   for (auto& l : vertex_shares_) l.clear();
   for (auto& l : facet_shares_) l.clear();
-  pcl::KdTreeFLANN<pcl::PointXYZ> tree;
-  tree.setInputCloud(cloud);
-  pcl::Indices k(1);
-  std::vector<float> d(1);
+  const SpatialIndex tree(alive_positions);
+  if (tree.size() == 0) throw InvalidInput("optimal transport: the complex has no finite vertex");
+  std::vector<int> k;
+  std::vector<float> d;
   for (std::size_t i = 0; i < points_.size(); ++i) {
-    const Eigen::Vector3f p = points_[i].cast<float>();
-    tree.nearestKSearch(pcl::PointXYZ(p.x(), p.y(), p.z()), 1, k, d);
+    tree.nearestK(points_[i].cast<float>(), 1, k, d);
     vertex_shares_[alive[k[0]]].push_back({static_cast<int>(i), -1, masses_[i]});
   }
 }

@@ -60,13 +60,6 @@ constexpr int kPropagationNeighbours = 10;
 std::size_t orientNormalsByPropagation(const Positions& points, Normals& normals,
                                        const NeighbourGraph& graph);
 
-/// estimateNormals over NeighbourGraph::byCount(points, index, k), then
-/// orientNormalsByPropagation over that graph, without holding the graph: the same normals
-/// bit for bit. Each block's rows are queried when the block is propagated, so the cost is a
-/// second round of k-nearest queries; the saving is the graph (at 20M points and k = 12,
-/// about 1.1 GB). `index` is built on `points`.
-Normals estimateNormalsOrientedByPropagation(const Positions& points, const SpatialIndex& index, int k);
-
 /// For a stage run in tiles: turns each connected component of `graph` (as
 /// orientNormalsByPropagation reads it: the first kPropagationNeighbours entries of each list)
 /// whose normals disagree with `hints` (the sum of n.h over its points with a finite, unit

@@ -93,12 +93,6 @@ class NeighbourGraph {
   friend class NeighbourGraphBuilder;
 };
 
-/// Point i's row in NeighbourGraph::byCount(points, index, k): its k nearest finite points
-/// (fewer when the index holds fewer), self first. For a stage that queries rows as it goes
-/// rather than holding the graph. Returns the row's length.
-int nearestRow(const Positions& points, const SpatialIndex& index, int i, int k, std::vector<int>& row,
-               std::vector<float>& sq_distances);
-
 /// Which count radiusForNeighbourCount aims at.
 enum class NeighbourCountStatistic {
   /// A typical point (the median) holds the count: the default. A mean count is made by the

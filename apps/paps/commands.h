@@ -6,6 +6,7 @@ int runSampleMesh(int argc, char** argv);
 int runMeshDistance(int argc, char** argv);
 int runBench(int argc, char** argv);
 int runBenchFiles(int argc, char** argv);
+int runBenchNeighbours(int argc, char** argv);
 int runBenchLpf(int argc, char** argv);
 int runCurvatureWorker(int argc, char** argv);
 int runCurvature(int argc, char** argv);

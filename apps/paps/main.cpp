@@ -35,6 +35,7 @@ const char* kUsage =
     "  shadows CLOUD LIST OUT --sun X,Y,Z   detect and relight the shadows of a coloured cloud\n"
     "  bench fusion [options]        image-cloud registration (Table 4.1; street and a real Kinect frame), colorization, shadows\n"
     "  bench files IN [IN..]         ours vs the peers on your own clouds: time, memory, output\n"
+    "  bench neighbours [options]    our k-d tree queries vs pcl::KdTreeFLANN: time a query, same lists\n"
     "  sample-mesh MESH N OUT        N points on a mesh, with --noise: a cloud of known surface\n"
     "  mesh-distance MESH CLOUD      distance of a cloud to a mesh (RMS, mean, p95, max)\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
@@ -86,6 +87,7 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "sample-mesh")) return paps::cli::runSampleMesh(argc, argv);
     if (!std::strcmp(argv[1], "mesh-distance")) return paps::cli::runMeshDistance(argc, argv);
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "files")) return paps::cli::runBenchFiles(argc, argv);
+    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "neighbours")) return paps::cli::runBenchNeighbours(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);
     std::fprintf(stderr, "paps: unknown command '%s'\n%s", argv[1], kUsage);

@@ -892,6 +892,14 @@ elseif(CASE STREQUAL "bench_curvature_speed")
   if(NOT out MATCHES "setKSearch\\(50\\), [0-9]+ threads: [0-9.]+ s on the points as sampled \\(random order\\), [0-9.]+ s in space order; PCL [^\n]*setKSearch\\(50\\): [0-9.]+ s / [0-9.]+ s")
     message(FATAL_ERROR "expected the k-search timings of the Feature class and PCL's: ${out}")
   endif()
+elseif(CASE STREQUAL "bench_neighbours")
+  # `paps bench neighbours`: our k-d tree's lists are pcl::KdTreeFLANN's, every one of them.
+  run_paps(bench neighbours --points 20000)
+  if(NOT rc STREQUAL "0" OR NOT out MATCHES "12-nearest +paps::SpatialIndex +[0-9.]+ +12.0 +0\n.*radius, small +paps::SpatialIndex +[0-9.]+ +[0-9.]+ +0\n.*radius, large +paps::SpatialIndex +[0-9.]+ +[0-9.]+ +0\n.*pcl::KdTreeFLANN")
+    message(FATAL_ERROR "expected three queries with no list differing from pcl::KdTreeFLANN's (${rc}): ${out} ${err}")
+  endif()
+  run_paps(bench neighbours --points 5)
+  expect_one_error_line("points")
 elseif(CASE STREQUAL "bench_lpf_shapes")
   # The tetrahedron and cylinder of `paps bench lpf` end to end (child processes, table, CSV), and a
   # clear error for an unknown shape or a missing real-scan mesh.

@@ -898,6 +898,11 @@ elseif(CASE STREQUAL "bench_neighbours")
   if(NOT rc STREQUAL "0" OR NOT out MATCHES "12-nearest +paps::SpatialIndex +[0-9.]+ +12.0 +0\n.*radius, small +paps::SpatialIndex +[0-9.]+ +[0-9.]+ +0\n.*radius, large +paps::SpatialIndex +[0-9.]+ +[0-9.]+ +0\n.*pcl::KdTreeFLANN")
     message(FATAL_ERROR "expected three queries with no list differing from pcl::KdTreeFLANN's (${rc}): ${out} ${err}")
   endif()
+  # ... and a PCL stage gives the same normals with paps::KdTreeSearch as with pcl::search::KdTree.
+  if(NOT out MATCHES "30 nearest \\([0-9]+\\) +paps::KdTreeSearch +[0-9.]+ +0\n +pcl::search::KdTree +[0-9.]+ +[0-9.]+ *\n"
+     OR NOT out MATCHES "small radius \\([0-9]+\\) +paps::KdTreeSearch +[0-9.]+ +0\n")
+    message(FATAL_ERROR "expected pcl::NormalEstimationOMP with no normal differing between the searches: ${out}")
+  endif()
   run_paps(bench neighbours --points 5)
   expect_one_error_line("points")
 elseif(CASE STREQUAL "bench_lpf_shapes")

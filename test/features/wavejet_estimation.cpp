@@ -14,7 +14,7 @@
 
 #include <paps/core/error.h>
 #include <paps/core/random.h>
-#include <paps/features/impl/lazy_kd_tree.hpp>
+#include <paps/core/kd_tree_search.h>
 #include <paps/features/wavejet_estimation.h>
 
 #include "../common/peak_allocation.h"
@@ -613,9 +613,10 @@ TEST(WavejetEstimation, EachOutputIsItsPointsWhateverOrderThePointsAreVisitedIn)
   }
 }
 
-// Without a search method the class gives PCL's Feature a kd-tree that builds at its first
-// query: radius balls from the grid never build it; a k search on the same object does, and
-// gives the outputs of an explicit pcl::search::KdTree; the tree answers a user's queries.
+// Without a search method the class gives PCL's Feature a paps::KdTreeSearch, which builds at
+// its first query: radius balls from the grid never build it; a k search on the same object
+// does, and gives the outputs of an explicit pcl::search::KdTree, bit for bit; the tree
+// answers a user's queries.
 TEST(WavejetEstimation, DefaultKdTreeIsBuiltOnlyWhenQueried) {
   const Positions p = heightFieldSamples([](double x, double y) { return 0.2 * x * y; }, 6000, 1.0, 12);
   const auto cloud = toCloud(p);
@@ -624,7 +625,7 @@ TEST(WavejetEstimation, DefaultKdTreeIsBuiltOnlyWhenQueried) {
   est.setRadiusSearch(0.06);
   pcl::PointCloud<paps::PointWavejet> out;
   est.compute(out);
-  const auto lazy = std::dynamic_pointer_cast<paps::detail::LazyKdTree<pcl::PointXYZ>>(est.getSearchMethod());
+  const auto lazy = std::dynamic_pointer_cast<paps::KdTreeSearch<pcl::PointXYZ>>(est.getSearchMethod());
   ASSERT_TRUE(lazy);
   EXPECT_FALSE(lazy->built());
   EXPECT_GT(est.getReport().fitted, p.size() * 9 / 10);

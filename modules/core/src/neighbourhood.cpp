@@ -93,6 +93,11 @@ std::size_t searchInto(const flann::KDTreeSingleIndex<flann::L2_Simple<float>>& 
 
 int SpatialIndex::radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<int>& indices,
                                std::vector<float>& sq_distances, int max_count) const {
+  return radiusSearchSquared(q, radius * radius, indices, sq_distances, max_count);
+}
+
+int SpatialIndex::radiusSearchSquared(const Eigen::Vector3f& q, float r2, std::vector<int>& indices,
+                                      std::vector<float>& sq_distances, int max_count) const {
   indices.clear();
   sq_distances.clear();
   if (finite_.empty() || !isFinite(q)) return 0;
@@ -102,7 +107,6 @@ int SpatialIndex::radiusSearch(const Eigen::Vector3f& q, float radius, std::vect
   thread_local std::tuple<float, std::size_t> capped_bounds;
   thread_local std::vector<std::size_t> idx;
   const float query[3] = {q.x(), q.y(), q.z()};
-  const float r2 = radius * radius;
   const std::size_t cap = max_count > 0 ? static_cast<std::size_t>(max_count) : finite_.size();
   // As FLANN's radiusSearch: a capped result set only when the cap can bind.
   const std::size_t n =

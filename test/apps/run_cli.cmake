@@ -892,6 +892,11 @@ elseif(CASE STREQUAL "bench_curvature_speed")
   if(NOT out MATCHES "setKSearch\\(50\\), [0-9]+ threads: [0-9.]+ s on the points as sampled \\(random order\\), [0-9.]+ s in space order; PCL [^\n]*setKSearch\\(50\\): [0-9.]+ s / [0-9.]+ s")
     message(FATAL_ERROR "expected the k-search timings of the Feature class and PCL's: ${out}")
   endif()
+  # ... whose default search (paps::KdTreeSearch) gives the outputs of a pcl::search::KdTree set.
+  if(NOT out MATCHES "setKSearch\\(50\\), points as sampled: [0-9.]+ s with PCL's default search \\(paps::KdTreeSearch\\), [0-9.]+ s with a pcl::search::KdTree set \\([0-9.]+x\\); ([0-9]+) of ([0-9]+) outputs identical"
+     OR NOT CMAKE_MATCH_1 STREQUAL CMAKE_MATCH_2)
+    message(FATAL_ERROR "expected every k-search output identical with either search: ${out}")
+  endif()
 elseif(CASE STREQUAL "bench_neighbours")
   # `paps bench neighbours`: our k-d tree's lists are pcl::KdTreeFLANN's, every one of them.
   run_paps(bench neighbours --points 20000)

@@ -1,6 +1,7 @@
 // PAPS stages inside a PCL pipeline: a noisy scan of a box corner is denoised by
 // paps::SimilarityDenoising, which also writes the normals and curvature of the denoised
-// surface into the PointNormal cloud; PCL's own region growing then segments it with them.
+// surface into the PointNormal cloud; PCL's own region growing then segments it with them,
+// its neighbours found by paps::KdTreeSearch (the lists of pcl::search::KdTree, faster).
 //
 //   example_pcl_pipeline
 //
@@ -13,10 +14,10 @@
 
 #include <pcl/common/io.h>
 #include <pcl/point_types.h>
-#include <pcl/search/kdtree.h>
 #include <pcl/segmentation/region_growing.h>
 
 #include <paps/core/error.h>
+#include <paps/core/kd_tree_search.h>
 #include <paps/filters/similarity_denoising.h>
 
 int main() try {
@@ -55,7 +56,7 @@ int main() try {
   pcl::RegionGrowing<pcl::PointXYZ, pcl::Normal> grow;
   grow.setInputCloud(points);
   grow.setInputNormals(normals);
-  grow.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
+  grow.setSearchMethod(pcl::make_shared<paps::KdTreeSearch<pcl::PointXYZ>>());  // for pcl::search::KdTree
   grow.setNumberOfNeighbours(20);
   grow.setSmoothnessThreshold(static_cast<float>(8.0 / 180.0 * M_PI));
   grow.setCurvatureThreshold(0.01f);

@@ -158,4 +158,17 @@ TEST(KdTreeSearch, BuiltAtTheFirstQueryAndAgainAfterANewCloud) {
   EXPECT_EQ(search.getName(), "paps::KdTreeSearch");
 }
 
+TEST(KdTreeSearch, CorruptCoordinatesAreAnErrorOutOfThePclStage) {
+  // A coordinate of 1e35 (misread bytes): FLANN's tree would abort the process. The search
+  // refuses the cloud when the stage hands it over, before any parallel region.
+  auto cloud = latticeWithTies();
+  (*cloud)[7].y = 1e35f;
+  pcl::NormalEstimation<pcl::PointXYZ, pcl::Normal> ne;
+  ne.setInputCloud(cloud);
+  ne.setKSearch(8);
+  ne.setSearchMethod(pcl::make_shared<paps::KdTreeSearch<pcl::PointXYZ>>());
+  pcl::PointCloud<pcl::Normal> out;
+  EXPECT_THROW(ne.compute(out), paps::InvalidInput);
+}
+
 }  // namespace

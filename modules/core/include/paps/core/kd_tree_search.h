@@ -9,7 +9,7 @@
 // the surface at every compute(), also when the stage then never queries it.
 // Differences from pcl::search::KdTree: x, y, z only (no point representation, no epsilon);
 // results always sorted; a non-finite query finds nothing (PCL asserts); a coordinate beyond
-// paps::kMaxCoordinate throws InvalidInput at the first query.
+// paps::kMaxCoordinate throws InvalidInput at setInputCloud (FLANN's tree would abort).
 #include <atomic>
 #include <memory>
 #include <mutex>
@@ -41,7 +41,16 @@ class KdTreeSearch : public pcl::search::Search<PointT> {
 
   explicit KdTreeSearch(bool sorted = true) : Base("paps::KdTreeSearch", sorted) {}
 
+  /// Throws InvalidInput for a coordinate beyond kMaxCoordinate (a corrupt file): here,
+  /// where a stage sets its search, not at the first query, which PCL's OpenMP stages make
+  /// inside a parallel region (an exception there would end the process).
   void setInputCloud(const PointCloudConstPtr& cloud, const pcl::IndicesConstPtr& indices = pcl::IndicesConstPtr()) override {
+    if (cloud)
+      for (const auto& p : *cloud)
+        if (isFinite(p.getVector3fMap()) && p.getVector3fMap().cwiseAbs().maxCoeff() > kMaxCoordinate)
+          throw InvalidInput("paps::KdTreeSearch: a point has a coordinate of magnitude " +
+                             detail::toString(p.getVector3fMap().cwiseAbs().maxCoeff()) + ", beyond " +
+                             detail::toString(kMaxCoordinate) + " (a corrupt file?)");
     std::lock_guard<std::mutex> lock(mutex_);
     this->input_ = cloud;
     this->indices_ = indices;

@@ -529,15 +529,15 @@ TEST(CustomPointTypes, TransportStagesOnTheUsersTypesGiveTheListedTypesMeshes) {
   p.target_vertices = 30;
   p.candidates = 10;
   p.initial_fraction = 0.1f;
-  paps::TransportReconstruction<LidarPoint> rebuild;
-  paps::TransportReconstruction<pcl::PointXYZ> rebuild_listed;
-  rebuild.setParameters(p);
-  rebuild_listed.setParameters(p);
-  rebuild.setInputCloud(lidar);
-  rebuild_listed.setInputCloud(xyz);
-  pcl::PolygonMesh mesh, mesh_listed;
-  rebuild.reconstruct(mesh);
-  rebuild_listed.reconstruct(mesh_listed);
+  auto rebuildWith = [&p](auto&& stage, const auto& cloud) {
+    stage.setParameters(p);
+    stage.setInputCloud(cloud);
+    pcl::PolygonMesh m;
+    stage.reconstruct(m);
+    return m;
+  };
+  const pcl::PolygonMesh mesh = rebuildWith(paps::TransportReconstruction<LidarPoint>(), lidar);
+  const pcl::PolygonMesh mesh_listed = rebuildWith(paps::TransportReconstruction<pcl::PointXYZ>(), xyz);
   expectSameMesh(mesh, mesh_listed, "reconstruction");
   const paps::TriangleMesh rebuilt = paps::toTriangleMesh(mesh);
   EXPECT_LE(rebuilt.vertices.size(), 30u);
@@ -551,17 +551,16 @@ TEST(CustomPointTypes, TransportStagesOnTheUsersTypesGiveTheListedTypesMeshes) {
   auto smooth = pcl::make_shared<pcl::PolygonMesh>(paps::toPolygonMesh(rounded));
   paps::TransportFeatureRecoveryParameters fp;
   fp.sweeps = 3;
-  paps::TransportFeatureRecovery<SurveyPoint> recover;
-  paps::TransportFeatureRecovery<pcl::PointXYZ> recover_listed;
-  recover.setParameters(fp);
-  recover_listed.setParameters(fp);
-  recover.setInputMesh(smooth);
-  recover_listed.setInputMesh(smooth);
-  recover.setInputCloud(survey);
-  recover_listed.setInputCloud(xyz);
-  pcl::PolygonMesh sharp, sharp_listed;
-  recover.process(sharp);
-  recover_listed.process(sharp_listed);
+  auto recoverWith = [&fp, &smooth](auto&& stage, const auto& cloud) {
+    stage.setParameters(fp);
+    stage.setInputMesh(smooth);
+    stage.setInputCloud(cloud);
+    pcl::PolygonMesh m;
+    stage.process(m);
+    return m;
+  };
+  const pcl::PolygonMesh sharp = recoverWith(paps::TransportFeatureRecovery<SurveyPoint>(), survey);
+  const pcl::PolygonMesh sharp_listed = recoverWith(paps::TransportFeatureRecovery<pcl::PointXYZ>(), xyz);
   expectSameMesh(sharp, sharp_listed, "feature recovery");
   EXPECT_LT(paps::pointToMeshError(paps::toTriangleMesh(sharp).vertices, to_cube).rmse,
             0.5 * paps::pointToMeshError(rounded.vertices, to_cube).rmse);

@@ -3,6 +3,7 @@
 // curvature and on a real scan mesh; plus the tilted-plane correction curve, the speed run and
 // renders of an enhanced scan. One run, one table.
 #include <algorithm>
+#include <array>
 #include <cstdlib>
 #include <chrono>
 #include <ctime>
@@ -279,6 +280,29 @@ std::vector<Estimate> geometricPcl(std::vector<Estimate> est, float curv_radius)
 }
 
 #ifdef PAPS_HAVE_CGAL
+// Whether CGAL's jet fitting of degree `order` is posed on these neighbours: as many distinct
+// positions as the jet has coefficients, spread over a plane (its PCA frame). CGAL does not
+// check (its preconditions are off in a release build): on a pile of copies of two positions
+// it crashed the bench's worker (`paps bench files` on such a cloud: "worker died (status 11)").
+bool cgalJetIsPosed(const Positions& p, const std::vector<int>& idx, int count, int need) {
+  std::vector<std::array<float, 3>> distinct;
+  distinct.reserve(static_cast<std::size_t>(count));
+  for (int j = 0; j < count; ++j) distinct.push_back({p[idx[j]].x(), p[idx[j]].y(), p[idx[j]].z()});
+  std::sort(distinct.begin(), distinct.end());
+  distinct.erase(std::unique(distinct.begin(), distinct.end()), distinct.end());
+  if (static_cast<int>(distinct.size()) < need) return false;
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& q : distinct) mean += Eigen::Vector3d(q[0], q[1], q[2]);
+  mean /= static_cast<double>(distinct.size());
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  for (const auto& q : distinct) {
+    const Eigen::Vector3d d = Eigen::Vector3d(q[0], q[1], q[2]) - mean;
+    cov += d * d.transpose();
+  }
+  const Eigen::Vector3d ev = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov, Eigen::EigenvaluesOnly).eigenvalues();
+  return ev(1) > 1e-10 * ev(2);  // not on a line
+}
+
 std::vector<Estimate> runCgal(const Positions& p, float radius, int order, double& secs) {
   using K = CGAL::Simple_cartesian<double>;
   using Fitting = CGAL::Monge_via_jet_fitting<K>;
@@ -295,7 +319,7 @@ std::vector<Estimate> runCgal(const Positions& p, float radius, int order, doubl
 #pragma omp for schedule(dynamic, 256)
     for (std::int64_t i = 0; i < n; ++i) {
       const int c = index.radiusSearch(p[i], radius, idx, d2);  // self first
-      if (c < need) continue;
+      if (c < need || !cgalJetIsPosed(p, idx, c, need)) continue;
       pts.clear();
       for (int j = 0; j < c; ++j) pts.emplace_back(p[idx[j]].x(), p[idx[j]].y(), p[idx[j]].z());
       Fitting fit;

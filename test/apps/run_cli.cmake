@@ -838,7 +838,9 @@ elseif(CASE STREQUAL "bench_files")
               "superres +qsr +ok .* 6000 " "superres +apss +ok .* 6000 " "superres +rimls +ok .* 6000 "
               "superres +pcl-mls-plane +ok .* 6000 " "curvature +wavejets +ok .* 3000 " "curvature +pcl +ok"
               "denoise, ours / peer time: pcl-mls [0-9.e+-]+ bilateral [0-9.e+-]+"
-              "piles +superres +apss +error .*distinct")
+              "piles +superres +apss +error .*distinct"
+              # CGAL's jet fitting is not called on a ball it cannot pose (it crashed the worker)
+              "piles +curvature +cgal +ok")
     if(NOT out MATCHES "${row}")
       message(FATAL_ERROR "no row matching '${row}': ${out}")
     endif()

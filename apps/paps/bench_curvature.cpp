@@ -224,9 +224,10 @@ std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, boo
     else
       stage.setRadiusSearch(r);
   };
+  // The finite points, as a PCL user gives them (PCL's estimators abort on NaN points).
+  const FiniteInput finite = finiteInput(p);
   pcl::PointCloud<pcl::PointXYZ>::Ptr cloud(new pcl::PointCloud<pcl::PointXYZ>);
-  cloud->resize(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) (*cloud)[i].getVector3fMap() = p[i];
+  writePositions(finite.points, *cloud);
   pcl::PointCloud<pcl::Normal>::Ptr normals(new pcl::PointCloud<pcl::Normal>);
   pcl::PointCloud<pcl::PrincipalCurvatures> pcs;
   const auto t0 = Clock::now();
@@ -247,9 +248,9 @@ std::vector<Estimate> runPcl(const Positions& p, float radius, double& secs, boo
   setSearch(pc, curv_radius);
   pc.compute(pcs);
   secs = since(t0);
-  std::vector<Estimate> out(p.size());
-  for (std::size_t i = 0; i < p.size(); ++i) out[i] = {(*normals)[i].getNormalVector3fMap(), pcs[i].pc1, pcs[i].pc2};
-  return out;
+  std::vector<Estimate> out(finite.points.size());
+  for (std::size_t i = 0; i < out.size(); ++i) out[i] = {(*normals)[i].getNormalVector3fMap(), pcs[i].pc1, pcs[i].pc2};
+  return atInputIndices(out, finite, Estimate());
 }
 
 std::vector<Estimate> calibratePcl(std::vector<Estimate> est, const std::vector<Truth>& truth, const std::vector<int>& eval) {

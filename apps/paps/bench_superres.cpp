@@ -92,7 +92,7 @@ Positions pclMlsUpsampleAs(const Positions& input, const std::string& mode, doub
                            Normals* normals) {
   using Mls = pcl::MovingLeastSquares<pcl::PointXYZ, PointOut>;
   auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-  writePositions(input, *cloud);
+  writePositions(finiteInput(input).points, *cloud);  // PCL's MLS aborts on NaN points
   Mls mls;
   mls.setInputCloud(cloud);
   mls.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());

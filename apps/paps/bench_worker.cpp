@@ -47,6 +47,17 @@ WorkerLimits g_limits;
 
 void setWorkerLimits(const WorkerLimits& limits) { g_limits = limits; }
 
+FiniteInput finiteInput(const Positions& p) {
+  FiniteInput f;
+  f.input_size = p.size();
+  for (std::size_t i = 0; i < p.size(); ++i)
+    if (isFinite(p[i])) {
+      f.points.push_back(p[i]);
+      f.at.push_back(i);
+    }
+  return f;
+}
+
 WorkerResult spawnWorker(std::vector<std::string> args, const std::map<std::string, double>& params,
                          const std::string& out_path, const std::string& log_path) {
   std::remove(out_path.c_str());
@@ -193,7 +204,8 @@ int runBenchWorker(int argc, char** argv) {
       if (report.tiles > 1) lf << "chosen " << report.tiles << " tiles\n";
     } else if (method == "mls") {
       auto cloud = pcl::make_shared<pcl::PointCloud<pcl::PointXYZ>>();
-      writePositions(input, *cloud);
+      const FiniteInput finite = finiteInput(input);
+      writePositions(finite.points, *cloud);
       pcl::MovingLeastSquares<pcl::PointXYZ, pcl::PointXYZ> mls;
       mls.setInputCloud(cloud);
       mls.setSearchMethod(pcl::make_shared<pcl::search::KdTree<pcl::PointXYZ>>());
@@ -203,7 +215,10 @@ int runBenchWorker(int argc, char** argv) {
       mls.setNumberOfThreads(static_cast<unsigned>(get("threads", 2)));
       pcl::PointCloud<pcl::PointXYZ> result;
       mls.process(result);
-      output = positionsOf(result);
+      // One projection per point (no upsampling): back at the input's indices.
+      output = result.size() == finite.points.size()
+                   ? atInputIndices(positionsOf(result), finite, Eigen::Vector3f::Constant(NAN).eval())
+                   : positionsOf(result);
       lf << "radius " << get("radius", 0) << "\n";
     } else {
       throw InvalidParameter("method", method, "ours, lpf, bilateral or mls");

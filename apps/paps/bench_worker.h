@@ -22,6 +22,24 @@ struct WorkerResult {
   Positions output;
 };
 
+/// A PCL peer's input as a PCL user gives it (pcl::removeNaNFromPointCloud): the finite points
+/// and where each was. PCL's MLS and normal estimators abort on NaN points, even with
+/// is_dense false (their kd-tree skips them; their loop over the points still queries them):
+/// `paps bench files` on a cloud with NaNs lost the PCL rows ("worker died (status 6)").
+struct FiniteInput {
+  Positions points;
+  std::vector<std::size_t> at;  // index in the original input of points[j]
+  std::size_t input_size = 0;
+};
+FiniteInput finiteInput(const Positions& p);
+/// One value per finite point, put back at its point's index; `missing` at the others.
+template <typename T>
+std::vector<T> atInputIndices(const std::vector<T>& values, const FiniteInput& f, const T& missing) {
+  std::vector<T> out(f.input_size, missing);
+  for (std::size_t j = 0; j < f.at.size() && j < values.size(); ++j) out[f.at[j]] = values[j];
+  return out;
+}
+
 /// Bounds on every worker started afterwards (0: none). A worker past `seconds` is killed
 /// (SIGALRM) and reported as timed out; `memory_gb` caps its address space (RLIMIT_AS), so a
 /// method whose memory grows without bound fails with bad_alloc instead of swapping.

@@ -43,15 +43,19 @@ Set& resultSetFor(std::unique_ptr<Set>& kept, std::tuple<Bounds...>& kept_bounds
 
 }  // namespace
 
+namespace detail {
+void throwCoordinateOutOfRange(float magnitude, const char* who) {
+  throw InvalidInput(std::string(who ? std::string(who) + ": " : "") + "a point has a coordinate of magnitude " +
+                     toString(magnitude) + ", beyond " + toString(kMaxCoordinate) + " (a corrupt file?)");
+}
+}  // namespace detail
+
 SpatialIndex::SpatialIndex(const Positions& points) {
   tree_ = std::make_unique<Tree>();
   std::size_t count = 0;
   for (std::size_t i = 0; i < points.size(); ++i) {
     if (!isFinite(points[i])) continue;
-    if (points[i].cwiseAbs().maxCoeff() > kMaxCoordinate)
-      throw InvalidInput("a point has a coordinate of magnitude " +
-                         detail::toString(points[i].cwiseAbs().maxCoeff()) + ", beyond " +
-                         detail::toString(kMaxCoordinate) + " (a corrupt file?)");
+    requireCoordinatesInRange(points[i]);
     ++count;
   }
   finite_.reserve(count);

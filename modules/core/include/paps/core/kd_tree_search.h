@@ -46,11 +46,7 @@ class KdTreeSearch : public pcl::search::Search<PointT> {
   /// inside a parallel region (an exception there would end the process).
   void setInputCloud(const PointCloudConstPtr& cloud, const pcl::IndicesConstPtr& indices = pcl::IndicesConstPtr()) override {
     if (cloud)
-      for (const auto& p : *cloud)
-        if (isFinite(p.getVector3fMap()) && p.getVector3fMap().cwiseAbs().maxCoeff() > kMaxCoordinate)
-          throw InvalidInput("paps::KdTreeSearch: a point has a coordinate of magnitude " +
-                             detail::toString(p.getVector3fMap().cwiseAbs().maxCoeff()) + ", beyond " +
-                             detail::toString(kMaxCoordinate) + " (a corrupt file?)");
+      for (const auto& p : *cloud) requireCoordinatesInRange(p.getVector3fMap(), "paps::KdTreeSearch");
     std::lock_guard<std::mutex> lock(mutex_);
     this->input_ = cloud;
     this->indices_ = indices;

@@ -16,6 +16,16 @@ namespace paps {
 /// in the kd-tree.
 constexpr float kMaxCoordinate = 1e30f;
 
+namespace detail {
+[[noreturn]] void throwCoordinateOutOfRange(float magnitude, const char* who);
+}
+
+/// Throws InvalidInput (prefixed by `who` when given) when the finite point `p` has a
+/// coordinate beyond kMaxCoordinate. The one check behind SpatialIndex and KdTreeSearch.
+inline void requireCoordinatesInRange(const Eigen::Vector3f& p, const char* who = nullptr) {
+  if (isFinite(p) && p.cwiseAbs().maxCoeff() > kMaxCoordinate) detail::throwCoordinateOutOfRange(p.cwiseAbs().maxCoeff(), who);
+}
+
 /// Kd-tree over the finite points of a Positions array. Queries are const and thread-safe;
 /// returned indices refer to the original array, sorted by increasing distance.
 /// Throws InvalidInput when a coordinate's magnitude exceeds kMaxCoordinate: the tree's float

@@ -3,11 +3,18 @@
 # the find_package(PAPS) consumer project), then the file readers and the decoder under ASan.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/install_deps.sh
-bash scripts/build.sh
+# Each phase prints its wall time: the whole run must stay well under 30 minutes on 2 cores.
+phase() {
+  local name=$1 start=$SECONDS
+  shift
+  "$@"
+  echo "test.sh: $name took $((SECONDS - start)) s (total $SECONDS s)"
+}
+phase "install" bash scripts/install_deps.sh
+phase "build" bash scripts/build.sh
 export PAPS_SAMPLES="${PAPS_SAMPLES:-$HOME/.cache/paps/samples}"
-bash scripts/fetch_samples.sh >/dev/null || echo "warning: sample scans unavailable; tests that need them skip"
-(cd build && ctest --output-on-failure -j"$(nproc)")
+phase "samples" bash -c 'bash scripts/fetch_samples.sh >/dev/null || echo "warning: sample scans unavailable; tests that need them skip"'
+phase "tests" bash -c 'cd build && ctest --output-on-failure -j"$(nproc)"'
 # The code that reads untrusted bytes (cloud readers, the codec's decoder) once more under
 # AddressSanitizer and UBSan: a release build can read out of bounds and still pass.
-bash scripts/address_sanitizer.sh --untrusted-input "$PWD/build-asan"
+phase "sanitizer tests" bash scripts/address_sanitizer.sh --untrusted-input "$PWD/build-asan"

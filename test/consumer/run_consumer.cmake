@@ -56,7 +56,9 @@ run_step(run ${consumer_exe})
 message(STATUS "${step_output}")
 
 # The examples of docs/examples, built on their own against the same installed package (as a
-# user copies them), each run once: without arguments each checks its result.
+# user copies them). Not run again: the tree's tests run each of them (label `example`), and
+# the libraries are static, so a build against the package is what this adds; the runs took
+# about 55 s of the CI's test time twice over.
 if(DEFINED EXAMPLES_SOURCE_DIR AND NOT EXAMPLES_SOURCE_DIR STREQUAL "")
   set(examples_build ${WORK_DIR}/examples)
   file(REMOVE_RECURSE ${examples_build})
@@ -67,15 +69,10 @@ if(DEFINED EXAMPLES_SOURCE_DIR AND NOT EXAMPLES_SOURCE_DIR STREQUAL "")
   file(GLOB examples LIST_DIRECTORIES false ${examples_build}/example_* ${examples_build}/${config}/example_*)
   list(FILTER examples INCLUDE REGEX "/example_[a-z_]+(\\.exe)?$")
   list(LENGTH examples example_count)
-  if(example_count LESS 6)
-    message(FATAL_ERROR "consumer: ${example_count} examples built in ${examples_build}, expected 6")
+  file(GLOB sources ${EXAMPLES_SOURCE_DIR}/*.cpp)
+  list(LENGTH sources source_count)
+  if(NOT example_count EQUAL source_count)
+    message(FATAL_ERROR "consumer: ${example_count} examples built in ${examples_build}, expected ${source_count}")
   endif()
-  foreach(exe IN LISTS examples)
-    get_filename_component(exe_name ${exe} NAME)
-    execute_process(COMMAND ${exe} WORKING_DIRECTORY ${examples_build} RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-    if(NOT rc STREQUAL "0")
-      message(FATAL_ERROR "consumer: ${exe_name} failed (${rc})\n${out}\n${err}")
-    endif()
-    message(STATUS "consumer: ${exe_name} ok")
-  endforeach()
+  message(STATUS "consumer: ${example_count} examples built")
 endif()

@@ -2,7 +2,11 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <cerrno>
 #include <exception>
+#include <string>
+
+#include <unistd.h>
 
 #include <paps/core/error.h>
 #include <paps/core/interrupt_cleanup.h>
@@ -40,7 +44,26 @@ const char* kUsage =
     "  mesh-distance MESH CLOUD      distance of a cloud to a mesh (RMS, mean, p95, max)\n"
     "Run 'paps COMMAND --help' for the options of a command.\n"
     "--threads N (any command): at most N threads (default: OMP_NUM_THREADS, else every core).\n";
+
+#ifdef PAPS_HAVE_FUSION
+// The image commands live in paps-fusion, beside this binary (fusion_main.cpp says why): run
+// it in this process's place with the same arguments (--threads was turned into
+// OMP_NUM_THREADS, which it inherits). Returns only when it cannot be run.
+int runFusionBinary(char** argv) {
+  std::string self(4096, '\0');
+  const ssize_t n = ::readlink("/proc/self/exe", self.data(), self.size());
+  self.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+  const std::string fusion = self.substr(0, self.rfind('/') + 1) + "paps-fusion";
+  argv[0] = const_cast<char*>("paps");
+  std::fflush(stdout);
+  ::execv(fusion.c_str(), argv);
+  std::fprintf(stderr, "paps: error: cannot run %s, which holds the '%s' command (%s): install it beside paps\n",
+               fusion.c_str(), argv[1], std::strerror(errno));
+  return 1;
 }
+#endif
+
+}  // namespace
 
 int main(int argc, char** argv) {
   paps::installInterruptCleanup();  // an interrupted write leaves no temporary file
@@ -77,12 +100,10 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "bench-worker-ot")) return paps::cli::runTransportWorker(argc, argv);
 #endif
 #ifdef PAPS_HAVE_FUSION
-    if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "fusion")) return paps::cli::runBenchFusion(argc, argv);
-    if (!std::strcmp(argv[1], "register")) return paps::cli::runRegister(argc, argv);
-    if (!std::strcmp(argv[1], "rgbd-photo")) return paps::cli::runRgbdPhoto(argc, argv);
-    if (!std::strcmp(argv[1], "make-street")) return paps::cli::runMakeStreet(argc, argv);
-    if (!std::strcmp(argv[1], "colorize")) return paps::cli::runColorize(argc, argv);
-    if (!std::strcmp(argv[1], "shadows")) return paps::cli::runShadows(argc, argv);
+    if ((!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "fusion")) ||
+        !std::strcmp(argv[1], "register") || !std::strcmp(argv[1], "rgbd-photo") ||
+        !std::strcmp(argv[1], "make-street") || !std::strcmp(argv[1], "colorize") || !std::strcmp(argv[1], "shadows"))
+      return runFusionBinary(argv);
 #endif
     if (!std::strcmp(argv[1], "sample-mesh")) return paps::cli::runSampleMesh(argc, argv);
     if (!std::strcmp(argv[1], "mesh-distance")) return paps::cli::runMeshDistance(argc, argv);

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <exception>
 #include <chrono>
 #include <memory>
 #include <mutex>
@@ -23,6 +24,7 @@
 #include <paps/core/cloud_file_layout.h>
 #include <paps/core/cloud_io.h>
 #include <paps/core/error.h>
+#include <paps/core/interrupt_cleanup.h>
 #include <paps/core/normal_refresh.h>
 #include <paps/core/view_point_option.h>
 
@@ -211,6 +213,33 @@ void takeThreadsOption(int& argc, char** argv) {
     for (int j = i; j + 2 <= argc; ++j) argv[j] = argv[j + 2];
     argc -= 2;
     --i;
+  }
+}
+
+int runCommandLine(int argc, char** argv, const char* program, const char* usage,
+                   const std::function<int(int, char**)>& dispatch) {
+  installInterruptCleanup();  // an interrupted write leaves no temporary file
+  try {
+    takeThreadsOption(argc, argv);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    return 1;
+  }
+  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
+    std::fputs(usage, argc < 2 ? stderr : stdout);
+    return argc < 2 ? 2 : 0;
+  }
+  try {
+    const int status = dispatch(argc, argv);
+    if (status != kUnknownCommand) return status;
+    std::fprintf(stderr, "%s: unknown command '%s'\n%s", program, argv[1], usage);
+    return 2;
+  } catch (const Error& e) {
+    std::fprintf(stderr, "%s: error: %s\n", program, e.what());
+    return 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "%s: unexpected error: %s\n", program, e.what());
+    return 1;
   }
 }
 

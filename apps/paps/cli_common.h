@@ -100,6 +100,14 @@ void printRead(const std::string& path, const Positions& points);
 /// Throws InvalidParameter on a count outside [1, 4096].
 void takeThreadsOption(int& argc, char** argv);
 
+/// What the commands of a binary (paps, paps-fusion, paps-codec) share around them: the
+/// interrupt cleanup, --threads, the usage on no command or --help, and one clear error line
+/// ("<program>: error: ...") for any exception. `dispatch` runs the command argv[1] names and
+/// returns its exit status, or kUnknownCommand.
+constexpr int kUnknownCommand = -1;
+int runCommandLine(int argc, char** argv, const char* program, const char* usage,
+                   const std::function<int(int, char**)>& dispatch);
+
 /// Whether the cloud has a field of that name.
 bool hasField(const pcl::PCLPointCloud2& c, const char* name);
 /// From the header alone: whether the .pcd or .ply at `path` has normal fields (PCL reads a

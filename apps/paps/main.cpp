@@ -3,13 +3,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <cerrno>
-#include <exception>
 #include <string>
 
 #include <unistd.h>
-
-#include <paps/core/error.h>
-#include <paps/core/interrupt_cleanup.h>
 
 #include "bench_worker.h"
 #include "cli_common.h"
@@ -66,18 +62,7 @@ int runFusionBinary(char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  paps::installInterruptCleanup();  // an interrupted write leaves no temporary file
-  try {
-    paps::cli::takeThreadsOption(argc, argv);
-  } catch (const paps::Error& e) {
-    std::fprintf(stderr, "paps: error: %s\n", e.what());
-    return 1;
-  }
-  if (argc < 2 || !std::strcmp(argv[1], "--help") || !std::strcmp(argv[1], "-h")) {
-    std::fputs(kUsage, argc < 2 ? stderr : stdout);
-    return argc < 2 ? 2 : 0;
-  }
-  try {
+  return paps::cli::runCommandLine(argc, argv, "paps", kUsage, [](int argc, char** argv) {
     if (!std::strcmp(argv[1], "denoise")) return paps::cli::runDenoise(argc, argv);
 #ifdef PAPS_HAVE_FEATURES
     if (!std::strcmp(argv[1], "curvature")) return paps::cli::runCurvature(argc, argv);
@@ -111,13 +96,6 @@ int main(int argc, char** argv) {
     if (!std::strcmp(argv[1], "bench") && argc > 2 && !std::strcmp(argv[2], "neighbours")) return paps::cli::runBenchNeighbours(argc, argv);
     if (!std::strcmp(argv[1], "bench")) return paps::cli::runBench(argc, argv);
     if (!std::strcmp(argv[1], "bench-worker")) return paps::cli::runBenchWorker(argc, argv);
-    std::fprintf(stderr, "paps: unknown command '%s'\n%s", argv[1], kUsage);
-    return 2;
-  } catch (const paps::Error& e) {
-    std::fprintf(stderr, "paps: error: %s\n", e.what());
-    return 1;
-  } catch (const std::exception& e) {
-    std::fprintf(stderr, "paps: unexpected error: %s\n", e.what());
-    return 1;
-  }
+    return paps::cli::kUnknownCommand;
+  });
 }

@@ -48,7 +48,13 @@ const char* kUsage =
 int runFusionBinary(char** argv) {
   std::string self(4096, '\0');
   const ssize_t n = ::readlink("/proc/self/exe", self.data(), self.size());
-  self.resize(n > 0 ? static_cast<std::size_t>(n) : 0);
+  if (n <= 0 || static_cast<std::size_t>(n) >= self.size()) {
+    // Without our own path, "paps-fusion" would be looked up in the working folder.
+    std::fprintf(stderr, "paps: error: cannot find this binary's folder (/proc/self/exe: %s), where paps-fusion "
+                 "holds the '%s' command\n", std::strerror(errno), argv[1]);
+    return 1;
+  }
+  self.resize(static_cast<std::size_t>(n));
   const std::string fusion = self.substr(0, self.rfind('/') + 1) + "paps-fusion";
   argv[0] = const_cast<char*>("paps");
   std::fflush(stdout);

@@ -16,6 +16,10 @@ phase "install" bash scripts/install_deps.sh
 phase "build" bash scripts/build.sh -DPAPS_BUILD_EXAMPLES=OFF
 export PAPS_SAMPLES="${PAPS_SAMPLES:-$HOME/.cache/paps/samples}"
 phase "samples" bash -c 'bash scripts/fetch_samples.sh >/dev/null || echo "warning: sample scans unavailable; tests that need them skip"'
+# Both ctest slots run OpenMP code on 2 threads each: with libgomp's default spin-waiting,
+# the idle threads of one test burn the core the other test needs (17 of the slowest tests:
+# 123-176 s with spinning, 86-87 s with passive waiting).
+export OMP_WAIT_POLICY=passive
 phase "tests" bash -c 'cd build && ctest --output-on-failure -j"$(nproc)"'
 # The code that reads untrusted bytes (cloud readers, the codec's decoder) once more under
 # AddressSanitizer and UBSan: a release build can read out of bounds and still pass.

@@ -10,6 +10,9 @@
 #include <paps/compression/seed_coder.h>
 #include <paps/core/random.h>
 
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace compression_bitstream_test {
+
 using namespace paps::compression;
 
 TEST(RangeCoder, RoundTripsSkewedAndFlatSymbols) {
@@ -131,3 +134,5 @@ TEST(SeedCoder, RoundTripsDistinctVoxels) {
   std::vector<std::uint8_t> cut(bytes.begin(), bytes.begin() + bytes.size() / 2);
   EXPECT_THROW(decodeVoxels(cut, v.size(), 16), CorruptStream);
 }
+
+}  // namespace compression_bitstream_test

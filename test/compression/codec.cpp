@@ -14,10 +14,12 @@
 #include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace compression_codec_test {
+
 using namespace paps;
 using namespace paps::compression;
 
-namespace {
 struct Sample {
   TriangleMesh mesh;
   Positions points;
@@ -35,7 +37,6 @@ const std::vector<std::uint8_t>& engravedStream() {
   static const std::vector<std::uint8_t> b = compressPositions(engraved().points, CompressionParameters{});
   return b;
 }
-}  // namespace
 
 TEST(SelfSimilarityCodec, RoundTripOnAnEngravedPlaneIsAccurateAndSmall) {
   const Sample& s = engraved();
@@ -343,3 +344,5 @@ TEST(SelfSimilarityCodec, AVolumeOfSeedsIsRefused) {
     EXPECT_NE(std::string(e.what()).find("volume"), std::string::npos) << e.what();
   }
 }
+
+}  // namespace compression_codec_test

@@ -14,7 +14,8 @@
 #include <paps/compression/bitstream.h>
 #include <paps/compression/self_similarity_codec.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace compression_corpus_regression_test {
 
 std::vector<std::uint8_t> corpusFile(const std::string& name) {
   std::ifstream f(std::string(PAPS_COMPRESSION_CORPUS_DIR) + "/" + name, std::ios::binary);
@@ -37,8 +38,6 @@ const std::map<std::string, std::size_t> kCompleteStreams = {
     {"v2-engraved-compact.paps", 2248}, {"v2-engraved-fine.paps", 1543}, {"v2-sphere-balanced.paps", 1355},
 };
 const std::set<std::string> kTruncatedStreams = {"engraved-compact-truncated.paps"};
-
-}  // namespace
 
 TEST(CompressionCorpus, EveryFileHasAnExpectation) {
   const std::filesystem::path dir = PAPS_COMPRESSION_CORPUS_DIR;
@@ -103,3 +102,5 @@ TEST(CompressionCorpus, FormatOneStreamStillDecodesOntoItsSphere) {
     ASSERT_LT(x.norm(), 1.05f);
   }
 }
+
+}  // namespace compression_corpus_regression_test

@@ -14,10 +14,12 @@
 
 #include "point_grid.h"
 
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace compression_grids_test {
+
 using namespace paps;
 using namespace paps::compression;
 
-namespace {
 Positions randomPoints(std::size_t n, std::uint64_t seed) {
   Random rng(seed);
   Positions p(n);
@@ -27,7 +29,6 @@ Positions randomPoints(std::size_t n, std::uint64_t seed) {
   }
   return p;
 }
-}  // namespace
 
 TEST(PointGrid, RadiusSearchFindsExactlyThePointsWithinTheRadius) {
   Positions p = randomPoints(5000, 3);
@@ -113,3 +114,5 @@ TEST(PreparedReference, KnownAnswerOnAShiftedPlaneAndSameAsCompareClouds) {
   EXPECT_EQ(e.d1_rmse, f.d1_rmse);
   EXPECT_EQ(prepared.compare(dec, 0.02).share_above_tolerance, 0.0);
 }
+
+}  // namespace compression_grids_test

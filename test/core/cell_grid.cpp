@@ -14,7 +14,8 @@
 #include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_cell_grid_test {
 
 using paps::CellGrid;
 using paps::NeighbourGraph;
@@ -445,8 +446,6 @@ TEST(CellGrid, DeterministicAcrossThreadCounts) {
   EXPECT_EQ(a.original(), b.original());
 }
 
-}  // namespace
-
 // A graph built a block of slots at a time (the normal refresh of a large cloud): each block's
 // rows are exactly those of the whole graph, capped or not, piles included; the other rows are
 // empty; blocks that cover every slot give every row.
@@ -478,3 +477,5 @@ TEST(CellGrid, BlocksOfSlotsGiveTheRowsOfTheWholeGraph) {
     for (std::size_t i = 0; i < p.size(); ++i) EXPECT_EQ(seen[i], paps::isFinite(p[i]) ? 1 : 0) << i;
   }
 }
+
+}  // namespace core_cell_grid_test

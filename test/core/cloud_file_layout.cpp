@@ -25,7 +25,8 @@
 #include <paps/core/triangle_mesh.h>
 #include <paps/core/xyz_file_reader.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_cloud_file_layout_test {
 
 namespace fs = std::filesystem;
 
@@ -565,4 +566,4 @@ TEST(CloudFileLayout, CommitTemporaryFileReplacesWholeOrLeavesAsItWas) {
   }
 }
 
-}  // namespace
+}  // namespace core_cloud_file_layout_test

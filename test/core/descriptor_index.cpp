@@ -15,7 +15,8 @@
 #include <paps/core/error.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_descriptor_index_test {
 
 std::vector<float> randomRows(std::size_t rows, std::size_t dims, std::uint64_t seed) {
   paps::Random rng(seed);
@@ -229,4 +230,4 @@ TEST(DescriptorIndex, BadParametersAreNamed) {
   }
 }
 
-}  // namespace
+}  // namespace core_descriptor_index_test

@@ -14,7 +14,8 @@
 
 #include <paps/core/interrupt_cleanup.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_interrupt_cleanup_test {
 
 namespace fs = std::filesystem;
 
@@ -73,4 +74,4 @@ TEST(InterruptCleanup, UnmarkedFilesAndForeignHandlersAreLeftAlone) {
   EXPECT_TRUE(fs::exists(own));
 }
 
-}  // namespace
+}  // namespace core_interrupt_cleanup_test

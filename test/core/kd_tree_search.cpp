@@ -15,7 +15,8 @@
 #include <paps/core/error.h>
 #include <paps/core/kd_tree_search.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_kd_tree_search_test {
 
 constexpr float kNaN = std::numeric_limits<float>::quiet_NaN();
 
@@ -182,4 +183,4 @@ TEST(KdTreeSearch, CorruptCoordinatesAreAnErrorOutOfThePclStage) {
   EXPECT_NO_THROW(search.setInputCloud(cloud));
 }
 
-}  // namespace
+}  // namespace core_kd_tree_search_test

@@ -12,7 +12,8 @@
 #include <paps/core/lasso_dictionary.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_lasso_dictionary_test {
 
 Eigen::MatrixXf randomMatrix(int rows, int cols, std::uint64_t seed) {
   paps::Random rng(seed);
@@ -166,4 +167,4 @@ TEST(LassoDictionary, BadParametersAndInputAreNamed) {
   EXPECT_TRUE(r.codes.allFinite());
 }
 
-}  // namespace
+}  // namespace core_lasso_dictionary_test

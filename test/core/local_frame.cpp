@@ -14,7 +14,8 @@
 #include <paps/core/spatial_order.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_local_frame_test {
 
 using paps::LocalFrame;
 using paps::LocalFrames;
@@ -558,8 +559,6 @@ TEST(LocalFrame, NaNNormalIsInvalid) {
   EXPECT_FALSE(f.valid());
 }
 
-}  // namespace
-
 // upwardSign: the propagation's rule for a whole group of oriented normals. A plate seen from
 // above, pointing down: flip; a closed sphere pointing in: flip (its top points down);
 // pointing out: keep; no upright normal and no side (a vertical band): keep.
@@ -620,3 +619,5 @@ TEST(TurnComponentsToHints, EachComponentTakesTheSideOfItsHints) {
     ASSERT_EQ(side < 0, i < n1) << i;
   }
 }
+
+}  // namespace core_local_frame_test

@@ -15,7 +15,8 @@
 #include <paps/core/local_probing_field.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_local_probing_field_test {
 
 using paps::LocalProbingAnalysis;
 using paps::LocalProbingParameters;
@@ -227,4 +228,4 @@ TEST(LocalProbingAnalysis, FieldsThatCannotFitAreRefused) {
   }
 }
 
-}  // namespace
+}  // namespace core_local_probing_field_test

@@ -18,7 +18,8 @@
 #include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_metrics_test {
 
 using paps::Positions;
 using paps::TriangleMesh;
@@ -411,4 +412,4 @@ TEST(TriangleMesh, LoadsRealPlyMesh) {
   EXPECT_LT(paps::pointToMeshError(p, d).max, 1e-5 * m.boundingBoxDiagonal());
 }
 
-}  // namespace
+}  // namespace core_metrics_test

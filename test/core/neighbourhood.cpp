@@ -22,7 +22,8 @@
 
 #include "../common/peak_allocation.h"
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_neighbourhood_test {
 
 using paps::NeighbourGraph;
 using paps::Positions;
@@ -658,10 +659,6 @@ TEST(BuildRadiusNeighbourhood, Errors) {
                paps::InvalidInput);
 }
 
-}  // namespace
-
-namespace {
-
 TEST(ExactDuplicateRepresentatives, FirstOccurrenceNaNAndSignedZero) {
   Positions p = {{1, 2, 3}, {0, 0, 0}, {1, 2, 3}, {kNaN, 0, 0}, {-0.f, 0, 0}, {1, 2, 3.0001f}, {1, 2, 3}};
   std::size_t dup = 99;
@@ -686,8 +683,6 @@ TEST(ExactDuplicateRepresentatives, EveryPointTwiceInShuffledOrder) {
   }
 }
 
-}  // namespace
-
 // The mean count over a spread sample: on a regular grid every interior ball at 1.01 spacings
 // holds 5 points (self and 4 neighbours), the corners 3 and the edges 4; the cap counts at most
 // that many per ball; non-finite points are not sampled.
@@ -707,3 +702,5 @@ TEST(SampledMeanNeighbourCount, KnownCountsOnAGrid) {
   const Positions none{Eigen::Vector3f::Constant(NAN)};
   EXPECT_EQ(paps::sampledMeanNeighbourCount(none, SpatialIndex(none), 1.f, 0), 0.0);
 }
+
+}  // namespace core_neighbourhood_test

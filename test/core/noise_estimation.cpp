@@ -14,7 +14,8 @@
 #include <paps/core/noise_estimation.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_noise_estimation_test {
 
 using paps::Positions;
 
@@ -158,4 +159,4 @@ TEST(EstimateNoiseLevel, BadInputGivesClearErrors) {
   EXPECT_GE(e.sigma, 0.f);
 }
 
-}  // namespace
+}  // namespace core_noise_estimation_test

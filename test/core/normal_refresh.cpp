@@ -11,7 +11,8 @@
 #include <paps/core/normal_refresh.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_normal_refresh_test {
 
 using paps::Normals;
 using paps::Positions;
@@ -180,4 +181,4 @@ TEST(NormalRefresh, BadParametersAreNamed) {
   EXPECT_EQ(paps::refreshNormals({}, 0.02f, {}, {}).refreshed, 0u);
 }
 
-}  // namespace
+}  // namespace core_normal_refresh_test

@@ -12,7 +12,8 @@
 #include <paps/core/plane_height_patch.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_plane_height_patch_test {
 
 using paps::LocalFrame;
 using paps::PlaneHeightPatch;
@@ -351,4 +352,4 @@ TEST(PlaneHeightPatch, OnlyTheListedNeighboursCount) {
   for (float x : both.heights) EXPECT_NEAR(x, 0.5f, 1e-5f);
 }
 
-}  // namespace
+}  // namespace core_plane_height_patch_test

@@ -8,7 +8,9 @@
 #include <paps/core/poisson_disk_sampling.h>
 #include <paps/core/random.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_poisson_disk_sampling_test {
+
 paps::Positions unitSquare(int n, std::uint64_t seed) {
   paps::Random rng(seed);
   paps::Positions p(n);
@@ -18,7 +20,6 @@ paps::Positions unitSquare(int n, std::uint64_t seed) {
   }
   return p;
 }
-}  // namespace
 
 TEST(PoissonDiskSubset, IsSeparatedAndCovering) {
   const paps::Positions pts = unitSquare(20000, 1);
@@ -62,3 +63,5 @@ TEST(PoissonDiskSubsetOrdered, KeepsPreferredPointsFirst) {
   const auto k = paps::poissonDiskSubsetOrdered(pts, 0.1f, {1.f, 0.f, 0.f});
   EXPECT_EQ(k, (std::vector<int>{1, 2}));
 }
+
+}  // namespace core_poisson_disk_sampling_test

@@ -7,9 +7,10 @@
 #include <paps/core/quadric_height_patch.h>
 #include <paps/core/random.h>
 
-using namespace paps;
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_quadric_height_patch_test {
 
-namespace {
+using namespace paps;
 
 // Points of z = f(x, y) on a jittered grid of half-width h around the origin.
 template <typename F>
@@ -30,8 +31,6 @@ std::vector<int> all(const Positions& p) {
   for (std::size_t i = 0; i < v.size(); ++i) v[i] = static_cast<int>(i);
   return v;
 }
-
-}  // namespace
 
 TEST(QuadricFit, ParaboloidCurvatures) {
   // z = (3 x^2 + 1 y^2) / 2: k1 = 3, k2 = 1 at the apex, t1 along x.
@@ -159,3 +158,5 @@ TEST(QuadricFit, ConditioningSeparatesDiscsFromLines) {
   Positions few = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.01f, 0}};
   EXPECT_EQ(fit(few, 0.1f).conditioning, 0.f);
 }
+
+}  // namespace core_quadric_height_patch_test

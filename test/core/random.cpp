@@ -12,7 +12,8 @@
 #include <string>
 #include <vector>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_random_test {
 
 TEST(Random, TheStreamIsSplitMix64) {
   // SplitMix64's published first output for the state 0.
@@ -172,4 +173,4 @@ TEST(Random, NoUnsequencedDrawsInTheTree) {
   EXPECT_EQ(found.str(), "") << "draw into named variables, one statement each (paps/core/random.h)";
 }
 
-}  // namespace
+}  // namespace core_random_test

@@ -7,7 +7,8 @@
 #include <paps/core/random.h>
 #include <paps/core/sparse_coding.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_sparse_coding_test {
 
 Eigen::MatrixXf randomDictionary(int k, int d, std::uint64_t seed) {
   paps::Random rng(seed);
@@ -31,8 +32,6 @@ Eigen::MatrixXf sparseSignals(const Eigen::MatrixXf& D, int n, int t, std::uint6
     }
   return Y;
 }
-
-}  // namespace
 
 TEST(OrthogonalMatchingPursuit, RecoversAnExactSparseCombination) {
   const Eigen::MatrixXf D = randomDictionary(64, 32, 1);
@@ -108,3 +107,5 @@ TEST(KSvd, RejectsAbsurdParameters) {
   for (int j = 0; j < 4; ++j) EXPECT_NEAR(r.dictionary.col(j).norm(), 1.f, 1e-4f);
   EXPECT_LT(r.rmse.back(), 1e-4);
 }
+
+}  // namespace core_sparse_coding_test

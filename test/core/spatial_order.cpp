@@ -11,7 +11,8 @@
 #include <paps/core/random.h>
 #include <paps/core/spatial_order.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_spatial_order_test {
 
 using paps::Positions;
 
@@ -137,4 +138,4 @@ TEST(SpatialOrder, EdgeCases) {
   EXPECT_EQ(paps::gathered(std::vector<int>{10, 20, 30}, {2, 0}), (std::vector<int>{30, 10}));
 }
 
-}  // namespace
+}  // namespace core_spatial_order_test

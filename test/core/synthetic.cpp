@@ -11,7 +11,8 @@
 #include <paps/core/error.h>
 #include <paps/core/synthetic.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_synthetic_test {
 
 using paps::Positions;
 using paps::TriangleMesh;
@@ -296,8 +297,6 @@ TEST(Outliers, CountIndicesAndBox) {
   EXPECT_THROW(syn::addOutliers(q, 1.5f, 8), paps::InvalidParameter);
 }
 
-}  // namespace
-
 // The scan-line pass: one line per degree of elevation, one return per azimuth step, each
 // stored `copies` times; returns lie on the ground within the range noise projected on the
 // vertical; the sector mesh lies on the ground and has the area of its annular sector.
@@ -338,3 +337,5 @@ TEST(ScanLinePass, CountsGeometryAndSectorMesh) {
   pass = {};
   EXPECT_THROW(syn::wavyGroundSector(pass, 5.f), paps::InvalidParameter);
 }
+
+}  // namespace core_synthetic_test

@@ -7,7 +7,8 @@
 #include <paps/core/error.h>
 #include <paps/core/thread_count.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_thread_count_test {
 
 int threadsOfARegion() {
   int n = 0;
@@ -49,4 +50,4 @@ TEST(ThreadCount, OptionRejectsAbsurdCounts) {
   EXPECT_EQ(o.getNumberOfThreads(), 2u);
 }
 
-}  // namespace
+}  // namespace core_thread_count_test

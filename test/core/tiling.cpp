@@ -16,7 +16,8 @@
 #include <paps/core/spatial_order.h>
 #include <paps/core/tiling.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace core_tiling_test {
 
 using paps::Positions;
 
@@ -257,8 +258,6 @@ TEST(Tiling, EdgeCasesAndErrors) {
                paps::InvalidInput);
 }
 
-}  // namespace
-
 // pointsAroundTile: the finite points of another scan inside the tile's core box grown by the
 // margin, in increasing order; tileProgress (partProgress) prefixes the stage names and passes
 // the answer on.
@@ -371,3 +370,5 @@ TEST(Tiling, TileSharesCarryOverTilesWithoutSurface) {
   EXPECT_EQ(d.go({0, 5}), (std::vector<std::size_t>{1}));  // a tile with nothing to make is not run
   EXPECT_EQ(d.calls.size(), 1u);
 }
+
+}  // namespace core_tiling_test

@@ -19,7 +19,8 @@
 
 #include "../common/peak_allocation.h"
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace features_wavejet_estimation_test {
 
 using paps::Positions;
 using HeightFn = std::function<double(double, double)>;
@@ -877,9 +878,6 @@ TEST(Wavejet, IntegralInvariantOfParaboloid) {
   EXPECT_NEAR(c.integralInvariant(0, 0.5f).real(), 0.2 * std::pow(0.5, 4) / 4, 1e-5);
 }
 
-}  // namespace
-
-namespace {
 TEST(Wavejet, OrderSelectionUnderNoise) {
   // Noisy paraboloid: GCV picks order 2 and the curvature error drops; on clean data with
   // quartic content the full order stays.
@@ -1218,9 +1216,6 @@ TEST(WavejetEstimation, NarrowingInThePclClassWithWideningAlways) {
   EXPECT_TRUE(out.is_dense);
 }
 
-}  // namespace
-
-namespace {
 // The same floats (NaN equal to NaN), field by field: a tile must give the one-piece bits.
 bool sameBits(const paps::WavejetResult& a, const paps::WavejetResult& b) {
   auto same = [](const auto& x, const auto& y) { return std::memcmp(&x, &y, sizeof(x)) == 0; };
@@ -1230,7 +1225,6 @@ bool sameBits(const paps::WavejetResult& a, const paps::WavejetResult& b) {
          same(a.radius, b.radius) && a.fits == b.fits && same(a.residual, b.residual) &&
          a.converged == b.converged && a.tilt_within_noise == b.tilt_within_noise;
 }
-}  // namespace
 
 // WavejetParameters::max_tile_points: a cloud fitted in tiles gets the one-piece outputs bit
 // for bit, coefficients and report included: on a sphere of uneven density stored twice (the
@@ -1294,3 +1288,5 @@ TEST(WavejetEstimation, TiledFitsAreTheOnePieceFits) {
     }
   }
 }
+
+}  // namespace features_wavejet_estimation_test

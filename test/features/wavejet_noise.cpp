@@ -15,7 +15,8 @@
 #include <paps/features/wavejet_estimation.h>
 #include <paps/features/wavejet_noise.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace features_wavejet_noise_test {
 
 using paps::Normals;
 using paps::Positions;
@@ -251,4 +252,4 @@ TEST(WavejetNoise, BadInputThrows) {
   EXPECT_THROW(paps::wavejetResidualNoise(none, empty, 0.1f, paps::WavejetParameters(), 50), paps::InvalidInput);
 }
 
-}  // namespace
+}  // namespace features_wavejet_noise_test

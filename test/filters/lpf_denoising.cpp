@@ -25,7 +25,8 @@
 
 #include "filter_test_support.h"
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace filters_lpf_denoising_test {
 
 using namespace paps::test;
 
@@ -507,4 +508,4 @@ TEST(LpfDenoising, ProgressCancels) {
                paps::Cancelled);
 }
 
-}  // namespace
+}  // namespace filters_lpf_denoising_test

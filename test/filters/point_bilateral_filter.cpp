@@ -24,7 +24,8 @@
 
 #include "filter_test_support.h"
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace filters_point_bilateral_filter_test {
 
 using namespace paps::test;
 
@@ -32,7 +33,6 @@ using paps::PointBilateralFilter;
 using paps::PointBilateralParameters;
 using paps::PointBilateralReport;
 using paps::Positions;
-
 
 Positions smallSphere(std::size_t count = 3000) { return noisySphere(count, 0.0025f, 5); }
 
@@ -384,4 +384,4 @@ TEST(PointBilateralFilter, ProgressCancels) {
                paps::Cancelled);
 }
 
-}  // namespace
+}  // namespace filters_point_bilateral_filter_test

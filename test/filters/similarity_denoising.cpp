@@ -26,7 +26,8 @@
 
 #include "filter_test_support.h"
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace filters_similarity_denoising_test {
 
 using namespace paps::test;
 
@@ -34,7 +35,6 @@ using paps::Positions;
 using paps::SimilarityDenoising;
 using paps::SimilarityDenoisingParameters;
 using paps::SimilarityDenoisingReport;
-
 
 /// Engraved plane of side 1 (wavelength 0.1, amplitude 0.01) sampled with `count` points
 /// and Gaussian noise of `noise` x the bounding-box diagonal.
@@ -780,8 +780,6 @@ TEST(SimilarityDenoising, ProgressReachesTheEndAndCancels) {
                paps::Cancelled);
 }
 
-}  // namespace
-
 TEST(SimilarityDenoising, SensorOriginOrientsNormals) {
   // A cloud that carries its sensor origin is processed as if that viewpoint had been given.
   const Positions p = smallNoisyPlane(1500);
@@ -801,3 +799,5 @@ TEST(SimilarityDenoising, SensorOriginOrientsNormals) {
   for (std::size_t i = 0; i < p.size(); ++i) differ += !sameBits(propagated[i], expected[i]);
   EXPECT_GT(differ, 0u);
 }
+
+}  // namespace filters_similarity_denoising_test

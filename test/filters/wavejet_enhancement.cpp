@@ -10,7 +10,8 @@
 
 #include "filter_test_support.h"
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace filters_wavejet_enhancement_test {
 
 using paps::Positions;
 
@@ -311,14 +312,10 @@ TEST(WavejetEnhancement, BadParameters) {
   EXPECT_THROW(paps::enhancePositions(bumps(100, 0.01, 1), params), paps::InvalidParameter);
 }
 
-}  // namespace
-
 // The bad-input contract shared with the other position filters (filter_test_support.h), on
 // the default stage (projection on the Wavejet surface, automatic radius).
-namespace {
 using namespace paps::test;
 Positions noisyBumps(int count) { return bumps(count, 0.02, 12, 0.002); }
-}  // namespace
 
 TEST(WavejetEnhancement, EmptyAndAllNaNAreInvalidInput) {
   paps::WavejetEnhancement<pcl::PointXYZ> f;
@@ -336,3 +333,5 @@ TEST(WavejetEnhancement, DenseStaysDenseAndColoursKept) {
 TEST(WavejetEnhancement, IndexOutOfRangeIsRejected) {
   expectIndexOutOfRangeIsRejected<paps::WavejetEnhancement>(noisyBumps(500));
 }
+
+}  // namespace filters_wavejet_enhancement_test

@@ -5,7 +5,8 @@
 #include <paps/fusion/point_visibility.h>
 #include <paps/fusion/synthetic_street.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_camera_model_test {
 
 paps::CameraIntrinsics distortedCamera() {
   paps::CameraIntrinsics c = paps::CameraIntrinsics::fromFieldOfView(320, 240, 70);
@@ -142,4 +143,4 @@ TEST(SyntheticStreet, ScanAndPhotoAgreeOnShadowsAndGeometry) {
   EXPECT_GT(double(agree) / checked, 0.95);  // the rest: shadow edges under cornices, a pixel wide
 }
 
-}  // namespace
+}  // namespace fusion_camera_model_test

@@ -1,7 +1,7 @@
 // libFuzzer target: paps::parsePhotoList must parse any text or reject it with paps::Error
 // (never crash, hang or allocate without bound), and what it accepts must survive a write and
 // a read unchanged. Built and run by `scripts/fuzz.sh photo_list`; crash inputs land in
-// test/fusion/photo_list_corpus, which test_fusion_photo_list replays in CI.
+// test/fusion/photo_list_corpus, which test_fusion (the photo list tests) replays in CI.
 #include <cstddef>
 #include <cstdint>
 #include <cstdlib>

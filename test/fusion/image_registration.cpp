@@ -5,7 +5,8 @@
 #include <paps/fusion/image_registration.h>
 #include <paps/fusion/synthetic_street.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_image_registration_test {
 
 struct Street {
   paps::synthetic::StreetScene scene;
@@ -124,4 +125,4 @@ TEST(ImageRegistration, BadInputThrowsAndCancelStops) {
   EXPECT_THROW(reg.align(), paps::InvalidInput);
 }
 
-}  // namespace
+}  // namespace fusion_image_registration_test

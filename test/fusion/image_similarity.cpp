@@ -8,7 +8,8 @@
 #include <paps/core/random.h>
 #include <paps/fusion/image_similarity.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_image_similarity_test {
 
 // A textured test image: rectangles of several grey levels on a gradient.
 cv::Mat pattern(int w = 160, int h = 120) {
@@ -138,4 +139,4 @@ TEST(ImageSimilarity, BadInputThrows) {
                paps::InvalidInput);
 }
 
-}  // namespace
+}  // namespace fusion_image_similarity_test

@@ -12,7 +12,8 @@
 #include <paps/core/random.h>
 #include <paps/fusion/organized_cloud_camera.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_organized_cloud_camera_test {
 
 using paps::CameraIntrinsics;
 using paps::CameraPose;
@@ -244,4 +245,4 @@ TEST(OrganizedCloudCamera, RealKinectFrame) {
   EXPECT_LT(r.fit.pose.linear()(1, 1), -0.9999);  // y and z flipped: the grabber's frame
 }
 
-}  // namespace
+}  // namespace fusion_organized_cloud_camera_test

@@ -7,7 +7,8 @@
 #include <paps/core/error.h>
 #include <paps/fusion/photo_list.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_photo_list_test {
 
 paps::PhotoListEntry entry(const std::string& image, double x) {
   paps::PhotoListEntry e;
@@ -97,4 +98,4 @@ TEST(PhotoList, FuzzCorpusReplays) {
   EXPECT_GT(files, 0);
 }
 
-}  // namespace
+}  // namespace fusion_photo_list_test

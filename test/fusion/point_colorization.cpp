@@ -12,7 +12,8 @@
 #include <paps/fusion/point_colorization.h>
 #include <paps/fusion/synthetic_street.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_point_colorization_test {
 
 using paps::CameraIntrinsics;
 using paps::CameraPose;
@@ -343,4 +344,4 @@ TEST(PointColorization, SameOutputWithOneAndTwoThreads) {
     ASSERT_EQ(outputs[0][i].rgba, outputs[1][i].rgba) << "point " << i;
 }
 
-}  // namespace
+}  // namespace fusion_point_colorization_test

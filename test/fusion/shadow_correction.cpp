@@ -12,7 +12,8 @@
 #include <paps/fusion/shadow_correction.h>
 #include <paps/fusion/synthetic_street.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_shadow_correction_test {
 
 using Cloud = pcl::PointCloud<pcl::PointXYZRGBNormal>;
 
@@ -219,4 +220,4 @@ TEST(ShadowCorrection, BadInputThrows) {
   bad([](auto& q) { q.estimation_neighbours = 100000; });
 }
 
-}  // namespace
+}  // namespace fusion_shadow_correction_test

@@ -13,7 +13,8 @@
 #include <paps/fusion/shadow_detection.h>
 #include <paps/fusion/synthetic_street.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_shadow_detection_test {
 
 using Cloud = pcl::PointCloud<pcl::PointXYZRGBNormal>;
 
@@ -296,4 +297,4 @@ TEST(ShadowDetection, BadInputThrows) {
   bad([](auto& q) { q.max_graph_cut_pixels = 0; });
 }
 
-}  // namespace
+}  // namespace fusion_shadow_detection_test

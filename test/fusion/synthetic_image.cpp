@@ -3,7 +3,8 @@
 #include <paps/core/error.h>
 #include <paps/fusion/synthetic_image.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace fusion_synthetic_image_test {
 
 // A square plate of side 2 m at 5 m in front of the camera, sampled every `step` metres.
 paps::Positions plate(float step) {
@@ -66,4 +67,4 @@ TEST(SyntheticImage, BadInputThrows) {
   EXPECT_EQ(cv::countNonZero(away.mask), 0);
 }
 
-}  // namespace
+}  // namespace fusion_synthetic_image_test

@@ -19,7 +19,8 @@
 #include <paps/surface/lpf_resampling.h>
 #include <paps/surface/mls_upsampling.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace surface_lpf_resampling_test {
 
 using paps::LpfResamplingParameters;
 using paps::LpfResamplingReport;
@@ -231,9 +232,6 @@ TEST(LpfResampling, BadInputAndParametersAreNamed) {
   EXPECT_THROW(stage.setUpsamplingFactor(1000.f), paps::InvalidParameter);
 }
 
-}  // namespace
-
-namespace {
 // Distance of each point to its nearest other point, sorted.
 std::vector<float> sortedNearestDistances(const Positions& a) {
   const paps::SpatialIndex index(a);
@@ -246,7 +244,6 @@ std::vector<float> sortedNearestDistances(const Positions& a) {
   std::sort(d.begin(), d.end());
   return d;
 }
-}  // namespace
 
 // Tiles (max_tile_points): the pattern radius is the whole cloud's, the output as dense and as
 // close to the plate and wires as in one piece, and the consensus runs on across the seams:
@@ -321,3 +318,5 @@ TEST(LpfResampling, TileParametersAreChecked) {
   p.tile_margin = 10.f;
   p.validate();
 }
+
+}  // namespace surface_lpf_resampling_test

@@ -17,9 +17,11 @@
 
 #include "../common/peak_allocation.h"
 
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace surface_mls_upsampling_test {
+
 using namespace paps;
 
-namespace {
 Positions spherePoints(std::size_t n, float r, std::uint64_t seed) {
   Random rng(seed);
   Positions p;
@@ -60,7 +62,6 @@ Positions seedsWithThreads(int threads, const Positions& pts, const Normals& nor
   omp_set_num_threads(before);
   return s;
 }
-}  // namespace
 
 TEST(MlsUpsampling, ApssLandsOnSphere) {
   const Positions in = spherePoints(3000, 1.f, 1);
@@ -748,7 +749,6 @@ TEST(MlsUpsampling, NormalsAreTheFittedSurfacesOnASphere) {
   for (const auto& q : seen) ASSERT_LT(q.getNormalVector3fMap().dot(q.getVector3fMap()), 0.f) << q;
 }
 
-namespace {
 // Distance from each point of `truth` to its nearest point of `out`, sorted: where the output
 // leaves holes (a seam between tiles left uncovered), the upper quantiles grow.
 std::vector<float> coverageDistances(const Positions& truth, const Positions& out) {
@@ -765,7 +765,6 @@ std::vector<float> coverageDistances(const Positions& truth, const Positions& ou
 float quantile(const std::vector<float>& sorted, double q) {
   return sorted[static_cast<std::size_t>(q * static_cast<double>(sorted.size() - 1))];
 }
-}  // namespace
 
 // Tiles (max_tile_points): the kernel support is the whole cloud's, the seed disc within 2% of
 // it (a spread sample's mean count instead of every list's), the output count the one-piece
@@ -981,3 +980,5 @@ TEST(MlsUpsampling, SeedsKeepTheirDistanceFromSeedsKeptBefore) {
   const Positions none;
   EXPECT_EQ(upsamplingSeeds(right, nr, 3 * right.size(), disc, 2, nullptr, nullptr, 0.f, nullptr, &none), alone);
 }
+
+}  // namespace surface_mls_upsampling_test

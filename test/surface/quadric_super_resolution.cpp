@@ -22,9 +22,11 @@
 #include <paps/surface/mls_upsampling.h>
 #include <paps/surface/quadric_super_resolution.h>
 
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace surface_quadric_super_resolution_test {
+
 using namespace paps;
 
-namespace {
 // Points away from the border of the square (seeds there overshoot the edge of the shape).
 Positions interior(const Positions& p) {
   Positions o;
@@ -39,7 +41,6 @@ struct Case {
 double surfaceError(const Positions& out, const TriangleMesh& mesh) {
   return pointToMeshError(interior(out), PointToMeshDistance(mesh)).rmse;
 }
-}  // namespace
 
 TEST(QuadricSuperResolution, BeatsPlainInterpolationOnEngravedPlane) {
   Case c;
@@ -653,11 +654,9 @@ TEST(QuadricSuperResolution, NoiseParametersBadValuesAndTinyClouds) {
   }
 }
 
-namespace {
 // The default pass of paps::synthetic (2 to 7 cm along a line, 9 cm to 0.9 m across, every
 // return stored twice, 5 mm range noise).
 Positions scanLineGround() { return synthetic::scanLinePass({}, 5); }
-}  // namespace
 
 // On scan lines the balls along one or two lines are too thin for a quadric: their fits are
 // remade on a support reaching the next lines, and their seeds stay nearer the returns (half
@@ -755,7 +754,6 @@ TEST(QuadricSuperResolution, ScanLinesAreFittedAcrossTheLines) {
   EXPECT_NO_THROW(bad.validate());
 }
 
-namespace {
 // A uniform point of the unit sphere's upper (z > 0) or lower half.
 Eigen::Vector3f onUnitHemisphere(Random& rng, bool upper) {
   for (;;) {
@@ -764,8 +762,6 @@ Eigen::Vector3f onUnitHemisphere(Random& rng, bool upper) {
     if ((v.z() > 0) == upper) return v;
   }
 }
-
-}  // namespace
 
 // A sphere whose lower half is sampled 10x more sparsely than its upper half, every point stored
 // twice: at the radius chosen on the dense half, the sparse half's balls hold too few distinct
@@ -843,7 +839,6 @@ TEST(QuadricSuperResolution, PilesOfCopiesAreWidenedToo) {
   // and keep their plane).
   EXPECT_GT(r_on.widened_fits, r_off.ill_posed_fits / 2);
 }
-
 
 // The output normals are the SR surface's: on the engraved plane they follow the relief (the
 // quadrics' slopes plus those of the SR heights), not just the base plane; one orientation;
@@ -950,7 +945,6 @@ TEST(QuadricSuperResolution, NormalsFollowTheRelief) {
   for (std::size_t i = 0; i < out.size(); ++i) ASSERT_GT(cloud_out[i].normal_z, 0.f) << i;
 }
 
-namespace {
 // Nearest-neighbour distance of every point to the others, sorted.
 std::vector<float> spacingsOf(const Positions& p) {
   const SpatialIndex index(p);
@@ -964,7 +958,6 @@ std::vector<float> spacingsOf(const Positions& p) {
   std::sort(s.begin(), s.end());
   return s;
 }
-}  // namespace
 
 // Tiles (max_tile_points): the radius, the noise and the denoising decision are the whole
 // scan's, the output count is the one-piece count, and the output is as close to the surface,
@@ -1135,3 +1128,5 @@ TEST(QuadricSuperResolution, TileParametersAreChecked) {
   p.tile_margin = 11.f;
   EXPECT_THROW(p.validate(), InvalidParameter);
 }
+
+}  // namespace surface_quadric_super_resolution_test

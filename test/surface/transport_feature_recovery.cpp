@@ -17,7 +17,8 @@
 #include <paps/core/synthetic.h>
 #include <paps/surface/transport_feature_recovery.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace surface_transport_feature_recovery_test {
 
 using paps::TriangleMesh;
 
@@ -136,4 +137,4 @@ TEST(TransportFeatureRecovery, RejectsBadInput) {
   EXPECT_THROW(stage.process(out), paps::InvalidInput);  // no mesh, no cloud
 }
 
-}  // namespace
+}  // namespace surface_transport_feature_recovery_test

@@ -14,7 +14,8 @@
 #include <paps/core/random.h>
 #include <paps/surface/transport_plan.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace surface_transport_plan_test {
 
 using Eigen::Vector3d;
 using paps::TransportPlan;
@@ -334,4 +335,4 @@ TEST(TransportPlan, RejectsBadInput) {
   EXPECT_THROW(empty.assignToNearestVertices(), paps::InvalidInput);  // no vertex
 }
 
-}  // namespace
+}  // namespace surface_transport_plan_test

@@ -24,7 +24,8 @@
 #include <paps/core/synthetic.h>
 #include <paps/surface/transport_reconstruction.h>
 
-namespace {
+// Named, not anonymous: the module's test files are compiled as one unit (unity build).
+namespace surface_transport_reconstruction_test {
 
 using paps::TriangleMesh;
 
@@ -419,4 +420,4 @@ TEST(TransportReconstruction, RejectsBadInput) {
   EXPECT_THROW(stage.reconstruct(mesh), paps::InvalidInput);
 }
 
-}  // namespace
+}  // namespace surface_transport_reconstruction_test

@@ -3,7 +3,7 @@
 set -euo pipefail
 SUDO=""
 [ "$(id -u)" -eq 0 ] || SUDO="sudo"
-PKGS=(cmake g++ make pkg-config libpcl-dev libeigen3-dev libflann-dev libboost-dev
+PKGS=(cmake g++ make ninja-build pkg-config libpcl-dev libeigen3-dev libflann-dev libboost-dev
       libgtest-dev libzstd-dev liblzma-dev libcgal-dev draco libdraco-dev clang
       libclang-rt-14-dev coinor-libclp-dev libopencv-dev libnlopt-dev)
 missing=()

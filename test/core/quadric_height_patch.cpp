@@ -4,6 +4,9 @@
 #include <cmath>
 #include <vector>
 
+#include <Eigen/SVD>
+
+#include <paps/core/irls.h>
 #include <paps/core/quadric_height_patch.h>
 #include <paps/core/random.h>
 
@@ -157,6 +160,43 @@ TEST(QuadricFit, ConditioningSeparatesDiscsFromLines) {
   // Stopped before the regression: 0.
   Positions few = {{0, 0, 0}, {0.01f, 0, 0}, {0, 0.01f, 0}};
   EXPECT_EQ(fit(few, 0.1f).conditioning, 0.f);
+}
+
+// solveIrlsL1: a full-rank system is solved exactly, and the l1 passes shrug off a gross
+// outlier that plain least squares follows; a rank-deficient one reports false and gives the
+// minimum-norm least-squares solution (the pseudo-inverse's, computed here by SVD).
+TEST(IrlsL1, ExactRobustAndMinimumNormWhenSingular) {
+  Random rng(11);
+  const int n = 40;
+  Eigen::Matrix<double, Eigen::Dynamic, 3> A(n, 3);
+  for (int i = 0; i < n; ++i) {
+    A(i, 0) = rng.uniform(-1, 1);
+    A(i, 1) = rng.uniform(-1, 1);
+    A(i, 2) = 1;
+  }
+  const Eigen::Vector3d truth(0.5, -2.0, 0.25);
+  Eigen::VectorXd b = A * truth;
+  const Eigen::VectorXd w = Eigen::VectorXd::Ones(n);
+  Eigen::Matrix<double, 3, 1> x;
+  ASSERT_TRUE(solveIrlsL1<3>(A, b, w, 0, 1e-4, x));
+  EXPECT_LT((x - truth).norm(), 1e-10);
+  b[7] += 50;  // one gross outlier
+  Eigen::Matrix<double, 3, 1> plain, robust;
+  ASSERT_TRUE(solveIrlsL1<3>(A, b, w, 0, 1e-4, plain));
+  ASSERT_TRUE(solveIrlsL1<3>(A, b, w, 20, 1e-6, robust));
+  EXPECT_GT((plain - truth).norm(), 0.5);
+  EXPECT_LT((robust - truth).norm(), 1e-3);
+  // Third column = first + second: rank 2.
+  Eigen::Matrix<double, Eigen::Dynamic, 3> S = A;
+  S.col(2) = A.col(0) + A.col(1);
+  const Eigen::VectorXd c = S * truth;
+  Eigen::Matrix<double, 3, 1> xs;
+  EXPECT_FALSE(solveIrlsL1<3>(S, c, w, 3, 1e-4, xs));
+  const Eigen::MatrixXd Sd = S;
+  const Eigen::Vector3d min_norm = Sd.jacobiSvd(Eigen::ComputeThinU | Eigen::ComputeThinV).solve(c);
+  EXPECT_LT((xs - min_norm).norm(), 1e-8 * min_norm.norm());
+  EXPECT_LT((S * xs - c).norm(), 1e-8 * c.norm());
+  EXPECT_GT((xs - truth).norm(), 0.1);  // the data cannot tell truth from the minimum-norm answer
 }
 
 }  // namespace core_quadric_height_patch_test

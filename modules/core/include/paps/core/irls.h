@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
 
 namespace paps {
 
@@ -31,7 +32,15 @@ bool solveIrlsL1(const Eigen::Matrix<double, Eigen::Dynamic, M>& A, const Eigen:
     const double scale = N.diagonal().cwiseAbs().maxCoeff();
     if (ldlt.info() != Eigen::Success || !(scale > 0) ||
         ldlt.vectorD().cwiseAbs().minCoeff() < 1e-12 * scale) {
-      x = N.completeOrthogonalDecomposition().solve(r);
+      // Minimum-norm least squares through the eigen decomposition of the symmetric N:
+      // the complete orthogonal decomposition gives the same x, and its fixed-size
+      // instantiation doubled the compile time of the file that includes this header.
+      const Eigen::SelfAdjointEigenSolver<Eigen::Matrix<double, M, M>> es(N);
+      const auto& lambda = es.eigenvalues();
+      const double cut = 1e-12 * lambda.cwiseAbs().maxCoeff();
+      Eigen::Matrix<double, M, 1> y = es.eigenvectors().transpose() * r;
+      for (int k = 0; k < M; ++k) y[k] = std::abs(lambda[k]) > cut ? y[k] / lambda[k] : 0.0;
+      x = es.eigenvectors() * y;
       ok = false;
       break;
     }

@@ -173,4 +173,35 @@ TEST(Random, NoUnsequencedDrawsInTheTree) {
   EXPECT_EQ(found.str(), "") << "draw into named variables, one statement each (paps/core/random.h)";
 }
 
+// The unity build of the tests (PAPS_UNITY_TESTS) compiles a module's test files a few at a
+// time as one unit: each file keeps its helpers in a namespace of its own,
+// <module>_<file>_test, never in an anonymous one, where a helper of another file in the
+// batch would clash with its own or be called in its place.
+TEST(SourceTree, EveryTestFileNamesItsOwnNamespace) {
+  namespace fs = std::filesystem;
+  std::size_t files = 0;
+  std::ostringstream found;
+  for (const std::string module : {"core", "filters", "features", "surface", "compression", "fusion"}) {
+    for (const auto& entry : fs::directory_iterator(fs::path(PAPS_SOURCE_DIR) / "test" / module)) {
+      const std::string stem = entry.path().stem().string();
+      if (!entry.is_regular_file() || entry.path().extension() != ".cpp" || stem.rfind("fuzz_", 0) == 0) continue;
+      std::ifstream in(entry.path(), std::ios::binary);
+      std::stringstream text;
+      text << in.rdbuf();
+      const std::string code = blankCommentsAndLiterals(text.str());
+      ++files;
+      const std::string where = "test/" + module + "/" + stem + ".cpp";
+      if (code.find("namespace " + module + "_" + stem + "_test {") == std::string::npos)
+        found << where << ": no namespace " << module << "_" << stem << "_test\n";
+      for (std::size_t at = code.find("namespace"); at != std::string::npos; at = code.find("namespace", at + 1)) {
+        std::size_t k = at + 9;
+        while (k < code.size() && std::isspace(static_cast<unsigned char>(code[k]))) ++k;
+        if (k < code.size() && code[k] == '{') found << where << ": an anonymous namespace\n";
+      }
+    }
+  }
+  EXPECT_GT(files, 40u);
+  EXPECT_EQ(found.str(), "");
+}
+
 }  // namespace core_random_test

@@ -149,6 +149,13 @@ TEST(Random, TheTreeCheckFlagsUnsequencedDrawsOnly) {
   EXPECT_EQ(unsequencedDrawLines("a();\nb();\np.emplace_back(rng.uniform(),\n rng.uniform());"), std::vector<int>{3});
 }
 
+std::string fileText(const std::filesystem::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
 TEST(Random, NoUnsequencedDrawsInTheTree) {
   // docs/examples draw from std distributions, whose values differ between standard
   // libraries anyway, and are left as a user would write them.
@@ -161,11 +168,8 @@ TEST(Random, NoUnsequencedDrawsInTheTree) {
       if (!entry.is_regular_file() || (ext != ".cpp" && ext != ".hpp" && ext != ".h")) continue;
       const std::string relative = fs::relative(entry.path(), PAPS_SOURCE_DIR).generic_string();
       if (relative == "test/core/random.cpp") continue;  // this file's own examples
-      std::ifstream in(entry.path(), std::ios::binary);
-      std::stringstream text;
-      text << in.rdbuf();
       ++files;
-      for (int l : unsequencedDrawLines(text.str()))
+      for (int l : unsequencedDrawLines(fileText(entry.path())))
         found << relative << ":" << l << "\n";
     }
   }
@@ -185,10 +189,7 @@ TEST(SourceTree, EveryTestFileNamesItsOwnNamespace) {
     for (const auto& entry : fs::directory_iterator(fs::path(PAPS_SOURCE_DIR) / "test" / module)) {
       const std::string stem = entry.path().stem().string();
       if (!entry.is_regular_file() || entry.path().extension() != ".cpp" || stem.rfind("fuzz_", 0) == 0) continue;
-      std::ifstream in(entry.path(), std::ios::binary);
-      std::stringstream text;
-      text << in.rdbuf();
-      const std::string code = blankCommentsAndLiterals(text.str());
+      const std::string code = blankCommentsAndLiterals(fileText(entry.path()));
       ++files;
       const std::string where = "test/" + module + "/" + stem + ".cpp";
       if (code.find("namespace " + module + "_" + stem + "_test {") == std::string::npos)

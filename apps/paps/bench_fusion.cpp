@@ -29,6 +29,7 @@
 #include <pcl/io/pcd_io.h>
 #include <pcl/point_types.h>
 
+#include <paps/core/error.h>
 #include <paps/core/random.h>
 #include <paps/fusion/image_registration.h>
 #include <paps/fusion/organized_cloud_camera.h>
@@ -341,6 +342,7 @@ int benchRegistrationRgbd(bool quick, const std::string& path, const std::string
     cv::hconcat(grey, synthetic, both);
     const std::string file = out_dir + "/kinect_photo_and_shading.png";
     if (cv::imwrite(file, both)) std::printf("wrote %s (the photo; the cloud's shading, light from above, at the true pose)\n", file.c_str());
+    else std::fprintf(stderr, "could not write %s\n", file.c_str());
   }
   std::printf("%-24s %-12s %8s %8s %8s %8s %10s %8s %10s\n", "method", "modality", "mean px", "std px", "median",
               "success", "remaining", "time s", "colour RMS");
@@ -426,6 +428,14 @@ int runBenchFusion(int argc, char** argv) {
     }
   }
   if (rgbd_path == "none") rgbd = false;
+  // Made before the parts run (they take minutes): the renders were lost when DIR was new.
+  if (!out_dir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(out_dir, ec);
+    if (ec || !std::filesystem::is_directory(out_dir))
+      throw IoError("bench fusion: cannot create the output folder " + out_dir + " (" +
+                    (ec ? ec.message() : std::string("a file of that name exists")) + ")");
+  }
   if (rgbd && !rgbd_given && !std::filesystem::exists(rgbd_path)) {
     std::printf("(real RGB-D part skipped: no %s; scripts/fetch_samples.sh fetches it)\n", rgbd_path.c_str());
     rgbd = false;

@@ -62,6 +62,25 @@ TEST(CameraModel, ScaledAndWidenedKeepTheRays) {
   EXPECT_NEAR(w.x(), a.x() + 30, 1e-9);
 }
 
+// A size that falls between pixels is rounded, and the lens follows the rounded size, so the
+// camera fits the image resized to exactly that size: 322 x 242 at 1/4 is 81 x 61 (80.5 and
+// 60.5 rounded up), each axis scaled by its own ratio.
+TEST(CameraModel, ScaledToWholePixelsFollowsTheRoundedSize) {
+  auto c = paps::CameraIntrinsics::fromFieldOfView(322, 242, 80);
+  c.k1 = -0.08;
+  const auto q = c.scaled(0.25);
+  EXPECT_EQ(q.width, 81);
+  EXPECT_EQ(q.height, 61);
+  const Eigen::Vector3d p(0.3, -0.2, 2.0);
+  Eigen::Vector2d a, b;
+  ASSERT_TRUE(c.project(p, a));
+  ASSERT_TRUE(q.project(p, b));
+  EXPECT_NEAR(b.x() + 0.5, (a.x() + 0.5) * 81.0 / 322.0, 1e-9);
+  EXPECT_NEAR(b.y() + 0.5, (a.y() + 0.5) * 61.0 / 242.0, 1e-9);
+  // The image's corners stay the image's corners.
+  EXPECT_NEAR((q.cx + 0.5) / q.width, (c.cx + 0.5) / c.width, 1e-12);
+}
+
 TEST(CameraModel, ReprojectionErrorOfAKnownShift) {
   const auto c = paps::CameraIntrinsics::fromFieldOfView(200, 200, 90);  // fx = 100
   const auto truth = paps::lookAt({0, 0, 0}, {0, 10, 0});

@@ -33,11 +33,14 @@ CameraIntrinsics CameraIntrinsics::scaled(double factor) const {
   CameraIntrinsics c = *this;
   c.width = std::max(8, static_cast<int>(std::lround(width * factor)));
   c.height = std::max(8, static_cast<int>(std::lround(height * factor)));
-  c.fx = fx * factor;
-  c.fy = fy * factor;
-  // Pixel centres: x' + 0.5 = (x + 0.5) * factor.
-  c.cx = (cx + 0.5) * factor - 0.5;
-  c.cy = (cy + 0.5) * factor - 0.5;
+  // The ratio of the whole-pixel sizes on each axis (the factor itself unless the size was
+  // rounded), as an image resized to exactly width x height is sampled.
+  const double sx = static_cast<double>(c.width) / width, sy = static_cast<double>(c.height) / height;
+  c.fx = fx * sx;
+  c.fy = fy * sy;
+  // Pixel centres: x' + 0.5 = (x + 0.5) * sx.
+  c.cx = (cx + 0.5) * sx - 0.5;
+  c.cy = (cy + 0.5) * sy - 0.5;
   return c;
 }
 

@@ -79,11 +79,13 @@ struct Bobyqa {
   }
 };
 
-/// Photo as grey float at a scale.
-cv::Mat scaledGrey(const cv::Mat& grey, double scale) {
-  if (scale == 1.0) return grey;
+/// Photo as grey float at the size of a scaled camera. The size is the camera's, not
+/// OpenCV's rounding of size x scale: that rounds halves to even, and a photo whose pyramid
+/// level fell on a half pixel (1242 / 4 = 310.5) then differed in size from its rendering.
+cv::Mat scaledGrey(const cv::Mat& grey, const CameraIntrinsics& cam) {
+  if (grey.cols == cam.width && grey.rows == cam.height) return grey;
   cv::Mat out;
-  cv::resize(grey, out, cv::Size(), scale, scale, cv::INTER_AREA);
+  cv::resize(grey, out, cv::Size(cam.width, cam.height), 0, 0, cv::INTER_AREA);
   return out;
 }
 
@@ -123,7 +125,7 @@ struct Registration {
     for (int level = 0; level < p.coarse_levels; ++level) {
       const double scale = std::ldexp(1.0, level - (p.coarse_levels - 1));
       const CameraIntrinsics cam = camera.scaled(scale);
-      const ImageComparator comparator(scaledGrey(grey, scale), p.coarse_metric);
+      const ImageComparator comparator(scaledGrey(grey, cam), p.coarse_metric);
       const int margin = std::max(2, static_cast<int>(std::lround(p.coarse_margin * cam.width)));
       const CameraIntrinsics wide_camera = cam.widened(margin);
       // Roll enters in pixels at the image's half width, so the trust region is isotropic.
@@ -155,7 +157,7 @@ struct Registration {
 
   CameraPose fine(const CameraPose& start, double& cost_out, double scale) {
     const CameraIntrinsics cam = camera.scaled(scale);
-    const ImageComparator comparator(scaledGrey(grey, scale), p.fine_metric);
+    const ImageComparator comparator(scaledGrey(grey, cam), p.fine_metric);
     // Pixel units for every degree of freedom: angles by the focal length, translations by
     // the image motion they cause at the median depth of the points in view.
     const SyntheticImage first = render(cam, start);

@@ -21,7 +21,10 @@ struct CameraIntrinsics {
   static CameraIntrinsics fromFieldOfView(int width, int height, double horizontal_fov_deg);
   /// Throws InvalidParameter for a size below 8, a focal length <= 0 or non-finite values.
   void validate() const;
-  /// The same camera for an image `factor` times the size (pyramids; factor in (0, 8]).
+  /// The same camera for an image `factor` times the size (pyramids; factor in [1e-3, 8]): the
+  /// size rounded to whole pixels (at least 8), the focal lengths and principal point scaled
+  /// by the rounded size's ratio on each axis, so it fits the image resized to exactly
+  /// width x height (cv::resize with that size).
   CameraIntrinsics scaled(double factor) const;
   /// The same lens with the image widened by `margin` pixels on every side (wide-angle image of
   /// the coarse registration, 4.4.1): the principal point moves, the focal lengths stay.

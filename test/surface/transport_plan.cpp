@@ -228,6 +228,34 @@ TEST(LocalTransport, NearestBinCostBoundsEveryProgramAndIsReachedWithoutFacets) 
   }
 }
 
+// The dual bound is a lower bound of the program whatever its goal (weak duality: any prices
+// give one; a goal above the optimum only makes the steps overshoot), starts from the
+// nearest-bin cost, and closes most of the gap that the uniform measure opens.
+TEST(LocalTransport, DualLowerBoundLiesBetweenTheNearestBinCostAndTheProgram) {
+  for (std::uint64_t seed : {11, 12, 13, 14}) {
+    const SquareProblem sq = squareProblem(seed);
+    paps::Random rng(seed + 100);
+    std::vector<double> mass;
+    for (std::size_t i = 0; i < sq.points.size(); ++i) mass.push_back(0.5 + rng.uniform());
+    const auto t = sq.all();
+    const double nearest = paps::nearestBinCost(sq.points, mass, t);
+    for (int bins_per_point : {0, 4, 8}) {
+      const auto sol = paps::solveLocalTransport(sq.points, mass, t, bins_per_point);
+      ASSERT_TRUE(sol.solved);
+      ASSERT_GT(sol.cost, nearest * 1.01);  // the uniform measure binds
+      for (double goal : {sol.cost, 2 * sol.cost}) {
+        const double bound = paps::dualLowerBound(sq.points, mass, t, bins_per_point, goal);
+        EXPECT_LE(bound, sol.cost * (1 + 1e-9)) << seed << " " << bins_per_point << " " << goal;
+        EXPECT_GE(bound, nearest * (1 - 1e-12)) << seed << " " << bins_per_point;
+        EXPECT_GT(bound - nearest, 0.5 * (sol.cost - nearest)) << seed << " " << bins_per_point << " " << goal;
+      }
+      // It stops once the goal is reached: below the nearest-bin cost, at the first pass.
+      if (bins_per_point == 0)
+        EXPECT_DOUBLE_EQ(paps::dualLowerBound(sq.points, mass, t, 0, 0.5 * nearest), nearest);
+    }
+  }
+}
+
 // A 3 x 3 grid of vertices and 8 facets over the unit square; returns the facet ids.
 std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
   std::vector<int> facets;

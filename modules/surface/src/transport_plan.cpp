@@ -125,28 +125,34 @@ FacetBins centroidalBins(const Eigen::Vector3d& a, const Eigen::Vector3d& b, con
   return out;
 }
 
-LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
-                                   const std::vector<TransportTarget>& targets, int bins_per_point) {
-  LocalTransport out;
-  const int np = static_cast<int>(points.size());
-  out.entries.resize(np);
-  if (np == 0) { out.solved = true; return out; }
-  if (targets.empty()) return out;
-  // Bins: (target, bin) pairs; facet bins get a row each.
-  struct Bin { int target, bin, row; Eigen::Vector3d at; };
-  std::vector<Bin> bins;
-  int rows = np;
+namespace {
+
+// The bins of a local problem: (target, bin) pairs; facet bins get a row each (after the
+// points' rows), vertex bins none.
+struct LocalBin {
+  int target, bin, row;
+  Eigen::Vector3d at;
+};
+
+std::vector<LocalBin> localBins(const std::vector<TransportTarget>& targets, int first_row, int& rows) {
+  std::vector<LocalBin> bins;
+  rows = first_row;
   for (int t = 0; t < static_cast<int>(targets.size()); ++t)
     for (int b = 0; b < targets[t].binCount(); ++b)
       bins.push_back({t, b, targets[t].isFacet() ? rows++ : -1, targets[t].bin(b)});
-  const int nb = static_cast<int>(bins.size());
-  // Each point's candidate bins: all, or its nearest `bins_per_point` plus its nearest vertex
-  // bin (vertex bins take any mass, so the problem stays feasible). One scratch list for all
-  // points: a list per point cost more in allocations than the selection itself.
+  return bins;
+}
+
+// Each point's candidate bins (squared distance, bin), in bin order: all, or its nearest
+// `bins_per_point` plus its nearest vertex bin (vertex bins take any mass, so the problem
+// stays feasible). One scratch list for all points: a list per point cost more in
+// allocations than the selection itself.
+std::vector<std::vector<std::pair<double, int>>> candidateBins(const std::vector<Eigen::Vector3d>& points,
+                                                               const std::vector<LocalBin>& bins, int bins_per_point) {
+  const int np = static_cast<int>(points.size()), nb = static_cast<int>(bins.size());
   std::vector<std::vector<std::pair<double, int>>> cand(np);
   std::vector<std::pair<double, int>> all;
   all.reserve(nb);
-  double dmax = 0;
   for (int i = 0; i < np; ++i) {
     all.clear();
     for (int k = 0; k < nb; ++k) all.emplace_back((points[i] - bins[k].at).squaredNorm(), k);
@@ -163,8 +169,26 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
     } else {
       c = all;
     }
-    for (const auto& x : c) dmax = std::max(dmax, x.first);
   }
+  return cand;
+}
+
+}  // namespace
+
+LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
+                                   const std::vector<TransportTarget>& targets, int bins_per_point) {
+  LocalTransport out;
+  const int np = static_cast<int>(points.size());
+  out.entries.resize(np);
+  if (np == 0) { out.solved = true; return out; }
+  if (targets.empty()) return out;
+  int rows = 0;
+  const std::vector<LocalBin> bins = localBins(targets, np, rows);
+  const int nb = static_cast<int>(bins.size());
+  const auto cand = candidateBins(points, bins, bins_per_point);
+  double dmax = 0;
+  for (const auto& c : cand)
+    for (const auto& x : c) dmax = std::max(dmax, x.first);
   // Scaling: costs to [0, 1], masses to sum 1 (Clp's tolerances are absolute).
   double total = 0;
   for (double m : mass) total += m;
@@ -254,6 +278,68 @@ double nearestBinCost(const std::vector<Eigen::Vector3d>& points, const std::vec
     cost += mass[i] * d2;
   }
   return cost;
+}
+
+double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
+                      const std::vector<TransportTarget>& targets, int bins_per_point, double goal, int iterations) {
+  const int np = static_cast<int>(points.size());
+  if (np == 0 || targets.empty()) return 0;
+  int rows = 0;
+  const std::vector<LocalBin> bins = localBins(targets, 0, rows);
+  const auto cand = candidateBins(points, bins, bins_per_point);
+  // Weak duality: for prices y on the facet bins (0 on vertex bins) with sum_b c_b y_b <= 0 on
+  // every facet, F(y) = sum_i m_i min over i's candidates k of (d_ik + y_k) is at most the
+  // program's cost. y = 0 is nearestBinCost over the candidates. Projected subgradient ascent
+  // (the subgradient is each bin's load; the projection keeps sum_b c_b y_b = 0 per facet),
+  // with Polyak's step towards `goal`; the best F met is returned, so any step is safe.
+  std::vector<double> y(bins.size(), 0.0), load(bins.size());
+  std::vector<int> first_bin(targets.size() + 1, 0);
+  for (std::size_t k = 0; k < bins.size(); ++k) first_bin[bins[k].target + 1] = static_cast<int>(k) + 1;
+  for (std::size_t t = 0; t < targets.size(); ++t) first_bin[t + 1] = std::max(first_bin[t + 1], first_bin[t]);
+  double best = -INFINITY, lambda = 1;
+  int stalled = 0;
+  for (int it = 0; it <= iterations; ++it) {
+    double f = 0;
+    std::fill(load.begin(), load.end(), 0.0);
+    for (int i = 0; i < np; ++i) {
+      double low = INFINITY;
+      int arg = -1;
+      for (const auto& [d2, k] : cand[i])
+        if (d2 + y[k] < low) { low = d2 + y[k]; arg = k; }
+      f += mass[i] * low;
+      load[arg] += mass[i];
+    }
+    if (f > best) {
+      best = f;
+      stalled = 0;
+    } else if (++stalled == 3) {  // the steps overshoot: shorter ones
+      lambda *= 0.5;
+      stalled = 0;
+    }
+    if (best >= goal || it == iterations) break;
+    // The ascent direction: the loads, minus their c-weighted share on each facet.
+    double norm2 = 0;
+    for (std::size_t t = 0; t < targets.size(); ++t) {
+      if (!targets[t].isFacet()) {
+        for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) load[k] = 0;
+        continue;
+      }
+      const auto& cap = targets[t].bins->capacity;
+      double cg = 0, cc = 0;
+      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
+        cg += cap[bins[k].bin] * load[k];
+        cc += cap[bins[k].bin] * cap[bins[k].bin];
+      }
+      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
+        load[k] -= cap[bins[k].bin] * cg / cc;
+        norm2 += load[k] * load[k];
+      }
+    }
+    if (!(norm2 > 0)) break;  // the loads already follow the capacities: F is at its maximum
+    const double step = lambda * (goal - f) / norm2;
+    for (std::size_t k = 0; k < bins.size(); ++k) y[k] += step * load[k];
+  }
+  return best;
 }
 
 // ---------------------------------------------------------------- TransportPlan

@@ -119,6 +119,12 @@ class Decimation {
     return c;
   }
 
+  // A lower bound of the prepared collapse's cost after it (the program's dual), which stops
+  // once it reaches `goal`.
+  double dualBound(const Collapse& c, double goal) const {
+    return dualLowerBound(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c), plan_.parameters().bins_per_point, goal);
+  }
+
   // Solves the prepared collapse's program: its cost change.
   void simulate(Collapse& c) const {
     c.solution = solveLocalTransport(plan_.positionsOf(c.before), c.before.mass, targetsAfter(c), plan_.parameters().bins_per_point);
@@ -441,10 +447,25 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
         if (!params.bound_simulations || !std::isfinite(best_delta) || !beaten(simulated[missing[j]]))
           batch.push_back(missing[j]);
       const std::int64_t nb = static_cast<std::int64_t>(batch.size());
+      // Past the first batch, a program is solved only if its dual bound (which sees the
+      // facets' uniform measure) does not already show it cannot beat the best change found.
+      const bool tighten = params.bound_simulations && params.dual_bound && std::isfinite(best_delta);
+      std::vector<char> ran(static_cast<std::size_t>(nb), 1);
 #pragma omp parallel for schedule(dynamic, 1)
-      for (std::int64_t j = 0; j < nb; ++j) dec.simulate(simulated[batch[j]]);
-      for (std::int64_t k : batch) best_delta = std::min(best_delta, simulated[k].delta);
-      run.insert(run.end(), batch.begin(), batch.end());
+      for (std::int64_t j = 0; j < nb; ++j) {
+        Decimation::Collapse& c = simulated[batch[j]];
+        if (tighten) {
+          const double margin = 1e-6 * (std::abs(best_delta) + c.before.cost);
+          c.lower_bound = std::max(c.lower_bound, dec.dualBound(c, c.before.cost + best_delta + 2 * margin) - c.before.cost);
+          if (beaten(c)) { ran[j] = 0; continue; }
+        }
+        dec.simulate(c);
+      }
+      for (std::int64_t j = 0; j < nb; ++j) {
+        if (!ran[j]) continue;
+        best_delta = std::min(best_delta, simulated[batch[j]].delta);
+        run.push_back(batch[j]);
+      }
     }
     report.simulations += static_cast<int>(run.size());
     report.bounded_simulations += static_cast<int>(nm - static_cast<std::int64_t>(run.size()));

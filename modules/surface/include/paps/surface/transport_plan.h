@@ -78,6 +78,16 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points,
 double nearestBinCost(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
                       const std::vector<TransportTarget>& targets);
 
+/// A lower bound of solveLocalTransport's cost with the same arguments, the facets' uniform
+/// measure taken into account through prices on their bins (weak duality, projected
+/// subgradient ascent): at least the nearest-bin cost over the points' candidate bins, and
+/// usually closer to the program's cost. It stops as soon as it reaches `goal` (a caller that
+/// only needs to know whether the cost exceeds a value passes that value) or after
+/// `iterations` steps. Cheap next to the program: a pass over each point's candidates a step.
+double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& mass,
+                      const std::vector<TransportTarget>& targets, int bins_per_point, double goal,
+                      int iterations = 30);
+
 struct TransportParameters {
   /// Facet bins per unit area once the points are scaled into a box of side 0.5 (the
   /// manuscript's 200); a facet has at least one bin and at most max_bins_per_facet.

@@ -47,6 +47,12 @@ struct TransportReconstructionParameters {
   /// change found: the rest cannot be chosen. Exact (the same mesh either way); off only to
   /// measure what it saves (rs1, 3,000 points to 100 vertices: 1,735 programs instead of 17,004).
   bool bound_simulations = true;
+  /// With bound_simulations: past each step's first batch, a drawn collapse's program is
+  /// solved only if a dual bound of its cost (prices on the facets' bins, so the uniform
+  /// measure counts; dualLowerBound) can still beat the best change found. Exact (the same
+  /// mesh either way); off only to measure what it saves (the 3,000-point cube to 30
+  /// vertices: 2,886 programs instead of 9,233, 28.0 s instead of 45.4 s on 2 threads).
+  bool dual_bound = true;
   /// Relocation rounds after each collapse (move halfway to the optimum, update the plan).
   int relocation_iterations = 2;
   /// Final relocation sweeps over all vertices (cheap next to the decimation).

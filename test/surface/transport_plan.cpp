@@ -243,11 +243,15 @@ TEST(LocalTransport, DualLowerBoundLiesBetweenTheNearestBinCostAndTheProgram) {
       const auto sol = paps::solveLocalTransport(sq.points, mass, t, bins_per_point);
       ASSERT_TRUE(sol.solved);
       ASSERT_GT(sol.cost, nearest * 1.01);  // the uniform measure binds
-      for (double goal : {sol.cost, 2 * sol.cost}) {
+      // Goals far above the optimum make Polyak's steps huge: the prices must stay bounded,
+      // or the rounding of sum_b c_b y_b lets the bound pass the program (it did, by up to
+      // 44% on the cube's programs, before the steps were capped).
+      for (double goal : {sol.cost, 2 * sol.cost, 1e6 * sol.cost, double(INFINITY)}) {
         const double bound = paps::dualLowerBound(sq.points, mass, t, bins_per_point, goal);
         EXPECT_LE(bound, sol.cost * (1 + 1e-9)) << seed << " " << bins_per_point << " " << goal;
         EXPECT_GE(bound, nearest * (1 - 1e-12)) << seed << " " << bins_per_point;
-        EXPECT_GT(bound - nearest, 0.5 * (sol.cost - nearest)) << seed << " " << bins_per_point << " " << goal;
+        if (goal <= 2 * sol.cost)
+          EXPECT_GT(bound - nearest, 0.5 * (sol.cost - nearest)) << seed << " " << bins_per_point << " " << goal;
       }
       // It stops once the goal is reached: below the nearest-bin cost, at the first pass.
       if (bins_per_point == 0)

@@ -296,6 +296,11 @@ double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vec
   std::vector<int> first_bin(targets.size() + 1, 0);
   for (std::size_t k = 0; k < bins.size(); ++k) first_bin[bins[k].target + 1] = static_cast<int>(k) + 1;
   for (std::size_t t = 0; t < targets.size(); ++t) first_bin[t + 1] = std::max(first_bin[t + 1], first_bin[t]);
+  // Prices beyond the largest candidate distance change no point's choice for the better; a
+  // longer step only makes the rounding of sum_b c_b y_b matter, so steps are capped there.
+  double dmax = 0;
+  for (const auto& c : cand)
+    for (const auto& x : c) dmax = std::max(dmax, x.first);
   double best = -INFINITY, lambda = 1;
   int stalled = 0;
   for (int it = 0; it <= iterations; ++it) {
@@ -306,6 +311,7 @@ double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vec
       int arg = -1;
       for (const auto& [d2, k] : cand[i])
         if (d2 + y[k] < low) { low = d2 + y[k]; arg = k; }
+      if (arg < 0) return best;  // not finite (cannot happen with the caps below)
       f += mass[i] * low;
       load[arg] += mass[i];
     }
@@ -336,8 +342,24 @@ double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vec
       }
     }
     if (!(norm2 > 0)) break;  // the loads already follow the capacities: F is at its maximum
-    const double step = lambda * (goal - f) / norm2;
+    double step = lambda * (goal - f) / norm2, move = 0;
+    for (double g : load) move = std::max(move, std::abs(g));
+    if (!std::isfinite(step) || step * move > dmax) step = dmax / move;
     for (std::size_t k = 0; k < bins.size(); ++k) y[k] += step * load[k];
+    // Back onto each facet's plane sum_b c_b y_b = 0 (against the rounding of the steps), then
+    // a rounding's worth below it: the prices must keep sum_b c_b y_b <= 0 to bound the program.
+    for (std::size_t t = 0; t < targets.size(); ++t) {
+      if (!targets[t].isFacet()) continue;
+      const auto& cap = targets[t].bins->capacity;
+      double cy = 0, cc = 0, ymax = 0;
+      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
+        cy += cap[bins[k].bin] * y[k];
+        cc += cap[bins[k].bin] * cap[bins[k].bin];
+        ymax = std::max(ymax, std::abs(y[k]));
+      }
+      const double shift = cy / cc;
+      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) y[k] -= cap[bins[k].bin] * shift + 1e-12 * ymax;
+    }
   }
   return best;
 }

@@ -296,6 +296,14 @@ double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vec
   std::vector<int> first_bin(targets.size() + 1, 0);
   for (std::size_t k = 0; k < bins.size(); ++k) first_bin[bins[k].target + 1] = static_cast<int>(k) + 1;
   for (std::size_t t = 0; t < targets.size(); ++t) first_bin[t + 1] = std::max(first_bin[t + 1], first_bin[t]);
+  // Each facet's sum_b c_b^2, for the projections onto sum_b c_b y_b = 0.
+  std::vector<double> cc(targets.size(), 0.0);
+  for (std::size_t t = 0; t < targets.size(); ++t)
+    if (targets[t].isFacet())
+      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
+        const double c = targets[t].bins->capacity[bins[k].bin];
+        cc[t] += c * c;
+      }
   // Prices beyond the largest candidate distance change no point's choice for the better; a
   // longer step only makes the rounding of sum_b c_b y_b matter, so steps are capped there.
   double dmax = 0;
@@ -331,13 +339,10 @@ double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vec
         continue;
       }
       const auto& cap = targets[t].bins->capacity;
-      double cg = 0, cc = 0;
+      double cg = 0;
+      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) cg += cap[bins[k].bin] * load[k];
       for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
-        cg += cap[bins[k].bin] * load[k];
-        cc += cap[bins[k].bin] * cap[bins[k].bin];
-      }
-      for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
-        load[k] -= cap[bins[k].bin] * cg / cc;
+        load[k] -= cap[bins[k].bin] * cg / cc[t];
         norm2 += load[k] * load[k];
       }
     }
@@ -351,13 +356,12 @@ double dualLowerBound(const std::vector<Eigen::Vector3d>& points, const std::vec
     for (std::size_t t = 0; t < targets.size(); ++t) {
       if (!targets[t].isFacet()) continue;
       const auto& cap = targets[t].bins->capacity;
-      double cy = 0, cc = 0, ymax = 0;
+      double cy = 0, ymax = 0;
       for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) {
         cy += cap[bins[k].bin] * y[k];
-        cc += cap[bins[k].bin] * cap[bins[k].bin];
         ymax = std::max(ymax, std::abs(y[k]));
       }
-      const double shift = cy / cc;
+      const double shift = cy / cc[t];
       for (int k = first_bin[t]; k < first_bin[t + 1]; ++k) y[k] -= cap[bins[k].bin] * shift + 1e-12 * ymax;
     }
   }

@@ -53,7 +53,8 @@ Triple sorted(Triple t) {
 // collapsed).
 class Decimation {
  public:
-  explicit Decimation(TransportPlan& plan) : plan_(plan), neighbours_(plan.vertexCount()) {
+  explicit Decimation(TransportPlan& plan)
+      : plan_(plan), neighbours_(plan.vertexCount()), degree_tree_(plan.vertexCount() + 1, 0) {
     for (int f = 0; f < plan.facetCount(); ++f)
       if (plan.facetAlive(f)) {
         const auto& t = plan.facet(f);
@@ -62,10 +63,26 @@ class Decimation {
   }
   void link(int a, int b) {
     if (a == b) return;
-    neighbours_[a].insert(b);
-    neighbours_[b].insert(a);
+    if (neighbours_[a].insert(b).second) addDegree(a, 1);
+    if (neighbours_[b].insert(a).second) addDegree(b, 1);
   }
   const std::set<int>& neighbours(int v) const { return neighbours_[v]; }
+
+  // The half-edges (u, v), u < v or not, in (u, v) order: the k-th of them and their count,
+  // without listing them (a list per step made the decimation quadratic in the vertices).
+  // A Fenwick tree over the vertices' degrees finds u; v is the rest-th of u's neighbours.
+  std::int64_t halfEdgeCount() const { return prefixDegree(static_cast<int>(neighbours_.size())); }
+  std::pair<int, int> halfEdge(std::int64_t k) const {
+    int u = 0;  // the largest u with prefixDegree(u) <= k
+    int bit = 1;
+    while (bit * 2 <= static_cast<int>(neighbours_.size())) bit *= 2;
+    for (; bit > 0; bit /= 2)
+      if (u + bit <= static_cast<int>(neighbours_.size()) && degree_tree_[u + bit] <= k) {
+        u += bit;
+        k -= degree_tree_[u];
+      }
+    return {u, *std::next(neighbours_[u].begin(), static_cast<std::ptrdiff_t>(k))};
+  }
 
   // The collapse of u onto v: the stencil before, the simplices after, and the new facets'
   // corner triples (created only when the collapse is applied).
@@ -157,9 +174,10 @@ class Decimation {
     }
     plan_.assign(c.before, c.vertices_after, facets, c.solution);
     for (int w : neighbours_[c.u]) {
-      neighbours_[w].erase(c.u);
+      if (neighbours_[w].erase(c.u) > 0) addDegree(w, -1);
       link(c.v, w);
     }
+    addDegree(c.u, -static_cast<int>(neighbours_[c.u].size()));
     neighbours_[c.u].clear();
   }
 
@@ -193,6 +211,16 @@ class Decimation {
   std::vector<std::uint64_t> vertex_step_, facet_step_;
   TransportPlan& plan_;
   std::vector<std::set<int>> neighbours_;
+  std::vector<std::int64_t> degree_tree_;  // Fenwick tree (1-based) of the neighbour counts
+
+  void addDegree(int v, int d) {
+    for (int i = v + 1; i < static_cast<int>(degree_tree_.size()); i += i & -i) degree_tree_[i] += d;
+  }
+  std::int64_t prefixDegree(int n) const {  // sum of the degrees of vertices [0, n)
+    std::int64_t sum = 0;
+    for (int i = n; i > 0; i -= i & -i) sum += degree_tree_[i];
+    return sum;
+  }
 };
 
 }  // namespace
@@ -318,7 +346,11 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     const auto& p = points[order[k]];
     sites.emplace_back(Kernel::Point_3(p.x(), p.y(), p.z()), static_cast<int>(k));
   }
+  ProgressReporter triangulation(progress, "transport Delaunay", 1);
   Delaunay dt(sites.begin(), sites.end());
+  triangulation.advance();
+  triangulation.throwIfCancelled();
+  triangulation.finish();
   if (dt.dimension() < 3)
     throw InvalidInput("transport reconstruction: the initial points are coplanar or collinear (dimension " +
                        std::to_string(dt.dimension()) + ")");
@@ -367,15 +399,17 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   // mass (so it can still be collapsed); without mass it goes.
   std::vector<Delaunay::Vertex_handle> by_id(plan.vertexCount());
   for (auto v = dt.finite_vertices_begin(); v != dt.finite_vertices_end(); ++v) by_id[vertex_of_site.at(v->info())] = v;
+  for (int id = 0; id < static_cast<int>(by_id.size()); ++id)
+    if (plan.facetsOf(id).empty() && plan.sharesOfVertex(id).empty()) plan.removeVertex(id);
   for (int id = 0; id < static_cast<int>(by_id.size()); ++id) {
-    if (!plan.facetsOf(id).empty()) continue;
-    if (plan.sharesOfVertex(id).empty()) { plan.removeVertex(id); continue; }
+    if (!plan.vertexAlive(id) || !plan.facetsOf(id).empty()) continue;
     std::vector<Delaunay::Vertex_handle> adj;
     dt.finite_adjacent_vertices(by_id[id], std::back_inserter(adj));
     int best = -1;
     double bd = INFINITY;
     for (auto w : adj) {
       const int wid = vertex_of_site.at(w->info());
+      if (!plan.vertexAlive(wid)) continue;  // removed above: no link to it
       const double d = (plan.vertex(wid) - plan.vertex(id)).squaredNorm();
       if (d < bd || (d == bd && wid < best)) { bd = d; best = wid; }
     }
@@ -388,19 +422,19 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     std::uint64_t step;  // the decimation's step when simulated
   };
   std::map<std::pair<int, int>, Cached> cache;
+  std::size_t swept_size = 0;  // the cache's size after its last sweep
   const int start = plan.aliveVertexCount();
   ProgressReporter rep(progress, "transport decimation", static_cast<std::size_t>(std::max(1, start - params.target_vertices)));
   while (plan.aliveVertexCount() > params.target_vertices) {
-    std::vector<std::pair<int, int>> half_edges;
-    for (int u = 0; u < plan.vertexCount(); ++u)
-      if (plan.vertexAlive(u))
-        for (int v : dec.neighbours(u)) half_edges.emplace_back(u, v);
-    if (half_edges.empty()) break;
+    const std::int64_t half_edges = dec.halfEdgeCount();
+    if (half_edges == 0) break;
     std::vector<std::pair<int, int>> candidates;
-    if (params.candidates == 0 || static_cast<std::size_t>(params.candidates) >= half_edges.size()) {
-      candidates = half_edges;
+    if (params.candidates == 0 || params.candidates >= half_edges) {
+      for (int u = 0; u < plan.vertexCount(); ++u)
+        for (int v : dec.neighbours(u)) candidates.emplace_back(u, v);
     } else {
-      for (int k = 0; k < params.candidates; ++k) candidates.push_back(half_edges[rng.below(half_edges.size())]);
+      for (int k = 0; k < params.candidates; ++k)
+        candidates.push_back(dec.halfEdge(static_cast<std::int64_t>(rng.below(static_cast<std::uint64_t>(half_edges)))));
       std::sort(candidates.begin(), candidates.end());
       candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
     }
@@ -480,17 +514,39 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     ++report.collapses;
     for (int it = 0; it < params.relocation_iterations; ++it) plan.relocate(collapse.v);
     if (params.relocation_iterations > 0) dec.touchAround(collapse.v);
-    // Drop what this step made stale (a collapsed vertex is in its collapse's stencil, so this
-    // also drops its half-edges: the cache holds at most the live ones).
-    for (auto it = cache.begin(); it != cache.end();)
-      it = dec.unchangedSince(it->second.collapse.before, it->second.step) ? std::next(it) : cache.erase(it);
+    // Drop what has gone stale (a collapsed vertex is in its collapse's stencil, so this also
+    // drops its half-edges), once the cache has doubled since the last sweep: a sweep every
+    // step made the decimation quadratic, and a stale entry is never used (lookups check).
+    if (cache.size() > 2 * swept_size + 64) {
+      for (auto it = cache.begin(); it != cache.end();)
+        it = dec.unchangedSince(it->second.collapse.before, it->second.step) ? std::next(it) : cache.erase(it);
+      swept_size = cache.size();
+    }
     rep.advance();
     if (rep.cancelled()) break;
   }
   rep.throwIfCancelled();
   rep.finish();
-  for (int sweep = 0; sweep < params.final_relocation_sweeps; ++sweep) plan.relocateAll();
-  if (params.deletion_threshold > 0) report.deleted_facets = plan.deleteRedundantFacets(params.deletion_threshold);
+  // The final stages get their own progress (and --timings lines): with few vertices left, each
+  // relocation re-solves a program over hundreds of points.
+  {
+    ProgressReporter sweeps(progress, "transport relocation",
+                            static_cast<std::size_t>(std::max(1, params.final_relocation_sweeps)));
+    for (int sweep = 0; sweep < params.final_relocation_sweeps; ++sweep) {
+      plan.relocateAll();
+      sweeps.advance();
+      sweeps.throwIfCancelled();
+    }
+    sweeps.finish();
+    sweeps.throwIfCancelled();
+  }
+  if (params.deletion_threshold > 0) {
+    ProgressReporter deletion(progress, "transport facet deletion", 1);
+    report.deleted_facets = plan.deleteRedundantFacets(params.deletion_threshold);
+    deletion.advance();
+    deletion.finish();
+    deletion.throwIfCancelled();
+  }
   report.final_cost = plan.cost();
   report.rms_transport = std::sqrt(report.final_cost / plan.totalMass());
 

@@ -761,8 +761,14 @@ int TransportPlan::deleteRedundantFacets(double threshold) {
       const Stencil s = facetStencil(f);
       Stencil without = s;  // the same simplices but f
       without.facets.erase(std::find(without.facets.begin(), without.facets.end(), f));
-      const LocalTransport sol = solve(s, without);
-      if (!sol.solved || sol.cost - s.cost > threshold * massOnFacet(f) * unit) continue;
+      const double allowed = threshold * massOnFacet(f) * unit;
+      const std::vector<Eigen::Vector3d> pts = positionsOf(s);
+      const std::vector<TransportTarget> targets = targetsOf(without);
+      // Every plan without f costs at least each point's nearest remaining bin: when that
+      // already exceeds the allowance (with a round-off margin), f stays without a program.
+      if (nearestBinCost(pts, s.mass, targets) - s.cost > allowed + 1e-6 * (std::abs(s.cost) + allowed)) continue;
+      const LocalTransport sol = solveLocalTransport(pts, s.mass, targets, params_.bins_per_point);
+      if (!sol.solved || sol.cost - s.cost > allowed) continue;
       release(s);
       removeFacet(f);
       assign(s, without.vertices, without.facets, sol);

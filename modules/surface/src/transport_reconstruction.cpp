@@ -68,9 +68,10 @@ class Decimation {
   }
   const std::set<int>& neighbours(int v) const { return neighbours_[v]; }
 
-  // The half-edges (u, v), u < v or not, in (u, v) order: the k-th of them and their count,
-  // without listing them (a list per step made the decimation quadratic in the vertices).
-  // A Fenwick tree over the vertices' degrees finds u; v is the rest-th of u's neighbours.
+  // The half-edges (u, v), both directions of every edge, in (u, v) order: their count and
+  // the k-th of them, without listing them (a list every step cost O(vertices) a step). A
+  // Fenwick tree over the vertices' degrees finds u; v is the remaining rank among u's
+  // neighbours.
   std::int64_t halfEdgeCount() const { return prefixDegree(static_cast<int>(neighbours_.size())); }
   std::pair<int, int> halfEdge(std::int64_t k) const {
     int u = 0;  // the largest u with prefixDegree(u) <= k
@@ -516,7 +517,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     if (params.relocation_iterations > 0) dec.touchAround(collapse.v);
     // Drop what has gone stale (a collapsed vertex is in its collapse's stencil, so this also
     // drops its half-edges), once the cache has doubled since the last sweep: a sweep every
-    // step made the decimation quadratic, and a stale entry is never used (lookups check).
+    // step cost O(cache) a step, and a stale entry is never used (lookups check).
     if (cache.size() > 2 * swept_size + 64) {
       for (auto it = cache.begin(); it != cache.end();)
         it = dec.unchangedSince(it->second.collapse.before, it->second.step) ? std::next(it) : cache.erase(it);

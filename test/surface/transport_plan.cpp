@@ -264,7 +264,8 @@ TEST(LocalTransport, DualLowerBoundLiesBetweenTheNearestBinCostAndTheProgram) {
 // plan is the program's (cost 0), and the projected subgradient is zero but for rounding, so
 // Polyak's steps towards a goal above 0 are huge. The bound must stay at 0; with the masses a
 // little off, below the program's small positive cost. (The first version's fault, a bound
-// 44% over 3 of the cube's 6,830 programs, passes this test too: only the bench found it.)
+// 44% over 3 of the cube's 6,830 programs, passes this test too; the reconstruction test
+// DualBoundGivesTheSameMeshAtTheReconstructionsQuadrature catches it.)
 TEST(LocalTransport, DualLowerBoundStaysBelowTheProgramWhenTheLoadsFit) {
   for (std::uint64_t seed : {21, 22, 23}) {
     const SquareProblem sq = squareProblem(seed);

@@ -63,7 +63,9 @@ const char* kReconstructUsage =
     "                           vertex); 0: to every bin of the local program (default 16;\n"
     "                           8 is faster and as good when the points outnumber the bins)\n"
     "  --quiet, --timings       no progress bar / wall time of each stage\n"
-    "Costly: meant for thousands to tens of thousands of points and tens to hundreds of vertices.\n";
+    "Costly: meant for thousands to tens of thousands of points and tens to hundreds of vertices\n"
+    "(2 cores: 3,000 points to 100 vertices in about 4 s, 50,000 in about 2 min; 112,000 points\n"
+    "to 50 vertices did not finish in 28 min). --timings shows where the time goes.\n";
 
 const char* kRecoverUsage =
     "usage: paps recover-features MESH IN OUT.ply [options]\n"

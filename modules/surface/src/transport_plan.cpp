@@ -576,10 +576,6 @@ std::vector<Eigen::Vector3d> TransportPlan::positionsOf(const Stencil& s) const 
   return pts;
 }
 
-LocalTransport TransportPlan::solve(const Stencil& s, const Stencil& targets) const {
-  return solveLocalTransport(positionsOf(s), s.mass, targetsOf(targets), params_.bins_per_point);
-}
-
 double TransportPlan::improve(const Stencil& s) {
   if (s.points.empty()) return 0;
   // Most stencils already send every point to its nearest bin: no program can lower that

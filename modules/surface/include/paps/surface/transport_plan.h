@@ -216,8 +216,6 @@ class TransportPlan {
                           const std::function<void(int)>& work);
 
  private:
-  /// The local program of the stencil's points and mass onto the simplices of `targets`.
-  LocalTransport solve(const Stencil& s, const Stencil& targets) const;
   void facetStencilSimplices(int f, std::vector<int>& vertices, std::vector<int>& facets) const;
 
   TransportParameters params_;

@@ -79,7 +79,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         r.target_vertices = 4;
         r.candidates = 4;
         r.transport = paps::TransportParameters();
-        if (p.size() > 100) p.resize(100);
+        // Odd sizes: up to 400 points merged into at most 100 cells (max_points); even: the
+        // first 100 points.
+        if (size % 2 == 1)
+          r.max_points = 100;
+        else if (p.size() > 100)
+          p.resize(100);
         const paps::TriangleMesh m = paps::transportReconstruct(p, r);
         for (const auto& t : m.triangles)
           if ((t.array() < 0).any() || (t.array() >= static_cast<int>(m.vertices.size())).any()) __builtin_trap();

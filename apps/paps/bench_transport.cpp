@@ -50,7 +50,9 @@ const char* kUsage =
     "              the library's; 0 = all)\n"
     "  --outlier-seeds N  seeds 1..N for each of our variants on the cube with outliers (default\n"
     "              3, at most 100; one seed's run takes a minute or two)\n"
-    "  --only-outliers  only the cube with outliers: not (a) nor the other shapes and cases\n"
+    "  --only-outliers  only the cube with outliers: not (a) nor the other shapes and cases\n"    "  --scan-points N  points sampled on rs1 (default 3000, 1000 to 1000000); past the\n"
+    "              library's max_points (20000) ours also runs unmerged (max_points 0)\n"
+    "  --only-scan  only the real scan rs1: not (a) nor the cube and fandisk\n"
     "(a) feature recovery on a fandisk block: PCL Poisson (normals by PCL's NormalEstimationOMP,\n"
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
@@ -59,7 +61,7 @@ const char* kUsage =
     "    below 0.5 of the mean density and dangling facets (support 2), then the same with the\n"
     "    outlier weights (outlier_neighbours 8); --quick: 800 points, noise 0)\n"
     "    and of a fandisk block (3000 points, 60 vertices, no noise; not in --quick) and of the\n"
-    "    real range-scan mesh rs1_normals.ply (3000 points, 100 vertices, no noise; PCL's\n"
+    "    real range-scan mesh rs1_normals.ply (3000 points or --scan-points, 100 vertices, no noise; PCL's\n"
     "    normals turned towards the scanner at the origin; not in --quick):\n"
     "    ours (30 vertices on the cube; seeds 1, 2, 3 and their mean; --quick: seed 1) vs\n"
     "    PCL Poisson (depth 5), that Poisson mesh decimated by VTK's quadric\n"
@@ -230,6 +232,7 @@ int runTransportWorker(int argc, char** argv) {
       p.candidates = static_cast<int>(params.get("candidates", p.candidates));
       p.dangling_support = static_cast<float>(params.get("dangling", p.dangling_support));
       p.outlier_neighbours = static_cast<int>(params.get("outlier_neighbours", p.outlier_neighbours));
+      p.max_points = static_cast<int>(params.get("max_points", p.max_points));
       TransportReconstructionReport r;
       mesh = transportReconstruct(input, p, &r);
       seconds = elapsed();
@@ -245,15 +248,23 @@ int runTransportWorker(int argc, char** argv) {
 }
 
 int runBenchTransport(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "only-outliers"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "only-outliers", "only-scan"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "quick", "samples", "candidates", "outlier-seeds", "only-outliers"});
+  a.allowOnly({"out", "quick", "samples", "candidates", "outlier-seeds", "only-outliers", "scan-points", "only-scan"});
   const int outlier_seeds = a.integer("outlier-seeds", 3);
   if (outlier_seeds < 1 || outlier_seeds > 100)
     throw InvalidParameter("outlier-seeds", std::to_string(outlier_seeds), "1 to 100");
   const bool only_outliers = a.has("only-outliers");
   if (only_outliers && a.has("quick")) throw InvalidParameter("only-outliers", "with --quick", "one or the other");
   const int candidates = a.integer("candidates", TransportReconstructionParameters().candidates);
+  // The real scan's sample size; past the library's max_points, ours also runs unmerged.
+  const int scan_points = a.integer("scan-points", 3000);
+  if (scan_points < 1000 || scan_points > 1000000)
+    throw InvalidParameter("scan-points", std::to_string(scan_points), "1000 to 1000000");
+  const int max_points = TransportReconstructionParameters().max_points;
+  const bool only_scan = a.has("only-scan");
+  if (only_scan && (a.has("quick") || a.has("only-outliers")))
+    throw InvalidParameter("only-scan", "with --quick or --only-outliers", "one of them");
   if (candidates < 0) throw InvalidParameter("candidates", std::to_string(candidates), "0 (all half-edges) or more");
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
   const bool quick = a.has("quick");
@@ -270,7 +281,7 @@ int runBenchTransport(int argc, char** argv) {
   };
 
   // (a) Feature recovery.
-  if (!only_outliers) {
+  if (!only_outliers && !only_scan) {
     const std::size_t n = quick ? 20000 : 60000;
     const int depth = quick ? 5 : 6;
     const TriangleMesh gt = synthetic::fandiskBlock(64);
@@ -336,11 +347,12 @@ int runBenchTransport(int argc, char** argv) {
     std::vector<std::pair<double, double>> cases;
     View view{};  // of the picture
   };
-  std::vector<Shape> shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30, false,
+  std::vector<Shape> shapes;
+  if (!only_scan) shapes = {{"cube(0.5, 4)", "reconstruction", synthetic::cube(0.5f, 4), 30, false,
                                 quick ? std::vector<std::pair<double, double>>{{0, 0}}
                                       : only_outliers ? std::vector<std::pair<double, double>>{{0, 0.1}}
                                       : std::vector<std::pair<double, double>>{{0, 0}, {0.005, 0}, {0, 0.1}}}};
-  if (!quick && !only_outliers) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, false, {{0, 0}}});
+  if (!quick && !only_outliers && !only_scan) shapes.push_back({"fandiskBlock(32)", "reconstruction-fandisk", synthetic::fandiskBlock(32), 60, false, {{0, 0}}});
   // A real shape: the range-scan mesh of opencv-doc (an open, cluttered scene with borders,
   // which the transport keeps and Poisson closes).
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
@@ -358,7 +370,8 @@ int runBenchTransport(int argc, char** argv) {
                                  : View::looking(shape.gt.vertices, {1.f, 0.6f, 0.8f});
   }
   for (const Shape& shape : shapes) {
-    const std::size_t n = quick ? 800 : 3000;
+    const bool scan = shape.part == "reconstruction-rs1";
+    const std::size_t n = quick ? 800 : scan ? static_cast<std::size_t>(scan_points) : 3000;
     const TriangleMesh& gt = shape.gt;
     const Positions clean = synthetic::sampleMesh(gt, n, 7);
     const double diagonal = gt.boundingBoxDiagonal();
@@ -393,6 +406,12 @@ int runBenchTransport(int argc, char** argv) {
                                            {"candidates", candidates}}}
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates}}});
+      // A scan sample larger than max_points: also unmerged (max_points 0), the cost the merge saves.
+      if (scan && n > static_cast<std::size_t>(max_points))
+        for (int seed = 1; seed <= seeds; ++seed)
+          rows.push_back(Row{fmt("ours (unmerged), seed %.0f", seed), "ot-reconstruction",
+                             {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates}, {"max_points", 0}},
+                             1});
       // With outliers, also with the outlier weights (outlier_neighbours 8).
       if (outliers > 0)
         for (int seed = 1; seed <= seeds; ++seed)

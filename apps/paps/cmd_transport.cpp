@@ -56,6 +56,11 @@ const char* kReconstructUsage =
     "                           (stray points pull the facets little); 0 (default): all\n"
     "                           weigh 1; 8 for the bench's cube with 10% outliers. Not for\n"
     "                           scans whose density varies: their sparse parts weigh less\n"
+    "  --max-points N           more distinct points than N are first merged by a voxel\n"
+    "                           grid into at most N points (cell centroids, summed masses);\n"
+    "                           0: never (default 20000: rs1 50,000 points to 100 vertices\n"
+    "                           in 30-38 s instead of 129-135 s, about as close; see\n"
+    "                           docs/transport.md)\n"
     "  --bins-per-area B        facet bins per unit area, the points scaled into a box of side\n"
     "                           0.5 (default 800; the manuscript's 200 is faster, less sharp)\n"
     "  --max-bins M             at most M bins a facet, 1 to 256 (default 64)\n"
@@ -63,9 +68,10 @@ const char* kReconstructUsage =
     "                           vertex); 0: to every bin of the local program (default 16;\n"
     "                           8 is faster and as good when the points outnumber the bins)\n"
     "  --quiet, --timings       no progress bar / wall time of each stage\n"
-    "Costly: meant for thousands to tens of thousands of points and tens to hundreds of vertices\n"
-    "(2 cores: 3,000 points to 100 vertices in about 4 s, 50,000 in about 2 min; 112,000 points\n"
-    "to 50 vertices did not finish in 28 min). --timings shows where the time goes.\n";
+    "Costly: meant for tens to hundreds of vertices. 2 cores: 3,000 points to 100 vertices in\n"
+    "about 4 s; 50,000 in about 35 s merged into 20,000 (2 min with --max-points 0); 112,586\n"
+    "(bun0.pcd) to 50 vertices in 48 s merged (not finished in 28 min unmerged). --timings\n"
+    "shows where the time goes.\n";
 
 const char* kRecoverUsage =
     "usage: paps recover-features MESH IN OUT.ply [options]\n"
@@ -136,7 +142,7 @@ int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
-               "dangling-support", "outlier-neighbours", "bins-per-area", "max-bins", "bins-per-point", "quiet",
+               "dangling-support", "outlier-neighbours", "max-points", "bins-per-area", "max-bins", "bins-per-point", "quiet",
                "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireFileOutput(".ply");  // checked before any work
@@ -151,12 +157,13 @@ int runReconstruct(int argc, char** argv) {
   p.deletion_threshold = a.real("deletion-threshold", p.deletion_threshold);
   p.dangling_support = a.real("dangling-support", p.dangling_support);
   p.outlier_neighbours = a.integer("outlier-neighbours", p.outlier_neighbours);
+  p.max_points = a.integer("max-points", p.max_points);
   p.transport.bins_per_area = a.number("bins-per-area", p.transport.bins_per_area);
   p.transport.max_bins_per_facet = a.integer("max-bins", p.transport.max_bins_per_facet);
   p.transport.bins_per_point = a.integer("bins-per-point", p.transport.bins_per_point);
   validateAsOptions({{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
                      {"density_threshold", "density-threshold"}, {"deletion_threshold", "deletion-threshold"},
-                     {"dangling_support", "dangling-support"}, {"outlier_neighbours", "outlier-neighbours"},
+                     {"dangling_support", "dangling-support"}, {"outlier_neighbours", "outlier-neighbours"}, {"max_points", "max-points"},
                      {"bins_per_area", "bins-per-area"},
                      {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}},
                     [&] { p.validate(); });
@@ -167,6 +174,9 @@ int runReconstruct(int argc, char** argv) {
               "%d simulations reused, %d skipped by their bound)\n",
               r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations,
               r.bounded_simulations);
+  if (r.merge_cell > 0)
+    std::printf("reconstruct: %zu points merged into %zu (cells of %g m, spread %.4g in the costs)\n",
+                r.points, r.transported_points, r.merge_cell, r.merge_spread);
   if (p.outlier_neighbours > 0)
     std::printf("reconstruct: outlier weights (%d neighbours): %zu points weigh less than 1, %zu less than 0.1\n",
                 p.outlier_neighbours, r.light_points, r.outlier_points);

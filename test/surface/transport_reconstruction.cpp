@@ -439,6 +439,128 @@ TEST(DanglingFacets, RejectsBadInput) {
   EXPECT_EQ(m.triangles.size(), 3u);  // untouched
 }
 
+// Merging large inputs (max_points): the merged points keep the mass and its centroid, and
+// for any bin b, sum m |p - b|^2 over the input = sum M |c - b|^2 over the cells + spread, so
+// a plan's cost on the merged points plus the spread is the cost of a plan on the input.
+std::vector<Eigen::Vector3d> spherePoints(int n, std::uint64_t seed, std::vector<double>* masses) {
+  paps::Random rng(seed);
+  std::vector<Eigen::Vector3d> points;
+  for (int i = 0; i < n; ++i) {
+    const Eigen::Vector3d p = rng.gaussian3();
+    points.push_back(3.0 * p.normalized() + Eigen::Vector3d(100, -20, 5));
+    masses->push_back(0.5 + 1.5 * rng.uniform());
+  }
+  return points;
+}
+
+TEST(MergeIntoCells, KeepsTheMassAndItsCentroidAndTheSpreadIsTheCostDifference) {
+  std::vector<double> masses;
+  const std::vector<Eigen::Vector3d> points = spherePoints(3000, 11, &masses);
+  const paps::MergedPoints m = paps::mergeIntoCells(points, masses, 400);
+  ASSERT_LE(m.points.size(), 400u);
+  EXPECT_GT(m.points.size(), 200u);  // the finest grid that fits, not any grid
+  ASSERT_EQ(m.masses.size(), m.points.size());
+  EXPECT_GT(m.cell, 0);
+  EXPECT_GT(m.spread, 0);
+  double mass = 0, merged_mass = 0;
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero(), merged_centre = Eigen::Vector3d::Zero();
+  for (std::size_t i = 0; i < points.size(); ++i) { mass += masses[i]; centre += masses[i] * points[i]; }
+  for (std::size_t i = 0; i < m.points.size(); ++i) {
+    EXPECT_GT(m.masses[i], 0);
+    merged_mass += m.masses[i];
+    merged_centre += m.masses[i] * m.points[i];
+  }
+  EXPECT_NEAR(merged_mass, mass, 1e-9 * mass);
+  EXPECT_LT((merged_centre / merged_mass - centre / mass).norm(), 1e-9);
+  paps::Random rng(5);
+  for (int t = 0; t < 6; ++t) {
+    const Eigen::Vector3d b = Eigen::Vector3d(100, -20, 5) + 2 * rng.gaussian3();
+    double direct = 0, merged = m.spread;
+    for (std::size_t i = 0; i < points.size(); ++i) direct += masses[i] * (points[i] - b).squaredNorm();
+    for (std::size_t i = 0; i < m.points.size(); ++i) merged += m.masses[i] * (m.points[i] - b).squaredNorm();
+    EXPECT_NEAR(merged, direct, 1e-9 * direct) << t;
+  }
+  // A centroid lies within its cell: at most a cell's diagonal from some input point.
+  for (const auto& c : m.points) {
+    double nearest = INFINITY;
+    for (const auto& p : points) nearest = std::min(nearest, (p - c).norm());
+    EXPECT_LE(nearest, std::sqrt(3.0) * m.cell);
+  }
+}
+
+TEST(MergeIntoCells, TheSameCellsForShuffledPointsAndNothingMergedWhenTheyFit) {
+  std::vector<double> masses;
+  const std::vector<Eigen::Vector3d> points = spherePoints(2000, 12, &masses);
+  std::vector<int> order(points.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = static_cast<int>(i);
+  paps::Random rng(3);
+  for (std::size_t k = order.size(); k > 1; --k) std::swap(order[k - 1], order[rng.below(k)]);
+  std::vector<Eigen::Vector3d> shuffled;
+  std::vector<double> shuffled_masses;
+  for (int i : order) { shuffled.push_back(points[i]); shuffled_masses.push_back(masses[i]); }
+  const paps::MergedPoints a = paps::mergeIntoCells(points, masses, 250);
+  const paps::MergedPoints b = paps::mergeIntoCells(shuffled, shuffled_masses, 250);
+  ASSERT_EQ(a.points.size(), b.points.size());
+  EXPECT_EQ(a.cell, b.cell);
+  for (std::size_t i = 0; i < a.points.size(); ++i) {
+    EXPECT_LT((a.points[i] - b.points[i]).norm(), 1e-9) << i;
+    EXPECT_NEAR(a.masses[i], b.masses[i], 1e-9) << i;
+  }
+  for (const std::size_t fits : {std::size_t(0), points.size(), points.size() + 1}) {
+    const paps::MergedPoints same = paps::mergeIntoCells(points, masses, fits);
+    EXPECT_EQ(same.points, points);
+    EXPECT_EQ(same.masses, masses);
+    EXPECT_EQ(same.cell, 0);
+    EXPECT_EQ(same.spread, 0);
+  }
+  // Fewer cells than the 8 of a grid at the box's side: still at most that many.
+  for (const std::size_t few : {1, 2, 5}) EXPECT_LE(paps::mergeIntoCells(points, masses, few).points.size(), few);
+  EXPECT_THROW(paps::mergeIntoCells(points, std::vector<double>(3, 1.0), 10), paps::InvalidInput);
+  auto bad = points;
+  bad[7].y() = NAN;
+  EXPECT_THROW(paps::mergeIntoCells(bad, masses, 10), paps::InvalidInput);
+}
+
+// 6,000 points of the cube merged into at most 600 reconstruct it as closely as 600 points
+// drawn from it do (the bounds of the first test); with max_points above the input, the mesh
+// is the unmerged one, bit for bit.
+TEST(TransportReconstruction, MergedLargeInputFitsTheCubeAsASampleOfThatSizeDoes) {
+  const TriangleMesh cube = paps::synthetic::cube(0.5f, 4);
+  const paps::Positions points = paps::synthetic::sampleMesh(cube, 6000, 3);
+  auto p = smallRun();
+  p.max_points = 600;
+  paps::TransportReconstructionReport r;
+  const TriangleMesh out = paps::transportReconstruct(points, p, &r);
+  EXPECT_EQ(r.points, 6000u);
+  EXPECT_LE(r.transported_points, 600u);
+  EXPECT_GT(r.transported_points, 300u);
+  EXPECT_GT(r.merge_cell, 0);
+  EXPECT_GT(r.merge_spread, 0);
+  EXPECT_GE(r.final_cost, r.merge_spread);
+  EXPECT_LE(r.output_vertices, 20);
+  const Fit f = fit(out, cube);
+  std::printf("cube, 6,000 points merged into %zu, 20 vertices: rms %.4f p95 %.4f coverage %.4f of the diagonal\n",
+              r.transported_points, f.to_truth_rms, f.to_truth_p95, f.coverage_rms);
+  EXPECT_LT(f.to_truth_rms, 0.011);
+  EXPECT_LT(f.to_truth_p95, 0.025);
+  EXPECT_LT(f.coverage_rms, 0.02);
+
+  const paps::Positions few = paps::synthetic::sampleMesh(cube, 300, 4);
+  auto q = exactnessRun(10);  // the manuscript's quadrature: faster, the same property
+  q.target_vertices = 10;
+  q.max_points = 0;
+  const TriangleMesh plain = paps::transportReconstruct(few, q);
+  q.max_points = 300;
+  paps::TransportReconstructionReport rq;
+  const TriangleMesh unmerged = paps::transportReconstruct(few, q, &rq);
+  EXPECT_EQ(rq.merge_cell, 0);
+  EXPECT_EQ(rq.transported_points, 300u);
+  ASSERT_EQ(unmerged.vertices.size(), plain.vertices.size());
+  ASSERT_EQ(unmerged.triangles.size(), plain.triangles.size());
+  for (std::size_t v = 0; v < plain.vertices.size(); ++v) EXPECT_EQ(unmerged.vertices[v], plain.vertices[v]) << v;
+  for (std::size_t t = 0; t < plain.triangles.size(); ++t) EXPECT_EQ(unmerged.triangles[t], plain.triangles[t]) << t;
+}
+
 TEST(TransportReconstruction, RejectsBadInput) {
   using paps::Positions;
   EXPECT_THROW(paps::transportReconstruct({}, smallRun()), paps::InvalidInput);
@@ -469,6 +591,14 @@ TEST(TransportReconstruction, RejectsBadInput) {
     p.outlier_neighbours = bad;
     EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
   }
+  for (const int bad : {-1, 1000000001}) {
+    p = smallRun();
+    p.max_points = bad;
+    EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
+  }
+  p = smallRun();
+  p.max_points = 3;  // too few points left to triangulate
+  EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidInput);
   paps::TransportReconstruction<pcl::PointXYZ> stage;  // no input cloud
   pcl::PolygonMesh mesh;
   EXPECT_THROW(stage.reconstruct(mesh), paps::InvalidInput);

@@ -2,6 +2,7 @@
 #include <paps/surface/impl/transport_reconstruction.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <numeric>
@@ -32,6 +33,7 @@ void TransportReconstructionParameters::validate() const {
   if (!(dangling_support >= 0) || !(dangling_support <= 1000))
     throw InvalidParameter("dangling_support", detail::toString(dangling_support), "in [0, 1000]");
   requireInRange("outlier_neighbours", outlier_neighbours, 0, 1000);
+  requireInRange("max_points", max_points, 0, 1000000000);
   transport.validate();
 }
 
@@ -297,6 +299,71 @@ std::vector<double> outlierWeights(const Positions& points, int neighbours) {
   return w;
 }
 
+MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& masses,
+                            std::size_t max_points) {
+  if (masses.size() != points.size())
+    throw InvalidInput("mergeIntoCells: " + std::to_string(points.size()) + " points but " +
+                       std::to_string(masses.size()) + " masses");
+  for (const auto& p : points)
+    if (!p.allFinite()) throw InvalidInput("mergeIntoCells: a point is not finite");
+  MergedPoints out;
+  if (max_points == 0 || points.size() <= max_points) {
+    out.points = points;
+    out.masses = masses;
+    return out;
+  }
+  Eigen::Vector3d lo = points[0], hi = points[0];
+  for (const auto& p : points) {
+    lo = lo.cwiseMin(p);
+    hi = hi.cwiseMax(p);
+  }
+  const double side = std::max((hi - lo).maxCoeff(), 1e-300);
+  using Key = std::array<std::int64_t, 3>;
+  std::vector<std::pair<Key, int>> keyed(points.size());
+  const auto keyAll = [&](double cell) {
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      const Eigen::Vector3d q = (points[i] - lo) / cell;
+      keyed[i] = {{static_cast<std::int64_t>(std::floor(q.x())), static_cast<std::int64_t>(std::floor(q.y())),
+                   static_cast<std::int64_t>(std::floor(q.z()))},
+                  static_cast<int>(i)};
+    }
+    std::sort(keyed.begin(), keyed.end());  // by key, then index: a total order
+  };
+  const auto cellsOf = [&](double cell) {
+    keyAll(cell);
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < keyed.size(); ++i) n += i == 0 || keyed[i].first != keyed[i - 1].first;
+    return n;
+  };
+  // The cell side by bisection on its logarithm: `fine` has too many cells, `coarse` few
+  // enough (a cell of the box's side holds at most 8 cells' worth: 2 a dimension).
+  double fine = side * 1e-7, coarse = side;
+  if (cellsOf(fine) <= max_points) coarse = fine;  // only copies of a few positions
+  while (coarse > fine && coarse / fine > 1 + 1e-3) {
+    const double mid = std::sqrt(fine * coarse);
+    (cellsOf(mid) <= max_points ? coarse : fine) = mid;
+  }
+  if (cellsOf(coarse) > max_points) {  // at the box's side 8 cells may still be too many
+    while (cellsOf(coarse) > max_points) coarse *= 2;
+  }
+  out.cell = coarse;
+  for (std::size_t i = 0; i < keyed.size();) {
+    std::size_t j = i;
+    double m = 0;
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (; j < keyed.size() && keyed[j].first == keyed[i].first; ++j) {
+      m += masses[keyed[j].second];
+      sum += masses[keyed[j].second] * points[keyed[j].second];
+    }
+    const Eigen::Vector3d c = sum / m;
+    for (std::size_t k = i; k < j; ++k) out.spread += masses[keyed[k].second] * (points[keyed[k].second] - c).squaredNorm();
+    out.points.push_back(c);
+    out.masses.push_back(m);
+    i = j;
+  }
+  return out;
+}
+
 TriangleMesh transportReconstruct(const Positions& input, const TransportReconstructionParameters& params,
                                   TransportReconstructionReport* report_out, const ProgressCallback& progress) {
   params.validate();
@@ -332,6 +399,23 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       report.light_points += w[i] < 1;
       report.outlier_points += w[i] < 0.1;
     }
+  }
+
+  // Large inputs are merged into cells: the reconstruction runs on the merged points, the
+  // dangling filter below looks at the distinct ones.
+  std::vector<Eigen::Vector3d> distinct_points;
+  report.transported_points = points.size();
+  if (params.max_points > 0 && points.size() > static_cast<std::size_t>(params.max_points)) {
+    MergedPoints merged = mergeIntoCells(points, masses, static_cast<std::size_t>(params.max_points));
+    distinct_points = std::move(points);
+    points = std::move(merged.points);
+    masses = std::move(merged.masses);
+    report.transported_points = points.size();
+    report.merge_cell = merged.cell;
+    report.merge_spread = merged.spread;
+    if (points.size() < 4)
+      throw InvalidInput("transport reconstruction: merging into at most " + std::to_string(params.max_points) +
+                         " points left " + std::to_string(points.size()) + " (raise max_points)");
   }
 
   // Initial subset: a seeded shuffle, so the result does not depend on anything else.
@@ -393,7 +477,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   for (int f = 0; f < plan.facetCount(); ++f)
     if (plan.facetAlive(f) && plan.sharesOfFacet(f).empty()) plan.removeFacet(f);
   report.complex_facets = plan.aliveFacetCount();
-  report.initial_cost = plan.cost();
+  report.initial_cost = plan.cost() + report.merge_spread;
 
   Decimation dec(plan);
   // A vertex left without facets keeps an edge to its nearest Delaunay neighbour if it carries
@@ -548,7 +632,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     deletion.finish();
     deletion.throwIfCancelled();
   }
-  report.final_cost = plan.cost();
+  report.final_cost = plan.cost() + report.merge_spread;
   report.rms_transport = std::sqrt(report.final_cost / plan.totalMass());
 
   // Post-processing (5.2.5): facets of low mass density go.
@@ -571,9 +655,10 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     out.triangles.push_back(t);
   }
   if (params.dangling_support > 0 && !out.triangles.empty()) {
+    const auto& source = distinct_points.empty() ? points : distinct_points;
     Positions finite;  // the input's distinct finite points
-    finite.reserve(points.size());
-    for (const auto& p : points) finite.push_back(p.cast<float>());
+    finite.reserve(source.size());
+    for (const auto& p : source) finite.push_back(p.cast<float>());
     const SpatialIndex index(finite);  // one index for the spacing and the support searches
     const double spacing = meanNearestNeighbourDistance(finite, index);
     if (spacing > 0)

@@ -367,6 +367,19 @@ TEST(TransportReconstruction, ProgressIsReportedAndCancels) {
                                             [&](const std::string& stage, float) { return stage != stop; }),
                  paps::Cancelled)
         << stop;
+  // Merging (more points than max_points) is a stage of its own, first, and cancels too.
+  p.max_points = 300;
+  stages.clear();
+  paps::transportReconstruct(points, p, nullptr, [&](const std::string& stage, float) {
+    if (stages.empty() || stages.back() != stage) stages.push_back(stage);
+    return true;
+  });
+  ASSERT_FALSE(stages.empty());
+  EXPECT_EQ(stages.front(), "transport merge");
+  EXPECT_EQ(std::vector<std::string>(stages.begin() + 1, stages.end()), expected);
+  EXPECT_THROW(paps::transportReconstruct(points, p, nullptr,
+                                          [&](const std::string& stage, float) { return stage != "transport merge"; }),
+               paps::Cancelled);
 }
 
 // Points on a grid of [0, 1]^2 (spacing 0.05), and the square as two facets.

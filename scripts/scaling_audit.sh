@@ -3,7 +3,8 @@
 # neighbour searches) and prints one line per run: exit code, wall time, peak memory, the
 # output's point count and the first error line.
 #   scripts/scaling_audit.sh [PAPS=build/apps/paps/paps] [WORK=/tmp/paps_scaling] [N=200000]
-# TIMEOUT=S (default 300) bounds each run; ONLY=REGEX keeps the inputs whose names match.
+# TIMEOUT=S (default 300) bounds each run; ONLY=REGEX keeps the inputs whose names match;
+# COMMANDS="denoise reconstruct ..." runs only those (default: all, listed in the loop below).
 # PEERS=1 also runs `paps bench files` on the same inputs (ours and the PCL/CGAL peers, each
 # bounded by TIMEOUT; a peer that does not finish is reported, not counted as a failure).
 # SKIP_OURS=1 skips the commands (with PEERS=1: the peers only).
@@ -61,7 +62,7 @@ for in in "$WORK"/in/*.pcd; do
   [[ $name =~ $ONLY ]] || continue
   inputs+=("$in")
   [ "${SKIP_OURS:-0}" = 1 ] && continue
-  for cmd in denoise bilateral curvature enhance superres apss rimls compress decompress; do
+  for cmd in ${COMMANDS:-denoise bilateral curvature enhance superres apss rimls compress decompress reconstruct}; do
     out="$WORK/out/$name.$cmd.pcd"
     case $cmd in
       denoise) args=(denoise "$in" "$out") ;;
@@ -72,6 +73,8 @@ for in in "$WORK"/in/*.pcd; do
       apss|rimls) args=(superres "$in" "$out" --factor 2 --method "$cmd") ;;
       compress) out="$WORK/out/$name.paps"; args=(compress "$in" "$out") ;;
       decompress) [ -f "$WORK/out/$name.paps" ] || continue; args=(decompress "$WORK/out/$name.paps" "$out") ;;
+      # Merged into 20,000 cells first (the default max_points); output: a mesh, its facets counted.
+      reconstruct) out="$WORK/out/$name.reconstruct.ply"; args=(reconstruct "$in" "$out") ;;
     esac
     [ "$cmd" = decompress ] || rm -f "$out"
     /usr/bin/time -f '%e %M' -o "$WORK/time.txt" timeout "$TIMEOUT" "$PAPS" "${args[@]}" --quiet \
@@ -80,7 +83,8 @@ for in in "$WORK"/in/*.pcd; do
     read -r secs kb < <(tail -1 "$WORK/time.txt")
     err=$(grep -m1 -iE 'error|terminate|abort' "$WORK/stderr.txt" | cut -c1-110)
     n=-; [ "$cmd" = compress ] && [ -f "$out" ] && n="$(stat -c %s "$out") B"
-    [ "$cmd" != compress ] && [ -f "$out" ] && n=$(points "$out")
+    [ "$cmd" != compress ] && [ "$cmd" != reconstruct ] && [ -f "$out" ] && n=$(points "$out")
+    [ "$cmd" = reconstruct ] && [ -f "$out" ] && n="$(head -c 400 "$out" | tr -d '\0' | awk '/^element face/{print $3; exit}') f"
     [ $rc -eq 124 ] || [ $rc -gt 128 ] && fails=$((fails + 1))
     [ $rc -eq 124 ] && secs=">$TIMEOUT"
     printf '%-9s %-14s %4s %9s %9s %9s  %s\n' "$name" "$cmd" "$rc" "$secs" "$(( ${kb:-0} / 1024 ))" "$n" "$err"

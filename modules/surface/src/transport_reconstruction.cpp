@@ -456,7 +456,12 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   triangulation.finish();
   if (dt.dimension() < 3)
     throw InvalidInput("transport reconstruction: the initial points are coplanar or collinear (dimension " +
-                       std::to_string(dt.dimension()) + ")");
+                       std::to_string(dt.dimension()) + ")" +
+                       (report.merge_cell > 0 ? "; the input was merged into " +
+                                                    std::to_string(report.transported_points) + " cells of side " +
+                                                    detail::toString(report.merge_cell) +
+                                                    ": a larger max_points (--max-points) keeps more of its detail"
+                                              : std::string()));
 
   TransportPlan plan(points, masses, params.transport);
   // Vertex ids by site index and facets in sorted order: CGAL's iteration order depends on

@@ -583,6 +583,17 @@ TEST(TransportReconstruction, RejectsBadInput) {
   Positions flat;
   for (int i = 0; i < 200; ++i) flat.emplace_back(i % 17 * 0.1f, i / 17 * 0.1f, 0.f);
   EXPECT_THROW(paps::transportReconstruct(flat, smallRun()), paps::InvalidInput);  // coplanar start
+  {  // coplanar after a merge: the error says so, and what to raise
+    auto merged = smallRun();
+    merged.max_points = 100;
+    try {
+      paps::transportReconstruct(flat, merged);
+      ADD_FAILURE() << "a plane was reconstructed";
+    } catch (const paps::InvalidInput& e) {
+      EXPECT_NE(std::string(e.what()).find("merged into"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("max_points"), std::string::npos) << e.what();
+    }
+  }
   const Positions few = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 2), 100, 1);
   EXPECT_THROW(paps::transportReconstruct(few, smallRun()), paps::InvalidParameter);  // 20 start vertices, not above 20
   auto p = smallRun();

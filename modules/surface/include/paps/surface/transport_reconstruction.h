@@ -97,11 +97,12 @@ struct TransportReconstructionParameters {
   /// reported costs stay upper bounds of the input's transport cost. The programs shrink with
   /// the points (the late ones hold thousands of points each); a cell is a few point spacings
   /// wide, well below the facets of tens to hundreds of vertices. 0: never merge.
-  /// 20,000: rs1 sampled with 50,000 points to 100 vertices, seeds 1-3, took 30-38 s instead
-  /// of 129-135 s (2 threads), the mesh 8% farther from the scan (RMS 3.25 against 3.00) and
-  /// covering it 13% closer (4.50 against 5.20); 112,586 points (bun0.pcd) to 50 vertices
-  /// took 48 s instead of not finishing in 28 minutes. Inputs up to 20,000 points are not
-  /// touched.
+  /// 20,000: rs1 sampled with 50,000 points to 100 vertices, seeds 1-3 (`paps bench
+  /// transport --only-scan --scan-points 50000`): 34 s instead of 127 s on 2 threads, mesh
+  /// RMS 0.99x and coverage RMS 0.91x the unmerged run's; 112,586 points (bun0.pcd) to 50
+  /// vertices took 48 s instead of not finishing in 28 minutes. On par with a plain sample of
+  /// the same size (docs/transport.md), without the user subsampling. Inputs up to 20,000
+  /// points are not touched.
   int max_points = 20000;
   std::uint64_t seed = 1;
   /// Quadrature: 4x the manuscript's bins per area (800) and up to 64 bins a facet. With the

@@ -52,8 +52,14 @@ const char* kUsage =
     "              3, at most 100; one seed's run takes a minute or two)\n"
     "  --only-outliers  only the cube with outliers: not (a) nor the other shapes and cases\n"
     "  --scan-points N  points sampled on rs1 (default 3000, 1000 to 1000000); past the\n"
-    "              library's max_points (20000) ours also runs unmerged (max_points 0)\n"
+    "              --max-points ours also runs unmerged (max_points 0)\n"
     "  --only-scan  only the real scan rs1: not (a) nor the cube and fandisk\n"
+    "  --shape-points N  points sampled on the cube and the fandisk block of (b) (default\n"
+    "              3000, 1000 to 1000000)\n"
+    "  --max-points N  ours merges inputs of more than N distinct points into cells (default\n"
+    "              the library's 20000; 0: never); past it ours also runs without the crease\n"
+    "              splits (merge_crease_angle 0)\n"
+    "  --only-shapes  only the cube and the fandisk block of (b): not (a) nor the scan\n"
     "(a) feature recovery on a fandisk block: PCL Poisson (normals by PCL's NormalEstimationOMP,\n"
     "    k = 20, pointing away from the centroid), then our transport feature recovery on that\n"
     "    Poisson mesh with the same points, with 1 relocation sweep (the default) and with 5\n"
@@ -234,6 +240,7 @@ int runTransportWorker(int argc, char** argv) {
       p.dangling_support = static_cast<float>(params.get("dangling", p.dangling_support));
       p.outlier_neighbours = static_cast<int>(params.get("outlier_neighbours", p.outlier_neighbours));
       p.max_points = static_cast<int>(params.get("max_points", p.max_points));
+      p.merge_crease_angle = params.get("crease", p.merge_crease_angle);
       TransportReconstructionReport r;
       mesh = transportReconstruct(input, p, &r);
       seconds = elapsed();
@@ -249,9 +256,10 @@ int runTransportWorker(int argc, char** argv) {
 }
 
 int runBenchTransport(int argc, char** argv) {
-  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "only-outliers", "only-scan"});
+  const Arguments a = Arguments::parse(argc, argv, 3, {"quick", "help", "only-outliers", "only-scan", "only-shapes"});
   if (a.has("help")) { std::fputs(kUsage, stdout); return 0; }
-  a.allowOnly({"out", "quick", "samples", "candidates", "outlier-seeds", "only-outliers", "scan-points", "only-scan"});
+  a.allowOnly({"out", "quick", "samples", "candidates", "outlier-seeds", "only-outliers", "scan-points", "only-scan", "shape-points",
+               "max-points", "only-shapes"});
   const int outlier_seeds = a.integer("outlier-seeds", 3);
   if (outlier_seeds < 1 || outlier_seeds > 100)
     throw InvalidParameter("outlier-seeds", std::to_string(outlier_seeds), "1 to 100");
@@ -262,10 +270,17 @@ int runBenchTransport(int argc, char** argv) {
   const int scan_points = a.integer("scan-points", 3000);
   if (scan_points < 1000 || scan_points > 1000000)
     throw InvalidParameter("scan-points", std::to_string(scan_points), "1000 to 1000000");
-  const int max_points = TransportReconstructionParameters().max_points;
-  const bool only_scan = a.has("only-scan");
+  const int shape_points = a.integer("shape-points", 3000);
+  if (shape_points < 1000 || shape_points > 1000000)
+    throw InvalidParameter("shape-points", std::to_string(shape_points), "1000 to 1000000");
+  const int max_points = a.integer("max-points", TransportReconstructionParameters().max_points);
+  if (max_points < 0 || max_points > 1000000000)
+    throw InvalidParameter("max-points", std::to_string(max_points), "0 (never merge) to 1000000000");
+  const bool only_scan = a.has("only-scan"), only_shapes = a.has("only-shapes");
   if (only_scan && (a.has("quick") || a.has("only-outliers")))
     throw InvalidParameter("only-scan", "with --quick or --only-outliers", "one of them");
+  if (only_shapes && (a.has("quick") || a.has("only-outliers") || only_scan))
+    throw InvalidParameter("only-shapes", "with --quick, --only-outliers or --only-scan", "one of them");
   if (candidates < 0) throw InvalidParameter("candidates", std::to_string(candidates), "0 (all half-edges) or more");
   std::setvbuf(stdout, nullptr, _IOLBF, 0);
   const bool quick = a.has("quick");
@@ -282,7 +297,7 @@ int runBenchTransport(int argc, char** argv) {
   };
 
   // (a) Feature recovery.
-  if (!only_outliers && !only_scan) {
+  if (!only_outliers && !only_scan && !only_shapes) {
     const std::size_t n = quick ? 20000 : 60000;
     const int depth = quick ? 5 : 6;
     const TriangleMesh gt = synthetic::fandiskBlock(64);
@@ -357,7 +372,7 @@ int runBenchTransport(int argc, char** argv) {
   // A real shape: the range-scan mesh of opencv-doc (an open, cluttered scene with borders,
   // which the transport keeps and Poisson closes).
   const std::string rs1 = a.text("samples", samplesDir()) + "/rs1_normals.ply";
-  const bool all_shapes = !quick && !only_outliers;
+  const bool all_shapes = !quick && !only_outliers && !only_shapes;
   if (all_shapes && std::filesystem::exists(rs1))
     shapes.push_back({"rs1_normals.ply (real range scan)", "reconstruction-rs1", loadTriangleMesh(rs1), 100, true, {{0, 0}}});
   else if (all_shapes)
@@ -372,7 +387,7 @@ int runBenchTransport(int argc, char** argv) {
   }
   for (const Shape& shape : shapes) {
     const bool scan = shape.part == "reconstruction-rs1";
-    const std::size_t n = quick ? 800 : scan ? static_cast<std::size_t>(scan_points) : 3000;
+    const std::size_t n = quick ? 800 : scan ? static_cast<std::size_t>(scan_points) : static_cast<std::size_t>(shape_points);
     const TriangleMesh& gt = shape.gt;
     const Positions clean = synthetic::sampleMesh(gt, n, 7);
     const double diagonal = gt.boundingBoxDiagonal();
@@ -404,11 +419,21 @@ int runBenchTransport(int argc, char** argv) {
       for (int seed = 1; seed <= seeds; ++seed)
         rows.push_back(outliers > 0 ? Row{fmt("ours (OT, 0.5, dangling 2), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", shape.vertices}, {"density", 0.5}, {"dangling", 2}, {"seed", seed},
-                                           {"candidates", candidates}}}
+                                           {"candidates", candidates}, {"max_points", max_points}}}
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
-                                          {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates}}});
+                                          {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates},
+                                           {"max_points", max_points}}});
+      // Merged: also without the crease splits (merge_crease_angle 0), what they change.
+      const bool merged = max_points > 0 && n > static_cast<std::size_t>(max_points);
+      if (merged)
+        for (Row r : std::vector<Row>(rows.begin(), rows.begin() + seeds)) {
+          r.name = fmt("ours (no crease split), seed %.0f", r.params["seed"]);
+          r.params["crease"] = 0;
+          r.group = 3;
+          rows.push_back(r);
+        }
       // A scan sample larger than max_points: also unmerged (max_points 0), the cost the merge saves.
-      if (scan && n > static_cast<std::size_t>(max_points))
+      if (scan && merged)
         for (int seed = 1; seed <= seeds; ++seed)
           rows.push_back(Row{fmt("ours (unmerged), seed %.0f", seed), "ot-reconstruction",
                              {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates}, {"max_points", 0}},

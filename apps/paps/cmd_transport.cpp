@@ -61,6 +61,9 @@ const char* kReconstructUsage =
     "                           0: never (default 20000: rs1 50,000 points to 100 vertices\n"
     "                           in 30-38 s instead of 129-135 s, about as close; on a sharp\n"
     "                           cube 1.5x the facets of a plain sample: docs/transport.md)\n"
+    "  --merge-crease-angle A   merging splits a cell whose points' normals fall in two groups\n"
+    "                           more than A degrees apart (a crease), each side at its own\n"
+    "                           centroid; in [0, 90] (default 30; 0: never split)\n"
     "  --bins-per-area B        facet bins per unit area, the points scaled into a box of side\n"
     "                           0.5 (default 800; the manuscript's 200 is faster, less sharp)\n"
     "  --max-bins M             at most M bins a facet, 1 to 256 (default 64)\n"
@@ -142,7 +145,7 @@ int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
-               "dangling-support", "outlier-neighbours", "max-points", "bins-per-area", "max-bins", "bins-per-point", "quiet",
+               "dangling-support", "outlier-neighbours", "max-points", "merge-crease-angle", "bins-per-area", "max-bins", "bins-per-point", "quiet",
                "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireFileOutput(".ply");  // checked before any work
@@ -158,12 +161,14 @@ int runReconstruct(int argc, char** argv) {
   p.dangling_support = a.real("dangling-support", p.dangling_support);
   p.outlier_neighbours = a.integer("outlier-neighbours", p.outlier_neighbours);
   p.max_points = a.integer("max-points", p.max_points);
+  p.merge_crease_angle = a.real("merge-crease-angle", p.merge_crease_angle);
   p.transport.bins_per_area = a.number("bins-per-area", p.transport.bins_per_area);
   p.transport.max_bins_per_facet = a.integer("max-bins", p.transport.max_bins_per_facet);
   p.transport.bins_per_point = a.integer("bins-per-point", p.transport.bins_per_point);
   validateAsOptions({{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
                      {"density_threshold", "density-threshold"}, {"deletion_threshold", "deletion-threshold"},
                      {"dangling_support", "dangling-support"}, {"outlier_neighbours", "outlier-neighbours"}, {"max_points", "max-points"},
+                     {"merge_crease_angle", "merge-crease-angle"},
                      {"bins_per_area", "bins-per-area"},
                      {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}},
                     [&] { p.validate(); });
@@ -175,8 +180,9 @@ int runReconstruct(int argc, char** argv) {
               r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations,
               r.bounded_simulations);
   if (r.merge_cell > 0)
-    std::printf("reconstruct: %zu points merged into %zu (cells of %g m, spread %.4g in the costs)\n",
-                r.points, r.transported_points, r.merge_cell, r.merge_spread);
+    std::printf("reconstruct: %zu points merged into %zu (cells of %g m, %zu more for creases, spread %.4g in the "
+                "costs)\n",
+                r.points, r.transported_points, r.merge_cell, r.crease_points, r.merge_spread);
   if (p.outlier_neighbours > 0)
     std::printf("reconstruct: outlier weights (%d neighbours): %zu points weigh less than 1, %zu less than 0.1\n",
                 p.outlier_neighbours, r.light_points, r.outlier_points);

@@ -19,7 +19,9 @@
 #include <pcl/point_types.h>
 
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/metrics.h>
+#include <paps/core/neighbourhood.h>
 #include <paps/core/random.h>
 #include <paps/core/synthetic.h>
 #include <paps/surface/transport_reconstruction.h>
@@ -534,6 +536,90 @@ TEST(MergeIntoCells, TheSameCellsForShuffledPointsAndNothingMergedWhenTheyFit) {
   EXPECT_THROW(paps::mergeIntoCells(bad, masses, 10), paps::InvalidInput);
 }
 
+// A cell across a crease merges at a centroid off the surface (inside a convex edge); split
+// at the crease (the points' normals in two groups 90 degrees apart), each side's centroid
+// lies on its own face. On a smooth sphere nothing is split at 30 degrees.
+double depthInCube(const Eigen::Vector3d& p, double half) {
+  const Eigen::Vector3d a = p.cwiseAbs();
+  const Eigen::Vector3d out = (a.array() - half).max(0).matrix();
+  return out.squaredNorm() > 0 ? out.norm() : half - a.maxCoeff();
+}
+
+TEST(MergeIntoCells, SplitsCellsAtCreasesSoTheirCentroidsLieOnTheFaces) {
+  paps::Normals normals;
+  const paps::Positions sample = paps::synthetic::sampleMesh(paps::synthetic::cube(1.f, 2), 20000, 9, &normals);
+  std::vector<Eigen::Vector3d> points;
+  for (const auto& p : sample) points.push_back(p.cast<double>());
+  std::vector<double> masses(points.size(), 1.0);
+  const paps::MergedPoints plain = paps::mergeIntoCells(points, masses, 1500);
+  const paps::MergedPoints split = paps::mergeIntoCells(points, masses, 1500, &normals, 30);
+  EXPECT_EQ(plain.crease_points, 0u);
+  EXPECT_GT(split.crease_points, 100u);  // 12 edges of about 1 / cell cells, and 8 corners
+  ASSERT_LE(split.points.size(), 1500u);
+  EXPECT_GT(split.points.size(), 1000u);
+  // Cells with fewer than 3 points on a side stay whole (kMinCreaseSide): some remain off.
+  double plain_depth = 0, split_depth = 0;
+  int plain_off = 0, split_off = 0;
+  for (const auto& c : plain.points) {
+    plain_depth = std::max(plain_depth, depthInCube(c, 0.5));
+    plain_off += depthInCube(c, 0.5) > 1e-6;
+  }
+  for (const auto& c : split.points) {
+    split_depth = std::max(split_depth, depthInCube(c, 0.5));
+    split_off += depthInCube(c, 0.5) > 1e-6;
+  }
+  std::printf("cube, 20,000 points into at most 1,500: deepest centroid %.4f plain, %.4f split; off the faces %d "
+              "plain, %d split (%zu more points, cell %.4f)\n",
+              plain_depth, split_depth, plain_off, split_off, split.crease_points, split.cell);
+  EXPECT_GT(plain_depth, 0.1 * plain.cell);
+  EXPECT_LT(split_depth, 0.4 * plain_depth);
+  EXPECT_LT(split_off, plain_off / 2);
+  // Still a merge: the mass, and the cost identity with the spread.
+  double mass = 0, direct = 0, merged = split.spread;
+  const Eigen::Vector3d b(0.2, -0.7, 0.4);
+  for (std::size_t i = 0; i < split.points.size(); ++i) {
+    mass += split.masses[i];
+    merged += split.masses[i] * (split.points[i] - b).squaredNorm();
+  }
+  for (const auto& p : points) direct += (p - b).squaredNorm();
+  EXPECT_NEAR(mass, 20000.0, 1e-6);
+  EXPECT_NEAR(merged, direct, 1e-9 * direct);
+  EXPECT_GT(split.spread, 0);
+
+  std::vector<double> sphere_masses;
+  const std::vector<Eigen::Vector3d> sphere = spherePoints(3000, 13, &sphere_masses);
+  paps::Normals radial;
+  for (const auto& p : sphere) radial.push_back((p - Eigen::Vector3d(100, -20, 5)).normalized().cast<float>());
+  const paps::MergedPoints smooth = paps::mergeIntoCells(sphere, sphere_masses, 400, &radial, 30);
+  const paps::MergedPoints cells = paps::mergeIntoCells(sphere, sphere_masses, 400);
+  EXPECT_EQ(smooth.crease_points, 0u);
+  ASSERT_EQ(smooth.points.size(), cells.points.size());
+  for (std::size_t i = 0; i < cells.points.size(); ++i) EXPECT_LT((smooth.points[i] - cells.points[i]).norm(), 1e-9);
+
+  // A flat square with noise (0.3x the spacing) and PCA normals, as the reconstruction makes
+  // them: the noise splits few cells (39 of about 1,500 when written).
+  paps::Positions flat;
+  paps::Random noise(21);
+  for (int i = 0; i < 20000; ++i) {
+    const double x = noise.uniform();
+    const double y = noise.uniform();
+    const double z = 0.002 * noise.gaussian();
+    flat.emplace_back(x, y, z);
+  }
+  const paps::SpatialIndex flat_index(flat);
+  const paps::Normals flat_normals =
+      paps::estimateNormals(flat, paps::NeighbourGraph::byCount(flat, flat_index, paps::kMergeNormalNeighbours));
+  std::vector<Eigen::Vector3d> flat_points;
+  for (const auto& p : flat) flat_points.push_back(p.cast<double>());
+  const paps::MergedPoints noisy = paps::mergeIntoCells(flat_points, masses, 1500, &flat_normals, 30);
+  std::printf("noisy square: %zu of %zu points from crease splits\n", noisy.crease_points, noisy.points.size());
+  EXPECT_LT(noisy.crease_points, noisy.points.size() / 20);
+
+  EXPECT_THROW(paps::mergeIntoCells(points, masses, 1500, &radial, 30), paps::InvalidInput);  // sizes differ
+  for (const double bad : {-1.0, 91.0, double(NAN)})
+    EXPECT_THROW(paps::mergeIntoCells(points, masses, 1500, &normals, bad), paps::InvalidParameter);
+}
+
 // 6,000 points of the cube merged into at most 600 reconstruct it as closely as 600 points
 // drawn from it do (the bounds of the first test); with max_points above the input, the mesh
 // is the unmerged one, bit for bit.
@@ -618,6 +704,11 @@ TEST(TransportReconstruction, RejectsBadInput) {
   for (const int bad : {-1, 1000000001}) {
     p = smallRun();
     p.max_points = bad;
+    EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
+  }
+  for (const double bad : {-1.0, 90.5, double(NAN)}) {
+    p = smallRun();
+    p.merge_crease_angle = bad;
     EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);
   }
   p = smallRun();

@@ -7,12 +7,16 @@
 #include <map>
 #include <numeric>
 #include <set>
+#include <tuple>
+
+#include <Eigen/Eigenvalues>
 
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
 #include <paps/core/error.h>
+#include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
 #include <paps/core/random.h>
@@ -34,6 +38,8 @@ void TransportReconstructionParameters::validate() const {
     throw InvalidParameter("dangling_support", detail::toString(dangling_support), "in [0, 1000]");
   requireInRange("outlier_neighbours", outlier_neighbours, 0, 1000);
   requireInRange("max_points", max_points, 0, 1000000000);
+  if (!(merge_crease_angle >= 0) || !(merge_crease_angle <= 90))
+    throw InvalidParameter("merge_crease_angle", detail::toString(merge_crease_angle), "in [0, 90]");
   transport.validate();
 }
 
@@ -299,81 +305,213 @@ std::vector<double> outlierWeights(const Positions& points, int neighbours) {
   return w;
 }
 
+namespace {
+
+// Crease splits: a cell's points in at most 2^kCreaseDepth groups (a cube's corner has 3 faces).
+constexpr int kCreaseDepth = 2;
+
+// Largest-eigenvalue axis of sum m n n^T over the points of [first, last) with a normal.
+Eigen::Vector3d normalAxis(const int* first, const int* last, const Normals& normals, const std::vector<double>& masses) {
+  Eigen::Matrix3d t = Eigen::Matrix3d::Zero();
+  for (const int* i = first; i != last; ++i)
+    if (isFinite(normals[*i])) {
+      const Eigen::Vector3d n = normals[*i].cast<double>();
+      t += masses[*i] * n * n.transpose();
+    }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+  eig.computeDirect(t);
+  return eig.eigenvectors().col(2);
+}
+
+// Whether the sides [first, mid) and [mid, last) of a cell, with normal axes a and b, are a
+// crease rather than noise: each side holds kMinCreaseSide normals or more, and the axes lie
+// further apart than kCreaseContrast x the RMS angle (sines) of the tighter side's normals to
+// its axis. Splitting the normals of a flat cell that only noise tilts gives axes about 1.4x
+// that RMS apart (half-means of a 2-D Gaussian); a crease gives tight clusters. The tighter
+// side, not both: at a cube's corner the first split leaves two faces on one side.
+constexpr int kMinCreaseSide = 3;
+constexpr double kCreaseContrast = 2.5;
+bool separatedBeyondNoise(const int* first, const int* mid, const int* last, const Eigen::Vector3d& a,
+                          const Eigen::Vector3d& b, const Normals& normals, const std::vector<double>& masses) {
+  const auto spreadOf = [&](const int* from, const int* to, const Eigen::Vector3d& axis) {
+    double m = 0, spread = 0;
+    int count = 0;
+    for (const int* i = from; i != to; ++i)
+      if (isFinite(normals[*i])) {
+        ++count;
+        m += masses[*i];
+        spread += masses[*i] * (1 - std::pow(axis.dot(normals[*i].cast<double>()), 2));
+      }
+    return count < kMinCreaseSide ? -1.0 : spread / m;
+  };
+  const double sa = spreadOf(first, mid, a), sb = spreadOf(mid, last, b);
+  if (sa < 0 || sb < 0) return false;
+  return 1 - std::pow(a.dot(b), 2) > kCreaseContrast * kCreaseContrast * std::min(sa, sb);
+}
+
+// Splits the points of [first, last) (a cell, reordered in place) into groups whose normals
+// lie within `cos_crease` of one axis: 2-means on unoriented normals, started from the
+// normal tensor's main axis and the normal furthest from it (chosen by value, so the
+// points' order does not matter), a split kept when the two axes end further apart than the
+// crease angle and beyond the noise of the normals (separatedBeyondNoise), then each side
+// again. Appends the end of each group to `ends`. Points without a normal stay with the
+// first side.
+void splitAtCreases(int* first, int* last, const Normals& normals, const std::vector<double>& masses,
+                    double cos_crease, int depth, std::vector<char>& side, std::vector<int*>& ends) {
+  if (depth < kCreaseDepth && last - first >= 2 * kMinCreaseSide) {
+    Eigen::Vector3d a = normalAxis(first, last, normals, masses), b;
+    double furthest = 2;
+    Eigen::Vector3f far_normal = Eigen::Vector3f::Zero();
+    for (const int* i = first; i != last; ++i) {
+      const Eigen::Vector3f& n = normals[*i];
+      if (!isFinite(n)) continue;
+      const double c = std::abs(n.cast<double>().dot(a));
+      const auto lexicographic = [](const Eigen::Vector3f& u, const Eigen::Vector3f& v) {
+        return std::tie(u.x(), u.y(), u.z()) < std::tie(v.x(), v.y(), v.z());
+      };
+      if (c < furthest || (c == furthest && lexicographic(n, far_normal))) {
+        furthest = c;
+        far_normal = n;
+      }
+    }
+    b = far_normal.cast<double>();
+    for (int round = 0; round < 4 && furthest < cos_crease; ++round) {
+      for (int* i = first; i != last; ++i) {
+        const Eigen::Vector3d n = normals[*i].cast<double>();
+        side[*i] = isFinite(normals[*i]) && std::abs(n.dot(b)) > std::abs(n.dot(a));
+      }
+      int* mid = std::stable_partition(first, last, [&](int i) { return side[i] == 0; });
+      if (mid == first || mid == last) break;
+      a = normalAxis(first, mid, normals, masses);
+      b = normalAxis(mid, last, normals, masses);
+      if (round == 3 && std::abs(a.dot(b)) < cos_crease && separatedBeyondNoise(first, mid, last, a, b, normals, masses)) {
+        splitAtCreases(first, mid, normals, masses, cos_crease, depth + 1, side, ends);
+        splitAtCreases(mid, last, normals, masses, cos_crease, depth + 1, side, ends);
+        return;
+      }
+    }
+  }
+  ends.push_back(last);
+}
+
+}  // namespace
+
 MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& masses,
-                            std::size_t max_points) {
+                            std::size_t max_points, const Normals* normals, double crease_degrees) {
   if (masses.size() != points.size())
     throw InvalidInput("mergeIntoCells: " + std::to_string(points.size()) + " points but " +
                        std::to_string(masses.size()) + " masses");
   for (const auto& p : points)
     if (!p.allFinite()) throw InvalidInput("mergeIntoCells: a point is not finite");
+  if (normals && normals->size() != points.size())
+    throw InvalidInput("mergeIntoCells: " + std::to_string(points.size()) + " points but " +
+                       std::to_string(normals->size()) + " normals");
+  if (!(crease_degrees >= 0) || !(crease_degrees <= 90))
+    throw InvalidParameter("crease_degrees", detail::toString(crease_degrees), "in [0, 90]");
   MergedPoints out;
   if (max_points == 0 || points.size() <= max_points) {
     out.points = points;
     out.masses = masses;
     return out;
   }
+  const bool creases = normals != nullptr && crease_degrees > 0;
+  const double cos_crease = std::cos(crease_degrees * M_PI / 180);
   Eigen::Vector3d lo = points[0], hi = points[0];
   for (const auto& p : points) {
     lo = lo.cwiseMin(p);
     hi = hi.cwiseMax(p);
   }
   const double side = std::max((hi - lo).maxCoeff(), 1e-300);
+  // The points in cell order (then by index: a total order) and where each cell starts.
+  std::vector<int> order(points.size());
+  std::vector<std::size_t> starts;
   using Key = std::array<std::int64_t, 3>;
-  std::vector<std::pair<Key, int>> keyed(points.size());
-  const auto keyAll = [&](double cell) {
+  std::vector<std::pair<Key, int>> keyed;
+  // With keys packed into one integer (the grid has fewer than 4e18 cells) a count sorts
+  // integers, 4x faster than triples on 1M points; the cells come in the same (x, y, z) order.
+  std::vector<std::uint64_t> packed;
+  std::vector<std::pair<std::uint64_t, int>> packed_index;
+  const auto sortIntoCells = [&](double cell, bool need_order) {
+    const Eigen::Array3d dims = ((hi - lo) / cell).array().floor() + 1;
+    starts.clear();
+    if (dims.prod() < 4e18) {
+      const auto ny = static_cast<std::uint64_t>(dims.y()), nz = static_cast<std::uint64_t>(dims.z());
+      const auto keyOf = [&](std::size_t i) {
+        const Eigen::Array3d q = ((points[i] - lo) / cell).array().floor().min(dims - 1);
+        return (static_cast<std::uint64_t>(q.x()) * ny + static_cast<std::uint64_t>(q.y())) * nz +
+               static_cast<std::uint64_t>(q.z());
+      };
+      if (!need_order) {  // a count only
+        packed.resize(points.size());
+        for (std::size_t i = 0; i < points.size(); ++i) packed[i] = keyOf(i);
+        std::sort(packed.begin(), packed.end());
+        for (std::size_t i = 0; i < packed.size(); ++i)
+          if (i == 0 || packed[i] != packed[i - 1]) starts.push_back(i);
+        return;
+      }
+      packed_index.resize(points.size());
+      for (std::size_t i = 0; i < points.size(); ++i) packed_index[i] = {keyOf(i), static_cast<int>(i)};
+      std::sort(packed_index.begin(), packed_index.end());
+      for (std::size_t i = 0; i < packed_index.size(); ++i) {
+        order[i] = packed_index[i].second;
+        if (i == 0 || packed_index[i].first != packed_index[i - 1].first) starts.push_back(i);
+      }
+      return;
+    }
+    keyed.resize(points.size());
     for (std::size_t i = 0; i < points.size(); ++i) {
       const Eigen::Vector3d q = (points[i] - lo) / cell;
       keyed[i] = {{static_cast<std::int64_t>(std::floor(q.x())), static_cast<std::int64_t>(std::floor(q.y())),
                    static_cast<std::int64_t>(std::floor(q.z()))},
                   static_cast<int>(i)};
     }
-    std::sort(keyed.begin(), keyed.end());  // by key, then index: a total order
-  };
-  // The bisection counts cells many times: with keys packed into one integer (the grid has
-  // fewer than 4e18 cells) a count is a sort of integers, 4x faster than of triples on 1M points.
-  std::vector<std::uint64_t> packed(points.size());
-  const auto cellsOf = [&](double cell) {
-    const Eigen::Array3d dims = ((hi - lo) / cell).array().floor() + 1;
-    std::size_t n = 0;
-    if (dims.prod() < 4e18) {
-      const auto ny = static_cast<std::uint64_t>(dims.y()), nz = static_cast<std::uint64_t>(dims.z());
-      for (std::size_t i = 0; i < points.size(); ++i) {
-        const Eigen::Array3d q = ((points[i] - lo) / cell).array().floor().min(dims - 1);
-        packed[i] = (static_cast<std::uint64_t>(q.x()) * ny + static_cast<std::uint64_t>(q.y())) * nz +
-                    static_cast<std::uint64_t>(q.z());
-      }
-      std::sort(packed.begin(), packed.end());
-      for (std::size_t i = 0; i < packed.size(); ++i) n += i == 0 || packed[i] != packed[i - 1];
-    } else {
-      keyAll(cell);
-      for (std::size_t i = 0; i < keyed.size(); ++i) n += i == 0 || keyed[i].first != keyed[i - 1].first;
+    std::sort(keyed.begin(), keyed.end());
+    for (std::size_t i = 0; i < keyed.size(); ++i) {
+      order[i] = keyed[i].second;
+      if (i == 0 || keyed[i].first != keyed[i - 1].first) starts.push_back(i);
     }
-    return n;
   };
-  // The cell side by bisection on its logarithm: `fine` has too many cells, `coarse` few
+  // The groups of each cell (its points, or its crease splits), as ends into `order`.
+  std::vector<char> split_side(creases ? points.size() : 0);
+  std::vector<int*> ends;
+  const auto groupsOf = [&](double cell, bool need_order) {
+    sortIntoCells(cell, creases || need_order);
+    ends.clear();
+    for (std::size_t c = 0; c < starts.size(); ++c) {
+      int* first = order.data() + starts[c];
+      int* last = order.data() + (c + 1 < starts.size() ? starts[c + 1] : order.size());
+      if (creases)
+        splitAtCreases(first, last, *normals, masses, cos_crease, 0, split_side, ends);
+      else
+        ends.push_back(last);
+    }
+    return ends.size();
+  };
+  // The cell side by bisection on its logarithm: `fine` has too many groups, `coarse` few
   // enough (a cell of the box's side holds at most 8 cells' worth: 2 a dimension).
   double fine = side * 1e-7, coarse = side;
-  if (cellsOf(fine) <= max_points) coarse = fine;  // only copies of a few positions
+  if (groupsOf(fine, false) <= max_points) coarse = fine;  // only copies of a few positions
   while (coarse > fine && coarse / fine > 1 + 1e-3) {
     const double mid = std::sqrt(fine * coarse);
-    (cellsOf(mid) <= max_points ? coarse : fine) = mid;
+    (groupsOf(mid, false) <= max_points ? coarse : fine) = mid;
   }
-  while (cellsOf(coarse) > max_points) coarse *= 2;  // at the box's side 8 cells may be too many
-  keyAll(coarse);
+  while (groupsOf(coarse, false) > max_points) coarse *= 2;  // at the box's side 8 cells may be too many
+  groupsOf(coarse, true);
   out.cell = coarse;
-  for (std::size_t i = 0; i < keyed.size();) {
-    std::size_t j = i;
+  out.crease_points = ends.size() - starts.size();
+  const int* first = order.data();
+  for (const int* last : ends) {
     double m = 0;
     Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (; j < keyed.size() && keyed[j].first == keyed[i].first; ++j) {
-      m += masses[keyed[j].second];
-      sum += masses[keyed[j].second] * points[keyed[j].second];
+    for (const int* i = first; i != last; ++i) {
+      m += masses[*i];
+      sum += masses[*i] * points[*i];
     }
     const Eigen::Vector3d c = sum / m;
-    for (std::size_t k = i; k < j; ++k) out.spread += masses[keyed[k].second] * (points[keyed[k].second] - c).squaredNorm();
+    for (const int* i = first; i != last; ++i) out.spread += masses[*i] * (points[*i] - c).squaredNorm();
     out.points.push_back(c);
     out.masses.push_back(m);
-    i = j;
+    first = last;
   }
   return out;
 }
@@ -421,7 +559,15 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   report.transported_points = points.size();
   if (params.max_points > 0 && points.size() > static_cast<std::size_t>(params.max_points)) {
     ProgressReporter merging(progress, "transport merge", 1);  // only when merging: a --timings line
-    MergedPoints merged = mergeIntoCells(points, masses, static_cast<std::size_t>(params.max_points));
+    Normals normals;
+    if (params.merge_crease_angle > 0) {
+      Positions distinct(points.size());
+      for (std::size_t i = 0; i < points.size(); ++i) distinct[i] = points[i].cast<float>();
+      const SpatialIndex index(distinct);
+      normals = estimateNormals(distinct, NeighbourGraph::byCount(distinct, index, kMergeNormalNeighbours));
+    }
+    MergedPoints merged = mergeIntoCells(points, masses, static_cast<std::size_t>(params.max_points),
+                                         normals.empty() ? nullptr : &normals, params.merge_crease_angle);
     merging.advance();
     merging.throwIfCancelled();
     merging.finish();
@@ -431,6 +577,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     report.transported_points = points.size();
     report.merge_cell = merged.cell;
     report.merge_spread = merged.spread;
+    report.crease_points = merged.crease_points;
     if (points.size() < 4)
       throw InvalidInput("transport reconstruction: merging into at most " + std::to_string(params.max_points) +
                          " points left " + std::to_string(points.size()) + " (raise max_points)");

@@ -106,6 +106,11 @@ struct TransportReconstructionParameters {
   /// along the edges, whose cells' centroids lie inside) in 1.7x the time of a plain
   /// 3,000-point sample. Inputs up to 20,000 points are not touched.
   int max_points = 20000;
+  /// Merging keeps creases: a cell whose points' normals (PCA of their kMergeNormalNeighbours
+  /// nearest distinct points) fall in two clusters more than this many degrees apart is split
+  /// into its sides, each merged at its own centroid, which lies on its face (mergeIntoCells).
+  /// 0: cells are never split; in [0, 90].
+  double merge_crease_angle = 30;
   std::uint64_t seed = 1;
   /// Quadrature: 4x the manuscript's bins per area (800) and up to 64 bins a facet. With the
   /// manuscript's 200 and 16, a 3,000-point cube at 30 vertices kept chamfers and overlapping
@@ -134,6 +139,8 @@ struct TransportReconstructionReport {
   /// m |p - centroid|^2, included in the costs below).
   std::size_t transported_points = 0;
   double merge_cell = 0, merge_spread = 0;
+  /// Of transported_points, those added by splitting cells at creases (merge_crease_angle).
+  std::size_t crease_points = 0;
   int initial_vertices = 0, initial_facets = 0;  // the Delaunay triangulation
   int complex_facets = 0;                        // facets with mass after relaxation
   int collapses = 0;
@@ -152,6 +159,9 @@ struct TransportReconstructionReport {
   /// sqrt(cost / total mass): root mean square transport distance, metres.
   double rms_transport = 0;
 };
+
+/// Neighbours (self included) of the PCA normals that find the creases when merging.
+constexpr int kMergeNormalNeighbours = 10;
 
 /// Reach beyond which a point counts as an outlier: this many times the median reach.
 constexpr double kOutlierReach = 1.5;
@@ -175,15 +185,25 @@ struct MergedPoints {
   /// sum m |p - c|^2 over the input, c its cell's centroid: for any plan on the merged points
   /// the same plan split in proportion on each cell's points costs this much more (exactly).
   double spread = 0;
+  /// Points added by splitting cells at creases (one more for each split).
+  std::size_t crease_points = 0;
 };
 
 /// Merges `points` (finite; masses > 0, one each) with the finest grid, cell sides tried by
-/// bisection, whose occupied cells are at most `max_points`; the grid starts at the points'
-/// lowest corner. With at most `max_points` points, or max_points = 0, returns them as given.
-/// Deterministic: the result does not depend on the input's order beyond float rounding of
-/// the sums. Throws InvalidInput when the sizes differ or a point is not finite.
+/// bisection, whose groups are at most `max_points`; the grid starts at the points' lowest
+/// corner. A group is a cell's points, or with `normals` (one a point, unit or NaN, sign
+/// free) and `crease_degrees` > 0, part of them: a cell whose points' normals fall in two
+/// clusters more than `crease_degrees` apart, and 2.5x further apart than their spread
+/// around their axes (2-means on unoriented normals; each side 3 points or more, so noise
+/// rarely splits), is split in two, and each side once more (at most 4 groups: a cube's
+/// corner has 3 faces). The centroid of a cell across a crease lies off the surface, inside
+/// a convex edge; the centroid of each side lies on its own face. With at most `max_points`
+/// points, or max_points = 0, returns them as given. Deterministic: the result does not
+/// depend on the input's order beyond float rounding of the sums. Throws InvalidInput when
+/// the sizes differ or a point is not finite, InvalidParameter for crease_degrees outside
+/// [0, 90].
 MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const std::vector<double>& masses,
-                            std::size_t max_points);
+                            std::size_t max_points, const Normals* normals = nullptr, double crease_degrees = 0);
 
 /// Reconstructs a mesh from `points` (NaN entries ignored). Deterministic for a seed, whatever
 /// the thread count. Throws InvalidInput for fewer than 4 distinct finite points, coplanar
@@ -211,6 +231,8 @@ class TransportReconstruction : public pcl::SurfaceReconstruction<PointT>, publi
   void setOutlierNeighbours(int k) { auto p = params_; p.outlier_neighbours = k; setParameters(p); }
   /// Merge large inputs into at most N points first (TransportReconstructionParameters::max_points).
   void setMaxPoints(int n) { auto p = params_; p.max_points = n; setParameters(p); }
+  /// Split merged cells at creases sharper than this many degrees (merge_crease_angle; 0: never).
+  void setMergeCreaseAngle(double degrees) { auto p = params_; p.merge_crease_angle = degrees; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const TransportReconstructionReport& getReport() const { return report_; }
   /// As pcl::SurfaceReconstruction::reconstruct, but without an input cloud it throws

@@ -615,6 +615,9 @@ TEST(MergeIntoCells, SplitsCellsAtCreasesSoTheirCentroidsLieOnTheFaces) {
   std::printf("noisy square: %zu of %zu points from crease splits\n", noisy.crease_points, noisy.points.size());
   EXPECT_LT(noisy.crease_points, noisy.points.size() / 20);
 
+  // Never more than asked, even when one cell's crease splits are too many (a corner).
+  for (const std::size_t few : {1, 2, 3, 5, 9})
+    EXPECT_LE(paps::mergeIntoCells(points, masses, few, &normals, 30).points.size(), few) << few;
   EXPECT_THROW(paps::mergeIntoCells(points, masses, 1500, &radial, 30), paps::InvalidInput);  // sizes differ
   for (const double bad : {-1.0, 91.0, double(NAN)})
     EXPECT_THROW(paps::mergeIntoCells(points, masses, 1500, &normals, bad), paps::InvalidParameter);

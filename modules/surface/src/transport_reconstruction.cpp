@@ -414,7 +414,7 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
     out.masses = masses;
     return out;
   }
-  const bool creases = normals != nullptr && crease_degrees > 0;
+  bool creases = normals != nullptr && crease_degrees > 0;
   const double cos_crease = std::cos(crease_degrees * M_PI / 180);
   Eigen::Vector3d lo = points[0], hi = points[0];
   for (const auto& p : points) {
@@ -472,7 +472,7 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
     }
   };
   // The groups of each cell (its points, or its crease splits), as ends into `order`.
-  std::vector<char> split_side(creases ? points.size() : 0);
+  std::vector<char> split_side(creases ? points.size() : 0);  // scratch of splitAtCreases
   std::vector<int*> ends;
   const auto groupsOf = [&](double cell, bool need_order) {
     sortIntoCells(cell, creases || need_order);
@@ -495,7 +495,12 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
     const double mid = std::sqrt(fine * coarse);
     (groupsOf(mid, false) <= max_points ? coarse : fine) = mid;
   }
-  while (groupsOf(coarse, false) > max_points) coarse *= 2;  // at the box's side 8 cells may be too many
+  // At the box's side 8 cells may be too many; one cell split at creases may be too (up to
+  // 4 groups): then it stays whole, and the doubling ends.
+  while (groupsOf(coarse, false) > max_points) {
+    if (starts.size() == 1) creases = false;
+    else coarse *= 2;
+  }
   groupsOf(coarse, true);
   out.cell = coarse;
   out.crease_points = ends.size() - starts.size();

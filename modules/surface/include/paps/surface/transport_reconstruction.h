@@ -101,10 +101,10 @@ struct TransportReconstructionParameters {
   /// transport --only-scan --scan-points 50000`): 34 s instead of 127 s on 2 threads, mesh
   /// RMS 0.99x and coverage RMS 0.91x the unmerged run's; 112,586 points (bun0.pcd) to 50
   /// vertices took 48 s instead of not finishing in 28 minutes. On par with a plain sample of
-  /// the same size (docs/transport.md), without the user subsampling. But on a sharp cube
-  /// (30,000 points into 2,906 cells) the mesh was as close with 1.5x the facets (doubled
-  /// along the edges, whose cells' centroids lie inside) in 1.7x the time of a plain
-  /// 3,000-point sample. Inputs up to 20,000 points are not touched.
+  /// the same size (docs/transport.md), without the user subsampling. On a sharp cube (30,000
+  /// points into 3,000) cells across the edges merged inside the cube until they were split
+  /// at creases (merge_crease_angle): coverage RMS 0.68x; still about 1.5x the facets of a
+  /// plain 3,000-point sample. Inputs up to 20,000 points are not touched.
   int max_points = 20000;
   /// Merging keeps creases: a cell whose points' normals (PCA of their kMergeNormalNeighbours
   /// nearest distinct points) fall in two clusters more than this many degrees apart is split

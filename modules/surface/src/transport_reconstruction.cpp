@@ -307,6 +307,13 @@ std::vector<double> outlierWeights(const Positions& points, int neighbours) {
 
 namespace {
 
+// The points in float, as the spatial index and the normals take them.
+Positions asPositions(const std::vector<Eigen::Vector3d>& points) {
+  Positions out(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) out[i] = points[i].cast<float>();
+  return out;
+}
+
 // Crease splits: a cell's points in at most 2^kCreaseDepth groups (a cube's corner has 3 faces).
 constexpr int kCreaseDepth = 2;
 
@@ -362,13 +369,13 @@ void splitAtCreases(int* first, int* last, const Normals& normals, const std::ve
     Eigen::Vector3d a = normalAxis(first, last, normals, masses), b;
     double furthest = 2;
     Eigen::Vector3f far_normal = Eigen::Vector3f::Zero();
+    const auto lexicographic = [](const Eigen::Vector3f& u, const Eigen::Vector3f& v) {
+      return std::tie(u.x(), u.y(), u.z()) < std::tie(v.x(), v.y(), v.z());
+    };
     for (const int* i = first; i != last; ++i) {
       const Eigen::Vector3f& n = normals[*i];
       if (!isFinite(n)) continue;
       const double c = std::abs(n.cast<double>().dot(a));
-      const auto lexicographic = [](const Eigen::Vector3f& u, const Eigen::Vector3f& v) {
-        return std::tie(u.x(), u.y(), u.z()) < std::tie(v.x(), v.y(), v.z());
-      };
       if (c < furthest || (c == furthest && lexicographic(n, far_normal))) {
         furthest = c;
         far_normal = n;
@@ -548,9 +555,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     throw InvalidInput("transport reconstruction needs at least 4 distinct finite points, got " +
                        std::to_string(points.size()));
   if (params.outlier_neighbours > 0) {
-    Positions distinct(points.size());
-    for (std::size_t i = 0; i < points.size(); ++i) distinct[i] = points[i].cast<float>();
-    const std::vector<double> w = outlierWeights(distinct, params.outlier_neighbours);
+    const std::vector<double> w = outlierWeights(asPositions(points), params.outlier_neighbours);
     for (std::size_t i = 0; i < points.size(); ++i) {
       masses[i] *= w[i];
       report.light_points += w[i] < 1;
@@ -566,8 +571,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     ProgressReporter merging(progress, "transport merge", 1);  // only when merging: a --timings line
     Normals normals;
     if (params.merge_crease_angle > 0) {
-      Positions distinct(points.size());
-      for (std::size_t i = 0; i < points.size(); ++i) distinct[i] = points[i].cast<float>();
+      const Positions distinct = asPositions(points);
       const SpatialIndex index(distinct);
       normals = estimateNormals(distinct, NeighbourGraph::byCount(distinct, index, kMergeNormalNeighbours));
     }
@@ -830,10 +834,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     out.triangles.push_back(t);
   }
   if (params.dangling_support > 0 && !out.triangles.empty()) {
-    const auto& source = distinct_points.empty() ? points : distinct_points;
-    Positions finite;  // the input's distinct finite points
-    finite.reserve(source.size());
-    for (const auto& p : source) finite.push_back(p.cast<float>());
+    const Positions finite = asPositions(distinct_points.empty() ? points : distinct_points);  // the input's distinct points
     const SpatialIndex index(finite);  // one index for the spacing and the support searches
     const double spacing = meanNearestNeighbourDistance(finite, index);
     if (spacing > 0)

@@ -7,6 +7,7 @@
 #include <cstring>
 
 #include <paps/core/error.h>
+#include <paps/core/key_sort.h>
 
 namespace paps {
 
@@ -81,7 +82,7 @@ bool CellGrid::build(const Positions& points, float cell, bool anchored) {
   keyed.reserve(points.size());
   for (std::size_t i = 0; i < points.size(); ++i)
     if (isFinite(points[i])) keyed.emplace_back(keyOf(points[i]), static_cast<int>(i));
-  std::sort(keyed.begin(), keyed.end());
+  sortByKey(keyed);  // indices in order: points of a cell stay in index order
   original_.resize(keyed.size());
   sorted_.resize(keyed.size());
   for (std::size_t s = 0; s < keyed.size(); ++s) {

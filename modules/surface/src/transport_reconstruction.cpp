@@ -16,6 +16,7 @@
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
 
 #include <paps/core/error.h>
+#include <paps/core/key_sort.h>
 #include <paps/core/local_frame.h>
 #include <paps/core/neighbourhood.h>
 #include <paps/core/spatial_order.h>
@@ -361,10 +362,10 @@ bool separatedBeyondNoise(const int* first, const int* mid, const int* last, con
 // normal tensor's main axis and the normal furthest from it (chosen by value, so the
 // points' order does not matter), a split kept when the two axes end further apart than the
 // crease angle and beyond the noise of the normals (separatedBeyondNoise), then each side
-// again. Appends the end of each group to `ends`. Points without a normal stay with the
-// first side.
+// again. Appends the end of each group to `ends` (room for 2^kCreaseDepth), counting them in
+// `count`. Points without a normal stay with the first side.
 void splitAtCreases(int* first, int* last, const Normals& normals, const std::vector<double>& masses,
-                    double cos_crease, int depth, std::vector<char>& side, std::vector<int*>& ends) {
+                    double cos_crease, int depth, std::vector<char>& side, int** ends, int& count) {
   if (depth < kCreaseDepth && last - first >= 2 * kMinCreaseSide) {
     Eigen::Vector3d a = normalAxis(first, last, normals, masses), b;
     double furthest = 2;
@@ -383,22 +384,33 @@ void splitAtCreases(int* first, int* last, const Normals& normals, const std::ve
     }
     b = far_normal.cast<double>();
     for (int round = 0; round < 4 && furthest < cos_crease; ++round) {
+      bool moved = round == 0;  // `side` holds another cell's flags before the first round
       for (int* i = first; i != last; ++i) {
         const Eigen::Vector3d n = normals[*i].cast<double>();
-        side[*i] = isFinite(normals[*i]) && std::abs(n.dot(b)) > std::abs(n.dot(a));
+        const char s = isFinite(normals[*i]) && std::abs(n.dot(b)) > std::abs(n.dot(a));
+        moved |= s != side[*i];
+        side[*i] = s;
       }
-      int* mid = std::stable_partition(first, last, [&](int i) { return side[i] == 0; });
-      if (mid == first || mid == last) break;
-      a = normalAxis(first, mid, normals, masses);
-      b = normalAxis(mid, last, normals, masses);
+      const auto firstSide = [&](int i) { return side[i] == 0; };
+      int* mid;
+      if (moved) {
+        mid = std::stable_partition(first, last, firstSide);
+        if (mid == first || mid == last) break;
+        a = normalAxis(first, mid, normals, masses);
+        b = normalAxis(mid, last, normals, masses);
+      } else {
+        // A fixed point: the later rounds would repeat this one (same sides, same axes).
+        mid = std::partition_point(first, last, firstSide);
+        round = 3;
+      }
       if (round == 3 && std::abs(a.dot(b)) < cos_crease && separatedBeyondNoise(first, mid, last, a, b, normals, masses)) {
-        splitAtCreases(first, mid, normals, masses, cos_crease, depth + 1, side, ends);
-        splitAtCreases(mid, last, normals, masses, cos_crease, depth + 1, side, ends);
+        splitAtCreases(first, mid, normals, masses, cos_crease, depth + 1, side, ends, count);
+        splitAtCreases(mid, last, normals, masses, cos_crease, depth + 1, side, ends, count);
         return;
       }
     }
   }
-  ends.push_back(last);
+  ends[count++] = last;
 }
 
 }  // namespace
@@ -434,10 +446,10 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
   std::vector<std::size_t> starts;
   using Key = std::array<std::int64_t, 3>;
   std::vector<std::pair<Key, int>> keyed;
-  // With keys packed into one integer (the grid has fewer than 4e18 cells) a count sorts
-  // integers, 4x faster than triples on 1M points; the cells come in the same (x, y, z) order.
-  std::vector<std::uint64_t> packed;
-  std::vector<std::pair<std::uint64_t, int>> packed_index;
+  // With keys packed into one integer (the grid has fewer than 4e18 cells) a radix sort
+  // orders them in linear time; the cells come in the same (x, y, z) order as triples.
+  std::vector<std::uint64_t> packed, packed_scratch;
+  std::vector<std::pair<std::uint64_t, int>> packed_index, packed_index_scratch;
   const auto sortIntoCells = [&](double cell, bool need_order) {
     const Eigen::Array3d dims = ((hi - lo) / cell).array().floor() + 1;
     starts.clear();
@@ -450,15 +462,18 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
       };
       if (!need_order) {  // a count only
         packed.resize(points.size());
-        for (std::size_t i = 0; i < points.size(); ++i) packed[i] = keyOf(i);
-        std::sort(packed.begin(), packed.end());
+#pragma omp parallel for schedule(static)
+        for (std::int64_t i = 0; i < static_cast<std::int64_t>(points.size()); ++i) packed[i] = keyOf(i);
+        sortKeys(packed, &packed_scratch);
         for (std::size_t i = 0; i < packed.size(); ++i)
           if (i == 0 || packed[i] != packed[i - 1]) starts.push_back(i);
         return;
       }
       packed_index.resize(points.size());
-      for (std::size_t i = 0; i < points.size(); ++i) packed_index[i] = {keyOf(i), static_cast<int>(i)};
-      std::sort(packed_index.begin(), packed_index.end());
+#pragma omp parallel for schedule(static)
+      for (std::int64_t i = 0; i < static_cast<std::int64_t>(points.size()); ++i)
+        packed_index[i] = {keyOf(i), static_cast<int>(i)};
+      sortByKey(packed_index, &packed_index_scratch);  // indices in order: ties stay by index
       for (std::size_t i = 0; i < packed_index.size(); ++i) {
         order[i] = packed_index[i].second;
         if (i == 0 || packed_index[i].first != packed_index[i - 1].first) starts.push_back(i);
@@ -480,18 +495,30 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
   };
   // The groups of each cell (its points, or its crease splits), as ends into `order`.
   std::vector<char> split_side(creases ? points.size() : 0);  // scratch of splitAtCreases
-  std::vector<int*> ends;
+  std::vector<int*> ends, cell_ends;
+  std::vector<int> cell_groups;
   const auto groupsOf = [&](double cell, bool need_order) {
     sortIntoCells(cell, creases || need_order);
     ends.clear();
-    for (std::size_t c = 0; c < starts.size(); ++c) {
-      int* first = order.data() + starts[c];
-      int* last = order.data() + (c + 1 < starts.size() ? starts[c + 1] : order.size());
-      if (creases)
-        splitAtCreases(first, last, *normals, masses, cos_crease, 0, split_side, ends);
-      else
-        ends.push_back(last);
+    const auto cells = static_cast<std::int64_t>(starts.size());
+    const auto endOf = [&](std::int64_t c) {
+      return order.data() + (c + 1 < cells ? starts[c + 1] : order.size());
+    };
+    if (!creases) {
+      for (std::int64_t c = 0; c < cells; ++c) ends.push_back(endOf(c));
+      return ends.size();
     }
+    // Cells are split independently (each touches its own points' entries of order and
+    // split_side), in parallel; their groups are then listed in cell order.
+    constexpr int kMaxGroups = 1 << kCreaseDepth;
+    cell_ends.resize(kMaxGroups * starts.size());
+    cell_groups.assign(starts.size(), 0);
+#pragma omp parallel for schedule(dynamic, 256)
+    for (std::int64_t c = 0; c < cells; ++c)
+      splitAtCreases(order.data() + starts[c], endOf(c), *normals, masses, cos_crease, 0, split_side,
+                     cell_ends.data() + kMaxGroups * c, cell_groups[c]);
+    for (std::int64_t c = 0; c < cells; ++c)
+      ends.insert(ends.end(), cell_ends.begin() + kMaxGroups * c, cell_ends.begin() + kMaxGroups * c + cell_groups[c]);
     return ends.size();
   };
   // The cell side by bisection on its logarithm: `fine` has too many groups, `coarse` few

@@ -637,8 +637,10 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   triangulation.advance();
   triangulation.throwIfCancelled();
   triangulation.finish();
-  if (dt.dimension() < 3)
-    throw InvalidInput("transport reconstruction: the initial points are coplanar or collinear (dimension " +
+  // Points on one plane give a flat triangulation (dimension 2): its triangles are the
+  // complex, and everything below holds for them. On a line there is no facet.
+  if (dt.dimension() < 2)
+    throw InvalidInput("transport reconstruction: the initial points are collinear (dimension " +
                        std::to_string(dt.dimension()) + ")" +
                        (report.merge_cell > 0 ? "; the input was merged into " +
                                                     std::to_string(report.transported_points) + " cells of side " +

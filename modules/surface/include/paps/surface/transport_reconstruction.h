@@ -206,9 +206,9 @@ MergedPoints mergeIntoCells(const std::vector<Eigen::Vector3d>& points, const st
                             std::size_t max_points, const Normals* normals = nullptr, double crease_degrees = 0);
 
 /// Reconstructs a mesh from `points` (NaN entries ignored). Deterministic for a seed, whatever
-/// the thread count. Throws InvalidInput for fewer than 4 distinct finite points, coplanar
-/// points, or a run that keeps no facet (the report is filled first), InvalidParameter for bad
-/// parameters.
+/// the thread count. Points on one plane give a mesh in that plane. Throws InvalidInput for
+/// fewer than 4 distinct finite points, collinear points, or a run that keeps no facet (the
+/// report is filled first), InvalidParameter for bad parameters.
 TriangleMesh transportReconstruct(const Positions& points, const TransportReconstructionParameters& params,
                                   TransportReconstructionReport* report = nullptr,
                                   const ProgressCallback& progress = {});

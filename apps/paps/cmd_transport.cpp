@@ -66,6 +66,10 @@ const char* kReconstructUsage =
     "                           centroid, when they are further apart than their noise; in\n"
     "                           [0, 90] (default 30; 0: never split; a sharp cube merged\n"
     "                           10:1: its coverage error 0.68x: docs/transport.md)\n"
+    "  --initial-complex C      delaunay (default; the manuscript: every facet of the subset's\n"
+    "                           3D Delaunay triangulation) or advancing-front (the facets of\n"
+    "                           CGAL's advancing-front surface over the same points: a near-\n"
+    "                           manifold mesh with fewer facets; docs/transport.md)\n"
     "  --bins-per-area B        facet bins per unit area, the points scaled into a box of side\n"
     "                           0.5 (default 800; the manuscript's 200 is faster, less sharp)\n"
     "  --max-bins M             at most M bins a facet, 1 to 256 (default 64)\n"
@@ -147,7 +151,7 @@ int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
-               "dangling-support", "outlier-neighbours", "max-points", "merge-crease-angle", "bins-per-area", "max-bins", "bins-per-point", "quiet",
+               "dangling-support", "outlier-neighbours", "max-points", "merge-crease-angle", "initial-complex", "bins-per-area", "max-bins", "bins-per-point", "quiet",
                "timings"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireFileOutput(".ply");  // checked before any work
@@ -164,6 +168,13 @@ int runReconstruct(int argc, char** argv) {
   p.outlier_neighbours = a.integer("outlier-neighbours", p.outlier_neighbours);
   p.max_points = a.integer("max-points", p.max_points);
   p.merge_crease_angle = a.real("merge-crease-angle", p.merge_crease_angle);
+  const std::string initial = a.text("initial-complex", "delaunay");
+  if (initial == "delaunay")
+    p.initial_complex = InitialComplex::Delaunay;
+  else if (initial == "advancing-front")
+    p.initial_complex = InitialComplex::AdvancingFront;
+  else
+    throw InvalidParameter("initial-complex", initial, "delaunay or advancing-front");
   p.transport.bins_per_area = a.number("bins-per-area", p.transport.bins_per_area);
   p.transport.max_bins_per_facet = a.integer("max-bins", p.transport.max_bins_per_facet);
   p.transport.bins_per_point = a.integer("bins-per-point", p.transport.bins_per_point);
@@ -177,8 +188,10 @@ int runReconstruct(int argc, char** argv) {
   const Positions points = loadPoints(in_path);
   TransportReconstructionReport r;
   const TriangleMesh mesh = transportReconstruct(points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
-  std::printf("reconstruct: Delaunay of %d points (%d facets), %d facets with mass; %d collapses (%d simulated, "
+  std::printf("reconstruct: %s of %d points (%d facets), %d facets with mass; %d collapses (%d simulated, "
               "%d simulations reused, %d skipped by their bound)\n",
+              p.initial_complex == InitialComplex::AdvancingFront && !r.advancing_front_fallback ? "advancing front"
+                                                                                                 : "Delaunay",
               r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations,
               r.bounded_simulations);
   if (r.merge_cell > 0)

@@ -11,6 +11,7 @@
 
 #include <Eigen/Eigenvalues>
 
+#include <CGAL/Advancing_front_surface_reconstruction.h>
 #include <CGAL/Delaunay_triangulation_3.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Triangulation_vertex_base_with_info_3.h>
@@ -669,6 +670,24 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     for (int i = 0; i < 4; ++i)
       if (i != f->second) t[k++] = vertex_of_site.at(f->first->vertex(i)->info());
     dt_facets.push_back(sorted(t));
+  }
+  if (params.initial_complex == InitialComplex::AdvancingFront && dt.dimension() == 3) {
+    // CGAL's own Delaunay of the same sites: its facets are a subset of dt's. Indices are
+    // the sites' (their order in `sites`), so the result does not depend on CGAL's
+    // iteration order.
+    std::vector<Kernel::Point_3> site_points;
+    for (const auto& site : sites) site_points.push_back(site.first);
+    std::vector<std::array<std::size_t, 3>> surface;
+    CGAL::advancing_front_surface_reconstruction(site_points.begin(), site_points.end(), std::back_inserter(surface));
+    if (surface.empty()) {
+      report.advancing_front_fallback = true;
+    } else {
+      dt_facets.clear();
+      for (const auto& t : surface)
+        dt_facets.push_back(sorted(Triple{vertex_of_site.at(static_cast<int>(t[0])),
+                                          vertex_of_site.at(static_cast<int>(t[1])),
+                                          vertex_of_site.at(static_cast<int>(t[2]))}));
+    }
   }
   std::sort(dt_facets.begin(), dt_facets.end());
   for (const auto& t : dt_facets) plan.addFacet(t[0], t[1], t[2]);

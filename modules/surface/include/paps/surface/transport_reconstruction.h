@@ -24,6 +24,18 @@
 
 namespace paps {
 
+/// Where the decimation starts from (both on the same random subset of the points).
+enum class InitialComplex {
+  /// Every facet of the subset's 3D Delaunay triangulation (the manuscript's 5.2.1); the
+  /// transport keeps those that receive mass. On a surface sample the slivers' overlapping
+  /// facets get mass too, and the output keeps layers of them (non-manifold edges).
+  Delaunay,
+  /// The facets of CGAL's advancing-front surface reconstruction of the subset (Cohen-Steiner
+  /// and Da, a subset of the same Delaunay facets chosen to form a surface): a near-manifold
+  /// start (not in the manuscript).
+  AdvancingFront,
+};
+
 struct TransportReconstructionParameters {
   /// Share of the points in the initial Delaunay triangulation, in (0, 1]; at least 4 points.
   /// Points are counted by distinct position: copies of a point (overlapping scans) are one
@@ -111,6 +123,8 @@ struct TransportReconstructionParameters {
   /// into its sides, each merged at its own centroid, which lies on its face (mergeIntoCells).
   /// 0: cells are never split; in [0, 90].
   double merge_crease_angle = 30;
+  /// The initial complex (InitialComplex). Delaunay: the manuscript's.
+  InitialComplex initial_complex = InitialComplex::Delaunay;
   std::uint64_t seed = 1;
   /// Quadrature: 4x the manuscript's bins per area (800) and up to 64 bins a facet. With the
   /// manuscript's 200 and 16, a 3,000-point cube at 30 vertices kept chamfers and overlapping
@@ -141,7 +155,11 @@ struct TransportReconstructionReport {
   double merge_cell = 0, merge_spread = 0;
   /// Of transported_points, those added by splitting cells at creases (merge_crease_angle).
   std::size_t crease_points = 0;
-  int initial_vertices = 0, initial_facets = 0;  // the Delaunay triangulation
+  int initial_vertices = 0, initial_facets = 0;  // the initial complex (InitialComplex)
+  /// With InitialComplex::AdvancingFront: its surface had no facet, so the Delaunay facets
+  /// were used. (Points on one plane always start from their flat Delaunay triangulation,
+  /// a surface already; not counted here.)
+  bool advancing_front_fallback = false;
   int complex_facets = 0;                        // facets with mass after relaxation
   int collapses = 0;
   /// Collapse simulations run (local programs solved), and those reused from an earlier step
@@ -233,6 +251,8 @@ class TransportReconstruction : public pcl::SurfaceReconstruction<PointT>, publi
   void setMaxPoints(int n) { auto p = params_; p.max_points = n; setParameters(p); }
   /// Split merged cells at creases sharper than this many degrees (merge_crease_angle; 0: never).
   void setMergeCreaseAngle(double degrees) { auto p = params_; p.merge_crease_angle = degrees; setParameters(p); }
+  /// Start from the subset's Delaunay facets (the manuscript) or its advancing-front surface.
+  void setInitialComplex(InitialComplex c) { auto p = params_; p.initial_complex = c; setParameters(p); }
   void setProgressCallback(ProgressCallback cb) { progress_ = std::move(cb); }
   const TransportReconstructionReport& getReport() const { return report_; }
   /// As pcl::SurfaceReconstruction::reconstruct, but without an input cloud it throws

@@ -31,8 +31,9 @@ enum class InitialComplex {
   /// facets get mass too, and the output keeps layers of them (non-manifold edges).
   Delaunay,
   /// The facets of CGAL's advancing-front surface reconstruction of the subset (Cohen-Steiner
-  /// and Da, a subset of the same Delaunay facets chosen to form a surface): a near-manifold
-  /// start (not in the manuscript).
+  /// and Da, a subset of the same Delaunay facets chosen to form a surface), all kept through
+  /// the relaxation (the Delaunay start keeps only those with mass): a near-manifold start
+  /// and output, in less time (not in the manuscript; docs/transport.md).
   AdvancingFront,
 };
 

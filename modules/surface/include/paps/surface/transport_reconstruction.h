@@ -6,7 +6,8 @@
 // facet density. The output is a simplicial complex (possibly non-manifold) with sharp
 // creases and boundaries kept, robust to noise and outliers. Costly: meant for point sets of
 // thousands to tens of thousands of points reduced to tens to hundreds of vertices; larger
-// inputs are merged into at most max_points (20,000) cells first.
+// inputs are merged into at most max_points (20,000) cells first. InitialComplex::AdvancingFront
+// starts from a surface over the subset instead (near-manifold output; not the manuscript's).
 #include <cstddef>
 #include <cstdint>
 #include <vector>

@@ -425,22 +425,20 @@ int runBenchTransport(int argc, char** argv) {
                                     : Row{fmt("ours (OT reconstruction), seed %.0f", seed), "ot-reconstruction",
                                           {{"vertices", shape.vertices}, {"seed", seed}, {"candidates", candidates},
                                            {"max_points", max_points}}});
-      // Merged: also without the crease splits (merge_crease_angle 0), what they change.
-      const bool merged = max_points > 0 && n > static_cast<std::size_t>(max_points);
-      if (merged)
+      // A variant of ours' first rows: the same seeds with one parameter changed.
+      const auto addVariant = [&](const char* label, const char* key, double value, int group) {
         for (Row r : std::vector<Row>(rows.begin(), rows.begin() + seeds)) {
-          r.name = fmt("ours (no crease split), seed %.0f", r.params["seed"]);
-          r.params["crease"] = 0;
-          r.group = 3;
+          r.name = std::string("ours (") + label + fmt("), seed %.0f", r.params["seed"]);
+          r.params[key] = value;
+          r.group = group;
           rows.push_back(r);
         }
+      };
+      // Merged: also without the crease splits (merge_crease_angle 0), what they change.
+      const bool merged = max_points > 0 && n > static_cast<std::size_t>(max_points);
+      if (merged) addVariant("no crease split", "crease", 0, 3);
       // Also from the advancing-front surface of the same subset (initial_complex).
-      for (Row r : std::vector<Row>(rows.begin(), rows.begin() + seeds)) {
-        r.name = fmt("ours (advancing front), seed %.0f", r.params["seed"]);
-        r.params["advancing_front"] = 1;
-        r.group = 4;
-        rows.push_back(r);
-      }
+      addVariant("advancing front", "advancing_front", 1, 4);
       // A scan sample larger than max_points: also unmerged (max_points 0), the cost the merge saves.
       if (scan && merged)
         for (int seed = 1; seed <= seeds; ++seed)

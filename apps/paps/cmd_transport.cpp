@@ -188,11 +188,11 @@ int runReconstruct(int argc, char** argv) {
   const Positions points = loadPoints(in_path);
   TransportReconstructionReport r;
   const TriangleMesh mesh = transportReconstruct(points, p, &r, progressBar(a.has("quiet"), a.has("timings")));
-  std::printf("reconstruct: %s of %d points (%d facets), %d facets with mass; %d collapses (%d simulated, "
+  const bool front = p.initial_complex == InitialComplex::AdvancingFront && !r.advancing_front_fallback;
+  std::printf("reconstruct: %s of %d points (%d facets), %d facets %s; %d collapses (%d simulated, "
               "%d simulations reused, %d skipped by their bound)\n",
-              p.initial_complex == InitialComplex::AdvancingFront && !r.advancing_front_fallback ? "advancing front"
-                                                                                                 : "Delaunay",
-              r.initial_vertices, r.initial_facets, r.complex_facets, r.collapses, r.simulations, r.reused_simulations,
+              front ? "advancing front" : "Delaunay", r.initial_vertices, r.initial_facets, r.complex_facets,
+              front ? "kept (all)" : "with mass", r.collapses, r.simulations, r.reused_simulations,
               r.bounded_simulations);
   if (r.merge_cell > 0)
     std::printf("reconstruct: %zu points merged into %zu (cells of %g m, %zu more for creases, spread %.4g in the "

@@ -664,13 +664,6 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     for (const auto& [site, p] : sorted_sites) vertex_of_site[site] = plan.addVertex(p);
   }
   std::vector<Triple> dt_facets;
-  for (auto f = dt.finite_facets_begin(); f != dt.finite_facets_end(); ++f) {
-    Triple t;
-    int k = 0;
-    for (int i = 0; i < 4; ++i)
-      if (i != f->second) t[k++] = vertex_of_site.at(f->first->vertex(i)->info());
-    dt_facets.push_back(sorted(t));
-  }
   if (params.initial_complex == InitialComplex::AdvancingFront && dt.dimension() == 3) {
     // CGAL's own Delaunay of the same sites: its facets are a subset of dt's. Indices are
     // the sites' (their order in `sites`), so the result does not depend on CGAL's
@@ -688,16 +681,20 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       ~SeededCgal() { CGAL::get_default_random() = callers; }
     } seeded;
     CGAL::advancing_front_surface_reconstruction(site_points.begin(), site_points.end(), std::back_inserter(surface));
-    if (surface.empty()) {
-      report.advancing_front_fallback = true;
-    } else {
-      dt_facets.clear();
-      for (const auto& t : surface)
-        dt_facets.push_back(sorted(Triple{vertex_of_site.at(static_cast<int>(t[0])),
-                                          vertex_of_site.at(static_cast<int>(t[1])),
-                                          vertex_of_site.at(static_cast<int>(t[2]))}));
-    }
+    report.advancing_front_fallback = surface.empty();
+    for (const auto& t : surface)
+      dt_facets.push_back(sorted(Triple{vertex_of_site.at(static_cast<int>(t[0])),
+                                        vertex_of_site.at(static_cast<int>(t[1])),
+                                        vertex_of_site.at(static_cast<int>(t[2]))}));
   }
+  if (dt_facets.empty())  // the Delaunay start (or the advancing front's fallback)
+    for (auto f = dt.finite_facets_begin(); f != dt.finite_facets_end(); ++f) {
+      Triple t;
+      int k = 0;
+      for (int i = 0; i < 4; ++i)
+        if (i != f->second) t[k++] = vertex_of_site.at(f->first->vertex(i)->info());
+      dt_facets.push_back(sorted(t));
+    }
   std::sort(dt_facets.begin(), dt_facets.end());
   for (const auto& t : dt_facets) plan.addFacet(t[0], t[1], t[2]);
   report.initial_vertices = plan.vertexCount();

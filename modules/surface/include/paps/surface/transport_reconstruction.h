@@ -162,7 +162,8 @@ struct TransportReconstructionReport {
   /// were used. (Points on one plane always start from their flat Delaunay triangulation,
   /// a surface already; not counted here.)
   bool advancing_front_fallback = false;
-  int complex_facets = 0;                        // facets with mass after relaxation
+  /// Facets after the relaxation: those with mass (the Delaunay start), all (the advancing front).
+  int complex_facets = 0;
   int collapses = 0;
   /// Collapse simulations run (local programs solved), and those reused from an earlier step
   /// because nothing in their stencil had changed since.

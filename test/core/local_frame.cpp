@@ -138,6 +138,40 @@ TEST(EstimateNormals, SurfaceVariationOfSphericalCapsKnownAnswer) {
   for (const float x : v) ASSERT_TRUE(std::isnan(x));
 }
 
+TEST(VolumeVariation, SurfacesAreFlatAtSomeScaleAVolumeIsNot) {
+  const auto measure = [](const Positions& p) { return paps::volumeVariation(p, SpatialIndex(p)); };
+  paps::Random rng(5);
+  Positions cube, plane;
+  for (int i = 0; i < 3000; ++i) {
+    const double x = rng.uniform();
+    const double y = rng.uniform();
+    cube.emplace_back(static_cast<float>(x), static_cast<float>(y), static_cast<float>(rng.uniform()));
+  }
+  // A plane with noise of one point spacing (1 / sqrt(3000)): thick at 32 neighbours,
+  // flat at 512.
+  for (int i = 0; i < 3000; ++i) {
+    const double x = rng.uniform();
+    const double y = rng.uniform();
+    plane.emplace_back(static_cast<float>(x), static_cast<float>(y), static_cast<float>(rng.gaussian() / std::sqrt(3000.0)));
+  }
+  const double volume = measure(cube);
+  // Uniform in a ball: 1/3; a cube's balls near its faces and corners are flatter.
+  EXPECT_GT(volume, 0.18);
+  EXPECT_LT(volume, 1.0 / 3);
+  EXPECT_LT(measure(plane), 0.03);
+  EXPECT_LT(measure(fibonacciSphere(3000)), 0.02);  // closed: the balls stay caps (n / 8 at most)
+  // Units and position do not matter.
+  Positions moved = cube;
+  for (auto& p : moved) p = 1000.f * p + Eigen::Vector3f(5e3f, -2e3f, 1e3f);
+  EXPECT_NEAR(measure(moved), volume, 1e-3);
+  // Collinear balls count as flat; fewer than 256 points are not measured.
+  Positions line;
+  for (int i = 0; i < 1000; ++i) line.emplace_back(0.01f * i, 0.f, 0.f);
+  EXPECT_EQ(measure(line), 0.0);
+  EXPECT_EQ(measure(Positions(cube.begin(), cube.begin() + 255)), 0.0);
+  EXPECT_GT(measure(Positions(cube.begin(), cube.begin() + 256)), 0.1);
+}
+
 TEST(EstimateNormals, TiltedPlaneFarFromOriginIsExact) {
   // A plane through (1000, -2000, 500): centring in double precision keeps PCA exact.
   const Eigen::Vector3f n = Eigen::Vector3f(1, 2, 3).normalized();

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <numeric>
 #include <limits>
 #include <queue>
@@ -52,6 +53,33 @@ Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Ei
   if (!(ev(1) > 1e-6 * ev(2))) return kNaN3;
   if (variation) *variation = static_cast<float>(std::max(0.0, ev(0)) / ev.sum());
   return eig.eigenvectors().col(0).cast<float>().normalized();
+}
+
+double volumeVariation(const Positions& points, const SpatialIndex& index, std::size_t samples) {
+  const std::size_t finite = index.size();
+  if (finite < 256) return 0;
+  const std::vector<int> sample = spreadSample(points, samples);
+  double least = INFINITY;
+  for (int k : {32, 128, 512}) {
+    k = std::min<int>(k, static_cast<int>(finite / 8));
+    std::vector<float> variation(sample.size(), std::numeric_limits<float>::quiet_NaN());
+#pragma omp parallel
+    {
+      std::vector<int> idx;
+      std::vector<float> sq;
+#pragma omp for schedule(static)
+      for (std::int64_t s = 0; s < static_cast<std::int64_t>(sample.size()); ++s) {
+        const int n = index.nearestK(points[sample[s]], k, idx, sq);
+        pcaNormal(points, idx.data(), n, nullptr, &variation[s]);
+      }
+    }
+    // Collinear or coincident balls (NaN) count as flat: no volume there.
+    for (float& v : variation)
+      if (!std::isfinite(v)) v = 0;
+    std::nth_element(variation.begin(), variation.begin() + variation.size() / 2, variation.end());
+    least = std::min(least, static_cast<double>(variation[variation.size() / 2]));
+  }
+  return least;
 }
 
 Normals estimateNormals(const Positions& points, const NeighbourGraph& graph, std::vector<float>* variation) {

@@ -38,6 +38,17 @@ Eigen::Vector3f pcaNormal(const Positions& points, const int* idx, int count, Ei
 /// and pcl::MovingLeastSquares for the points it makes from a ball).
 Normals estimateNormals(const Positions& points, const NeighbourGraph& graph, std::vector<float>* variation = nullptr);
 
+/// How much the points fill a volume rather than lie on a surface: over
+/// spreadSample(points, samples), the median surface variation (pcaNormal) of each sampled
+/// point's k nearest, for k = 32, 128 and 512 (each at most a eighth of the finite points,
+/// so that a ball stays a patch of a closed surface), and the least of those medians. A
+/// surface is flat at some scale: noise is at most a few spacings thick, curvature shows only
+/// at large scales. Measured (docs/transport.md): scans and synthetic surfaces 0 to 0.044 (a
+/// plane with noise of twice its point spacing), points uniform in a cube 0.205 to 0.25 (1/3
+/// is isotropic). 0 with fewer than 256 finite points (too few for the smallest scale);
+/// `index` built on `points`. Deterministic.
+double volumeVariation(const Positions& points, const SpatialIndex& index, std::size_t samples = 1000);
+
 /// Flips each normal to face `viewpoint` (e.g. the cloud's sensor origin). Returns flips.
 std::size_t orientNormalsTowards(const Positions& points, Normals& normals,
                                  const Eigen::Vector3f& viewpoint);

@@ -90,6 +90,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         const paps::TriangleMesh m = paps::transportReconstruct(p, r);
         for (const auto& t : m.triangles)
           if ((t.array() < 0).any() || (t.array() >= static_cast<int>(m.vertices.size())).any()) __builtin_trap();
+        // The advancing front again in this process, whose heap has changed: the same mesh
+        // (CGAL's border set once took equal priorities in heap-address order).
+        if (r.initial_complex == paps::InitialComplex::AdvancingFront) {
+          const paps::TriangleMesh again = paps::transportReconstruct(p, r);
+          if (again.vertices != m.vertices || again.triangles != m.triangles) __builtin_trap();
+        }
         break;
       }
       case 10: {  // feature recovery: the first third of the points as a triangle strip

@@ -61,10 +61,10 @@ Triple sorted(Triple t) {
 // CGAL's advancing front keeps its border edges in a set ordered by (priority, address of
 // the edge's record): equal priorities are taken in heap-address order, which depends on
 // what the process allocated and freed before (with 2 threads, the fandisk test's two calls
-// in one process gave different surfaces in 4 runs of 8). Its default priority (the radius of the smallest empty
-// sphere through the facet) scaled by 1 + h 2^-44, h from the facet's three point indices,
-// so that no two facets tie; the same facet seen from two edges still ties, and gives the
-// same facet whichever comes first.
+// in one process gave different surfaces in 4 runs of 8). Here its default priority (the
+// radius of the smallest empty sphere through the facet) is scaled by 1 + h 2^-44, h from
+// the facet's three point indices, so that no two facets tie (after it, 8 runs of 8 gave
+// one surface). The same facet seen from two border edges can still tie.
 struct TieBrokenPriority {
   template <typename AdvancingFront, typename CellHandle>
   double operator()(const AdvancingFront& front, CellHandle& c, const int& index) const {

@@ -40,7 +40,7 @@ Normals estimateNormals(const Positions& points, const NeighbourGraph& graph, st
 
 /// How much the points fill a volume rather than lie on a surface: over
 /// spreadSample(points, samples), the median surface variation (pcaNormal) of each sampled
-/// point's k nearest, for k = 32, 128 and 512 (each at most a eighth of the finite points,
+/// point's k nearest, for k = 32, 128 and 512 (each at most an eighth of the finite points,
 /// so that a ball stays a patch of a closed surface), and the least of those medians. A
 /// surface is flat at some scale: noise is at most a few spacings thick, curvature shows only
 /// at large scales. Measured (docs/transport.md): scans and synthetic surfaces 0 to 0.044 (a

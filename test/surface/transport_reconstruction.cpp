@@ -94,7 +94,8 @@ int nonManifoldEdges(const TriangleMesh& m) {
 // The advancing-front start: the same subset, only the facets of a surface over it. On a
 // sample of the fandisk block the Delaunay start's output keeps layers of facets (edges with
 // 3 or more); this one is nearly a manifold, and closer to the block. The same mesh twice in
-// one process (CGAL's surface depends on its random generator, seeded for the call).
+// one process: CGAL's surface depended on its random generator (seeded for the call) and on
+// heap addresses where priorities tied (broken by point indices).
 TEST(TransportReconstruction, AdvancingFrontStartGivesANearManifoldMesh) {
   const TriangleMesh block = paps::synthetic::fandiskBlock(32);
   const paps::Positions points = paps::synthetic::sampleMesh(block, 1000, 7);

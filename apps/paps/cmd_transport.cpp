@@ -81,7 +81,7 @@ const char* kReconstructUsage =
     "                           8 is faster and as good when the points outnumber the bins)\n"
     "  --quiet, --timings       no progress bar / wall time of each stage\n"
     "Costly: meant for tens to hundreds of vertices. 2 cores: 3,000 points to 100 vertices in\n"
-    "about 4 s; 50,000 in about 35 s merged into 20,000 (2 min with --max-points 0); 112,586\n"
+    "about 3 s; 50,000 in about 35 s merged into 20,000 (2 min with --max-points 0); 112,586\n"
     "(bun0.pcd) to 50 vertices in 48 s merged (not finished in 28 min unmerged). --timings\n"
     "shows where the time goes.\n";
 

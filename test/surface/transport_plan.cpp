@@ -350,22 +350,24 @@ TEST(TransportPlan, FacetDeletionTakesADoubledFacetOnly) {
     const std::vector<int> corners = {id[0][0], id[1][0], id[1][1]};
     const TransportPlan::Stencil s = plan.gather(corners, {square[0], twin});
     const std::vector<Vector3d> pts = plan.positionsOf(s);
-    std::vector<paps::LocalTransport> half;
-    for (int keep : {square[0], twin}) {
-      const TransportPlan::Stencil one = plan.gather(corners, {keep});
-      half.push_back(paps::solveLocalTransport(pts, s.mass, plan.targetsOf(one)));
-      ASSERT_TRUE(half.back().solved);
-    }
+    // Targets of each half: s's vertices, then its one facet; of the whole: s's vertices,
+    // then s's facets (gather sorts both).
+    const int nv = static_cast<int>(s.vertices.size());
     paps::LocalTransport both{true, 0, std::vector<std::vector<paps::TransportEntry>>(pts.size())};
-    for (int h = 0; h < 2; ++h)
+    for (int h = 0; h < 2; ++h) {
+      const TransportPlan::Stencil one = plan.gather(corners, {s.facets[h]});
+      ASSERT_EQ(one.vertices, s.vertices);
+      const paps::LocalTransport half = paps::solveLocalTransport(pts, s.mass, plan.targetsOf(one));
+      ASSERT_TRUE(half.solved);
       for (std::size_t i = 0; i < pts.size(); ++i)
-        for (paps::TransportEntry e : half[h].entries[i]) {
-          if (e.target == 3) e.target += h;  // the facet: square[0] for the first half, the twin for the second
+        for (paps::TransportEntry e : half.entries[i]) {
+          if (e.target == nv) e.target += h;  // the half's facet: s.facets[h]
           e.mass *= 0.5;
           both.entries[i].push_back(e);
         }
+    }
     plan.release(s);
-    plan.assign(s, corners, {square[0], twin}, both);
+    plan.assign(s, s.vertices, s.facets, both);
   }
   ASSERT_GT(plan.massOnFacet(twin), 0.4 * plan.massOnFacet(square[0]));  // both copies are fed
   ASSERT_GT(plan.massOnFacet(square[0]), 0.4 * plan.massOnFacet(twin));

@@ -229,8 +229,8 @@ LocalTransport solveLocalTransport(const std::vector<Eigen::Vector3d>& points, c
   start.push_back(static_cast<CoinBigIndex>(index.size()));
   std::vector<double> rowlb(rows, 0.0), rowub(rows, 0.0);
   for (int i = 0; i < np; ++i) rowlb[i] = rowub[i] = mass[i] / total;
-  // One model per thread, reloaded for every problem: building a
-  // ClpSimplex (its message tables) cost as much as solving these small programs.
+  // One model per thread, reloaded for every problem: building a ClpSimplex (its message
+  // tables) cost as much as solving these small programs.
   static thread_local ClpSimplex model;
   model.setLogLevel(0);
   model.loadProblem(ncols, rows, start.data(), index.data(), value.data(), collb.data(), colub.data(), obj.data(),

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <numeric>
+#include <thread>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -93,6 +94,45 @@ TEST(CentroidalBins, AreAFixedPointOfLloyd) {
         EXPECT_LT((sum[k] / size[k] - bins.barycentric[k]).norm(), 1e-12);
       }
     }
+}
+
+TEST(CentroidalBins, MemoReturnsWhatAFreshTessellationGives) {
+  // centroidalBins keeps recent results per thread. Reference: each triangle and count
+  // tessellated in a thread of its own (an empty memo). Then, in one thread, every case twice
+  // in interleaved order, and once more after more tessellations than the memo holds: a memo
+  // that mixed up corners, their order or counts would hand back another case's bins.
+  const std::vector<std::array<Vector3d, 3>> triangles = {
+      {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(0, 1, 0)},
+      {Vector3d(1, 0, 0), Vector3d(0, 1, 0), Vector3d(0, 0, 0)},  // same corners, rotated order
+      {Vector3d(0, 0, 0), Vector3d(1, 0, 0), Vector3d(3, 0.2, 0)},  // the first's a and b
+      {Vector3d(2, 3, 0), Vector3d(0, 1, 0), Vector3d(0, 0, 0)},    // the second's b and c
+      {Vector3d(0.2, -1, 3), Vector3d(2, 0.5, 3), Vector3d(0, 1, 2)}};
+  const std::vector<int> counts = {2, 5, 16};
+  std::vector<paps::FacetBins> fresh;
+  for (const auto& t : triangles)
+    for (int count : counts) {
+      paps::FacetBins bins;
+      std::thread([&] { bins = paps::centroidalBins(t[0], t[1], t[2], count); }).join();
+      fresh.push_back(bins);
+    }
+  const auto same = [](const paps::FacetBins& x, const paps::FacetBins& y) {
+    return x.barycentric == y.barycentric && x.capacity == y.capacity;
+  };
+  // The rotated triangle is the same set of cells, with barycentric coordinates rotated.
+  EXPECT_FALSE(same(fresh[0 * counts.size() + 1], fresh[1 * counts.size() + 1]));
+  std::thread([&] {
+    for (int round = 0; round < 3; ++round) {
+      if (round == 2)
+        for (int k = 0; k < 9000; ++k) paps::centroidalBins(Vector3d(k, 0, 0), Vector3d(k + 1, 0, 0), Vector3d(k, 1, 0), 2);
+      for (std::size_t i = 0; i < triangles.size(); ++i)
+        for (std::size_t j = 0; j < counts.size(); ++j) {
+          const auto& t = triangles[(i + round) % triangles.size()];
+          const auto bins = paps::centroidalBins(t[0], t[1], t[2], counts[j]);
+          EXPECT_TRUE(same(bins, fresh[((i + round) % triangles.size()) * counts.size() + j])) << round << " " << i << " " << j;
+          EXPECT_EQ(static_cast<int>(bins.capacity.size()), counts[j]);
+        }
+    }
+  }).join();
 }
 
 TEST(LocalTransport, PointsOnVerticesCostNothing) {

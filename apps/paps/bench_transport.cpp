@@ -78,7 +78,9 @@ const char* kUsage =
     "    from the advancing-front surface of the same subset (initial_complex AdvancingFront)\n"
     "Errors in thousandths of the bounding-box diagonal: vertices to the true mesh (RMS),\n"
     "50000 samples of the output to the true mesh (mesh->gt) and of the true mesh to the output\n"
-    "(gt->mesh, whose max measures rounded creases and corners and holes).\n";
+    "(gt->mesh, whose max measures rounded creases and corners and holes). (b) also: area/gt, the\n"
+    "output's area over the true mesh's (layers of facets stacked over one surface push it above 1,\n"
+    "holes below), and e>2, the edges shared by three facets or more (0 on a manifold).\n";
 
 // Triangles travel through the raw scratch files as float triples (indices are exact in
 // float below 2^24).
@@ -121,16 +123,22 @@ pcl::PointCloud<pcl::PointNormal>::Ptr withNormals(const Positions& points, int 
   return out;
 }
 
+// The distances see neither holes' area nor layers of facets stacked within the noise (each
+// layer is near the surface): the area ratio (output / true mesh; layers push it above 1,
+// holes below) and the edges of three facets or more show them.
 struct MeshScore {
   double vertex_rms = NAN, to_gt_rms = NAN, to_gt_max = NAN, from_gt_rms = NAN, from_gt_max = NAN;
+  double area_ratio = NAN, nonmanifold_edges = NAN;
 };
 
 MeshScore score(const TriangleMesh& m, const PointToMeshDistance& gt_distance, const Positions& gt_samples,
-                double diagonal) {
+                double diagonal, double gt_area) {
   MeshScore s;
   const double k = 1e3 / diagonal;
   if (!m.vertices.empty()) s.vertex_rms = k * pointToMeshError(m.vertices, gt_distance).rmse;
   if (m.triangles.empty()) return s;
+  s.area_ratio = m.area() / gt_area;
+  s.nonmanifold_edges = m.nonManifoldEdgeCount();
   const ErrorStats to_gt = pointToMeshError(synthetic::sampleMesh(m, 50000, 3), gt_distance);
   const ErrorStats from_gt = pointToMeshError(gt_samples, PointToMeshDistance(m));
   s.to_gt_rms = k * to_gt.rmse;
@@ -290,12 +298,13 @@ int runBenchTransport(int argc, char** argv) {
   std::filesystem::create_directories(out_dir);
   std::ofstream csv(out_dir + "/transport.csv");
   csv << "part,noise,method,ok,vertices,facets,seconds,total_seconds,peak_mb,vertex_rms,mesh_gt_rms,mesh_gt_max,"
-         "gt_mesh_rms,gt_mesh_max\n";
+         "gt_mesh_rms,gt_mesh_max,area_ratio,nonmanifold_edges\n";
   auto csvRow = [&](const char* part, double noise, const std::string& method, const WorkerResult& w,
                     const TriangleMesh& m, double total, const MeshScore& s) {
     csv << part << "," << noise << ",\"" << method << "\"," << w.ok << "," << m.vertices.size() << ","
         << m.triangles.size() << "," << w.seconds << "," << total << "," << w.peak_mb << "," << s.vertex_rms << ","
-        << s.to_gt_rms << "," << s.to_gt_max << "," << s.from_gt_rms << "," << s.from_gt_max << "\n";
+        << s.to_gt_rms << "," << s.to_gt_max << "," << s.from_gt_rms << "," << s.from_gt_max << "," << s.area_ratio
+        << "," << s.nonmanifold_edges << "\n";
   };
 
   // (a) Feature recovery.
@@ -323,7 +332,7 @@ int runBenchTransport(int argc, char** argv) {
           csvRow("recovery", noise, name, w, m, total, MeshScore());
           return;
         }
-        const MeshScore s = score(m, gt_distance, gt_samples, diagonal);
+        const MeshScore s = score(m, gt_distance, gt_samples, diagonal, gt.area());
         std::printf("%-6s %-34s %7zu %7zu %8.2f %8.2f %8.0f %8s %9s %9s %9s %9s\n", noise_s.c_str(), name.c_str(),
                     m.vertices.size(), m.triangles.size(), w.seconds, total, w.peak_mb, cell("%.3f", s.vertex_rms).c_str(),
                     cell("%.3f", s.to_gt_rms).c_str(), cell("%.2f", s.to_gt_max).c_str(),
@@ -395,13 +404,14 @@ int runBenchTransport(int argc, char** argv) {
     const double diagonal = gt.boundingBoxDiagonal();
     const PointToMeshDistance gt_distance(gt);
     const Positions gt_samples = synthetic::sampleMesh(gt, 50000, 4);
+    const double gt_area = gt.area();
     std::printf("\nbench transport (b): reconstruction of %s, %zu points; ours with %d vertices and %d candidates a step, PCL Poisson "
                 "depth 5, the same Poisson mesh\nquadric-decimated (VTK through PCL) to ours' vertex count (time: Poisson + decimation), PCL "
                 "GreedyProjectionTriangulation (radius 3x the mean spacing, mu 2.5, 100 neighbours);\n"
                 "errors in 1e-3 of the bounding-box diagonal (%.3f m)\n",
                 shape.name.c_str(), n, shape.vertices, candidates, diagonal);
-    std::printf("%-6s %-34s %7s %7s %9s %9s %9s %9s %8s %8s\n", "noise", "method", "verts", "facets", "m>gt.rms",
-                "m>gt.max", "gt>m.rms", "gt>m.max", "time(s)", "peak MB");
+    std::printf("%-6s %-34s %7s %7s %9s %9s %9s %9s %7s %5s %8s %8s\n", "noise", "method", "verts", "facets", "m>gt.rms",
+                "m>gt.max", "gt>m.rms", "gt>m.max", "area/gt", "e>2", "time(s)", "peak MB");
     for (const auto& [noise, outliers] : shape.cases) {
       Positions points = clean;
       if (noise > 0) synthetic::addGaussianNoise(points, static_cast<float>(noise), 8);
@@ -460,16 +470,17 @@ int runBenchTransport(int argc, char** argv) {
       std::size_t ours_vertices = 0;
       // The picture: the true mesh, then ours (seed 1) and each peer, in the rows' order.
       std::vector<TriangleMesh> panels{gt};
-      MeshScore ours_sum{0, 0, 0, 0, 0};
+      MeshScore ours_sum{0, 0, 0, 0, 0, 0, 0};
       double ours_seconds = 0;
       int ours_runs = 0, ours_group = 0;
       // The mean of the seeds of one variant of ours, printed after its rows.
       auto printMean = [&] {
         if (ours_runs > 1)
-          std::printf("%-6s %-34s %7s %7s %9.3f %9.2f %9.3f %9.2f %8.2f\n", noise_s.c_str(), "ours, mean of the seeds", "", "",
-                      ours_sum.to_gt_rms / ours_runs, ours_sum.to_gt_max / ours_runs, ours_sum.from_gt_rms / ours_runs,
-                      ours_sum.from_gt_max / ours_runs, ours_seconds / ours_runs);
-        ours_sum = MeshScore{0, 0, 0, 0, 0};
+          std::printf("%-6s %-34s %7s %7s %9.3f %9.2f %9.3f %9.2f %7.3f %5.1f %8.2f\n", noise_s.c_str(), "ours, mean of the seeds",
+                      "", "", ours_sum.to_gt_rms / ours_runs, ours_sum.to_gt_max / ours_runs, ours_sum.from_gt_rms / ours_runs,
+                      ours_sum.from_gt_max / ours_runs, ours_sum.area_ratio / ours_runs, ours_sum.nonmanifold_edges / ours_runs,
+                      ours_seconds / ours_runs);
+        ours_sum = MeshScore{0, 0, 0, 0, 0, 0, 0};
         ours_seconds = 0;
         ours_runs = 0;
       };
@@ -494,8 +505,10 @@ int runBenchTransport(int argc, char** argv) {
           csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, MeshScore());
           continue;
         }
-        const MeshScore s = score(m, gt_distance, gt_samples, diagonal);
+        const MeshScore s = score(m, gt_distance, gt_samples, diagonal, gt_area);
         if (r.method == "ot-reconstruction") {
+          ours_sum.area_ratio += s.area_ratio;
+          ours_sum.nonmanifold_edges += s.nonmanifold_edges;
           ours_sum.to_gt_rms += s.to_gt_rms;
           ours_sum.to_gt_max += s.to_gt_max;
           ours_sum.from_gt_rms += s.from_gt_rms;
@@ -503,10 +516,11 @@ int runBenchTransport(int argc, char** argv) {
           ours_seconds += w.seconds;
           ++ours_runs;
         }
-        std::printf("%-6s %-34s %7zu %7zu %9s %9s %9s %9s %8.2f %8.0f\n", noise_s.c_str(), r.name.c_str(),
+        std::printf("%-6s %-34s %7zu %7zu %9s %9s %9s %9s %7s %5s %8.2f %8.0f\n", noise_s.c_str(), r.name.c_str(),
                     m.vertices.size(), m.triangles.size(), cell("%.3f", s.to_gt_rms).c_str(),
                     cell("%.2f", s.to_gt_max).c_str(), cell("%.3f", s.from_gt_rms).c_str(),
-                    cell("%.2f", s.from_gt_max).c_str(), w.seconds, w.peak_mb);
+                    cell("%.2f", s.from_gt_max).c_str(), cell("%.3f", s.area_ratio).c_str(),
+                    cell("%.0f", s.nonmanifold_edges).c_str(), w.seconds, w.peak_mb);
         if (r.method == "poisson-decimated" && !w.chosen.empty()) std::printf("%-6s   %s\n", "", w.chosen.c_str());
         csvRow(outliers > 0 ? "reconstruction-outliers" : shape.part.c_str(), noise, r.name, w, m, w.seconds, s);
       }

@@ -281,6 +281,28 @@ TEST(TriangleMesh, AreaAndAppend) {
   EXPECT_DOUBLE_EQ(m.area(), 8);
 }
 
+TEST(TriangleMesh, NonManifoldEdgesAreThoseOfThreeTrianglesOrMore) {
+  TriangleMesh m = unitSquare();  // two triangles sharing the diagonal
+  EXPECT_EQ(m.nonManifoldEdgeCount(), 0);
+  // A third triangle on the diagonal (whatever its orientation): one edge of three.
+  const int d0 = m.triangles[0][0], d2 = m.triangles[0][2];
+  m.vertices.emplace_back(0, 0, 1);
+  const int top = static_cast<int>(m.vertices.size()) - 1;
+  m.triangles.emplace_back(d2, d0, top);
+  EXPECT_EQ(m.nonManifoldEdgeCount(), 1);
+  // The same two triangles stacked again over the same vertices: each of the 4 sides is in 2
+  // triangles (a copy and its original), the diagonal in 4.
+  TriangleMesh stacked = unitSquare();
+  stacked.triangles.push_back(stacked.triangles[0]);
+  stacked.triangles.push_back(stacked.triangles[1]);
+  EXPECT_EQ(stacked.nonManifoldEdgeCount(), 1);
+  // A tetrahedron: closed and manifold.
+  TriangleMesh tet;
+  tet.vertices = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  tet.triangles = {{0, 2, 1}, {0, 1, 3}, {1, 2, 3}, {0, 3, 2}};
+  EXPECT_EQ(tet.nonManifoldEdgeCount(), 0);
+}
+
 TEST(TriangleMesh, PolygonMeshIsFanned) {
   pcl::PointCloud<pcl::PointXYZ> cloud;
   for (const auto& v : unitSquare().vertices) cloud.push_back(pcl::PointXYZ(v.x(), v.y(), v.z()));

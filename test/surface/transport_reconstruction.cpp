@@ -81,15 +81,7 @@ TEST(TransportReconstruction, ReconstructsACubeWithTheVerticesAskedCloserThanWit
   EXPECT_LT(f.coverage_rms, 0.95 * coarse.coverage_rms);
 }
 
-// Edges shared by more than two facets (a manifold has none).
-int nonManifoldEdges(const TriangleMesh& m) {
-  std::map<std::pair<int, int>, int> facets_of;
-  for (const auto& t : m.triangles)
-    for (int k = 0; k < 3; ++k) ++facets_of[std::minmax(t[k], t[(k + 1) % 3])];
-  int n = 0;
-  for (const auto& [edge, count] : facets_of) n += count > 2;
-  return n;
-}
+int nonManifoldEdges(const TriangleMesh& m) { return m.nonManifoldEdgeCount(); }
 
 // The advancing-front start: the same subset, only the facets of a surface over it. On a
 // sample of the fandisk block the Delaunay start's output keeps layers of facets (edges with

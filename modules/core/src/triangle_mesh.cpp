@@ -31,6 +31,22 @@ double TriangleMesh::area() const {
   return sum;
 }
 
+int TriangleMesh::nonManifoldEdgeCount() const {
+  std::vector<std::pair<int, int>> edges;
+  edges.reserve(3 * triangles.size());
+  for (const auto& t : triangles)
+    for (int k = 0; k < 3; ++k) edges.push_back(std::minmax(t[k], t[(k + 1) % 3]));
+  std::sort(edges.begin(), edges.end());
+  int count = 0;
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i;
+    while (j < edges.size() && edges[j] == edges[i]) ++j;
+    count += j - i > 2;
+    i = j;
+  }
+  return count;
+}
+
 void TriangleMesh::append(const TriangleMesh& other) {
   const int offset = static_cast<int>(vertices.size());
   vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());

@@ -15,6 +15,9 @@ struct TriangleMesh {
 
   float boundingBoxDiagonal() const { return paps::boundingBoxDiagonal(vertices); }
   double area() const;
+  /// Edges shared by more than two triangles (a manifold has none; layers of facets stacked
+  /// over one surface have many).
+  int nonManifoldEdgeCount() const;
   /// Appends another mesh (indices shifted).
   void append(const TriangleMesh& other);
 };

@@ -85,8 +85,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
           r.max_points = 100;
         else if (p.size() > 100)
           p.resize(100);
-        // Sizes 2 and 3 mod 4: from CGAL's advancing-front surface of the subset.
-        if (size / 2 % 2 == 1) r.initial_complex = paps::InitialComplex::AdvancingFront;
+        // Sizes 2 and 3 mod 4: from every Delaunay facet of the subset; the others from CGAL's
+        // advancing-front surface of it (the default).
+        r.initial_complex = size / 2 % 2 == 1 ? paps::InitialComplex::Delaunay : paps::InitialComplex::AdvancingFront;
         const paps::TriangleMesh m = paps::transportReconstruct(p, r);
         for (const auto& t : m.triangles)
           if ((t.array() < 0).any() || (t.array() >= static_cast<int>(m.vertices.size())).any()) __builtin_trap();

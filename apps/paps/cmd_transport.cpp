@@ -66,10 +66,11 @@ const char* kReconstructUsage =
     "                           centroid, when they are further apart than their noise; in\n"
     "                           [0, 90] (default 30; 0: never split; a sharp cube merged\n"
     "                           10:1: its coverage error 0.68x: docs/transport.md)\n"
-    "  --initial-complex C      delaunay (default; the manuscript: every facet of the subset's\n"
-    "                           3D Delaunay triangulation) or advancing-front (the facets of\n"
-    "                           CGAL's advancing-front surface over the same points: a near-\n"
-    "                           manifold mesh with fewer facets; docs/transport.md)\n"
+    "  --initial-complex C      advancing-front (default: the facets of CGAL's advancing-front\n"
+    "                           surface over the subset; a near-manifold mesh) or delaunay (the\n"
+    "                           manuscript: every facet of the subset's 3D Delaunay\n"
+    "                           triangulation; its meshes stack layers of facets over the\n"
+    "                           surface, 1.2x-2x its area in the bench; docs/transport.md)\n"
     "  --allow-volume           run on points that fill a volume too (refused by default:\n"
     "                           the method is for surfaces: 5,000 points in a cube took\n"
     "                           258 s, 200,000 did not end in 400 s; docs/transport.md)\n"
@@ -171,7 +172,7 @@ int runReconstruct(int argc, char** argv) {
   p.outlier_neighbours = a.integer("outlier-neighbours", p.outlier_neighbours);
   p.max_points = a.integer("max-points", p.max_points);
   p.merge_crease_angle = a.real("merge-crease-angle", p.merge_crease_angle);
-  const std::string initial = a.text("initial-complex", "delaunay");
+  const std::string initial = a.text("initial-complex", "advancing-front");
   if (initial == "delaunay")
     p.initial_complex = InitialComplex::Delaunay;
   else if (initial == "advancing-front")

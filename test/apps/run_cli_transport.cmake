@@ -173,15 +173,23 @@ if(CASE STREQUAL "reconstruct_cube")
   if(NOT fourth STREQUAL fifth)
     message(FATAL_ERROR "merged points: 2 and 1 threads gave different meshes")
   endif()
-  # From the advancing-front surface of the subset: said so, and the same mesh with 1 and 2 threads.
-  run_paps(reconstruct ${dir}/in.pcd ${dir}/out6.ply --vertices 12 --candidates 10 --seed 3 --initial-complex advancing-front --threads 2)
-  expect_mesh(${dir}/out6.ply "advancing front of [0-9]+ points \\([0-9]+ facets\\)")
+  # From every Delaunay facet of the subset (the manuscript's start, not the default): said so,
+  # and the same mesh with 1 and 2 threads.
+  run_paps(reconstruct ${dir}/in.pcd ${dir}/out6.ply --vertices 12 --candidates 10 --seed 3 --initial-complex delaunay --threads 2)
+  expect_mesh(${dir}/out6.ply "Delaunay of [0-9]+ points \\([0-9]+ facets\\)")
   file(SHA256 ${dir}/out6.ply sixth)
-  run_paps(reconstruct ${dir}/in.pcd ${dir}/out7.ply --vertices 12 --candidates 10 --seed 3 --initial-complex advancing-front --threads 1)
+  run_paps(reconstruct ${dir}/in.pcd ${dir}/out7.ply --vertices 12 --candidates 10 --seed 3 --initial-complex delaunay --threads 1)
   expect_mesh(${dir}/out7.ply "wrote .*out7.ply")
   file(SHA256 ${dir}/out7.ply seventh)
   if(NOT sixth STREQUAL seventh)
-    message(FATAL_ERROR "advancing-front start: 2 and 1 threads gave different meshes")
+    message(FATAL_ERROR "Delaunay start: 2 and 1 threads gave different meshes")
+  endif()
+  # The default start is the advancing front: the same mesh as asked for by name.
+  run_paps(reconstruct ${dir}/in.pcd ${dir}/out8.ply --vertices 12 --candidates 10 --seed 3 --initial-complex advancing-front)
+  expect_mesh(${dir}/out8.ply "advancing front of [0-9]+ points \\([0-9]+ facets\\)")
+  file(SHA256 ${dir}/out8.ply eighth)
+  if(NOT first STREQUAL eighth)
+    message(FATAL_ERROR "the default start is not the advancing front's mesh")
   endif()
   # Evenly spaced points weigh 1 each: the outlier weights change nothing.
   run_paps(reconstruct ${dir}/in.pcd ${dir}/out3.ply --vertices 12 --candidates 10 --seed 3 --outlier-neighbours 8)

@@ -6,8 +6,10 @@
 // facet density. The output is a simplicial complex (possibly non-manifold) with sharp
 // creases and boundaries kept, robust to noise and outliers. Costly: meant for point sets of
 // thousands to tens of thousands of points reduced to tens to hundreds of vertices; larger
-// inputs are merged into at most max_points (20,000) cells first. InitialComplex::AdvancingFront
-// starts from a surface over the subset instead (near-manifold output; not the manuscript's).
+// inputs are merged into at most max_points (20,000) cells first. By default the decimation
+// starts from CGAL's advancing-front surface over the subset (InitialComplex::AdvancingFront,
+// a near-manifold output); InitialComplex::Delaunay is the manuscript's start, whose output
+// stacks layers of facets over the surface.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -125,8 +127,15 @@ struct TransportReconstructionParameters {
   /// into its sides, each merged at its own centroid, which lies on its face (mergeIntoCells).
   /// 0: cells are never split; in [0, 90].
   double merge_crease_angle = 30;
-  /// The initial complex (InitialComplex). Delaunay: the manuscript's.
-  InitialComplex initial_complex = InitialComplex::Delaunay;
+  /// The initial complex (InitialComplex). The advancing front by default since session 64:
+  /// the Delaunay start's meshes (the manuscript's) covered 1.2x-2.0x the true surface's area
+  /// in `paps bench transport` (means of seeds 1-3: clean cube 1.21, 0.5% noise 1.98, 10%
+  /// outliers 1.51, fandisk block 1.60, rs1 1.54; 19-69 edges of three facets or more), layers
+  /// stacked within the noise that the distances barely see; the advancing front's 0.98-1.03
+  /// (0.3-2 such edges), in 0.3x-0.8x the time. Its meshes are closer to the cube and the
+  /// fandisk block, but its coverage is worse with noise (1.19x), outliers (1.35x) and on rs1
+  /// (1.20x) (docs/transport.md).
+  InitialComplex initial_complex = InitialComplex::AdvancingFront;
   /// Points that fill a volume (volumeVariation of the transported points above
   /// kVolumeVariation) are refused: the method transports points onto a surface, and on a
   /// volume its local programs grow with the facets filling it. 2,000 points uniform in a

@@ -7,7 +7,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -81,8 +80,6 @@ TEST(TransportReconstruction, ReconstructsACubeWithTheVerticesAskedCloserThanWit
   EXPECT_LT(f.coverage_rms, 0.95 * coarse.coverage_rms);
 }
 
-int nonManifoldEdges(const TriangleMesh& m) { return m.nonManifoldEdgeCount(); }
-
 // The advancing-front start: the same subset, only the facets of a surface over it. On a
 // sample of the fandisk block the Delaunay start's output keeps layers of facets (edges with
 // 3 or more); this one is nearly a manifold, and closer to the block. The same mesh twice in
@@ -105,13 +102,13 @@ TEST(TransportReconstruction, AdvancingFrontStartGivesANearManifoldMesh) {
   const Fit fd = fit(delaunay, block), fa = fit(front, block);
   std::printf("fandisk block, 1000 points, 40 vertices: Delaunay start %zu facets, %d non-manifold edges, rms %.4f "
               "coverage %.4f; advancing front %zu facets, %d non-manifold edges, rms %.4f coverage %.4f\n",
-              delaunay.triangles.size(), nonManifoldEdges(delaunay), fd.to_truth_rms, fd.coverage_rms,
-              front.triangles.size(), nonManifoldEdges(front), fa.to_truth_rms, fa.coverage_rms);
+              delaunay.triangles.size(), delaunay.nonManifoldEdgeCount(), fd.to_truth_rms, fd.coverage_rms,
+              front.triangles.size(), front.nonManifoldEdgeCount(), fa.to_truth_rms, fa.coverage_rms);
   // Measured: Delaunay start 76 facets, 24 non-manifold edges, RMS 0.0085 of the diagonal
   // from the block, coverage 0.0081; advancing front 68, 1, 0.0051, 0.0068 (70, 1, 0.0059,
   // 0.0073 in some runs before CGAL's ties were broken by point indices).
-  EXPECT_LE(nonManifoldEdges(front), 2);
-  EXPECT_GT(nonManifoldEdges(delaunay), 10);
+  EXPECT_LE(front.nonManifoldEdgeCount(), 2);
+  EXPECT_GT(delaunay.nonManifoldEdgeCount(), 10);
   EXPECT_LT(fa.to_truth_rms, fd.to_truth_rms);
   EXPECT_LT(fa.coverage_rms, 1.5 * fd.coverage_rms);
   const TriangleMesh again = paps::transportReconstruct(points, p);

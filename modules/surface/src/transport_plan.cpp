@@ -6,6 +6,7 @@
 #include <functional>
 #include <limits>
 #include <numeric>
+#include <string_view>
 #include <unordered_map>
 
 #include <ClpSimplex.hpp>
@@ -136,9 +137,8 @@ struct BinsKey {
 };
 struct BinsKeyHash {
   std::size_t operator()(const BinsKey& k) const {
-    std::uint64_t h = 0x9e3779b97f4a7c15ull ^ static_cast<std::uint64_t>(k.count);
-    for (const std::uint64_t x : k.bits) h = (h ^ x) * 0x100000001b3ull + (h >> 29);
-    return static_cast<std::size_t>(h);
+    const std::string_view corners(reinterpret_cast<const char*>(k.bits.data()), sizeof(k.bits));
+    return std::hash<std::string_view>{}(corners) ^ static_cast<std::size_t>(k.count);
   }
 };
 

@@ -252,6 +252,7 @@ int runTransportWorker(int argc, char** argv) {
       p.max_points = static_cast<int>(params.get("max_points", p.max_points));
       p.merge_crease_angle = params.get("crease", p.merge_crease_angle);
       if (params.get("delaunay_start", 0) != 0) p.initial_complex = InitialComplex::Delaunay;
+      p.stacked_threshold = static_cast<float>(params.get("stacked", p.stacked_threshold));
       TransportReconstructionReport r;
       mesh = transportReconstruct(input, p, &r);
       seconds = elapsed();
@@ -451,6 +452,8 @@ int runBenchTransport(int argc, char** argv) {
       // Also from every facet of the subset's Delaunay triangulation (initial_complex), the
       // manuscript's start (ours starts from the advancing-front surface of the same subset).
       addVariant("Delaunay start", "delaunay_start", 1, 4);
+      // Without the stacked-facet deletion (stacked_threshold 0), what it changes.
+      addVariant("no stacked deletion", "stacked", 0, 5);
       // A scan sample larger than max_points: also unmerged (max_points 0), the cost the merge saves.
       if (scan && merged)
         for (int seed = 1; seed <= seeds; ++seed)

@@ -46,6 +46,13 @@ const char* kReconstructUsage =
     "  --deletion-threshold D   after the decimation, a facet goes when passing its mass to\n"
     "                           its neighbours costs at most D x its mass x the median facet's\n"
     "                           mean squared transport distance (default 0.2; 0: keep all)\n"
+    "  --stacked-threshold T    then a facet lying over near-parallel facets (a layer or a\n"
+    "                           fold, within the reach below) goes when passing its mass to\n"
+    "                           them costs at most T x its mass x that unit (default 4; 0:\n"
+    "                           keep layers)\n"
+    "  --stacked-reach R        how far above or below a facet another one counts as\n"
+    "                           stacked on it, in RMS transport distances of the median facet\n"
+    "                           (default 3)\n"
     "  --dangling-support S     at the end, a facet with a corner no other facet uses goes when\n"
     "                           fewer than 2 points lie within S mean point spacings of that\n"
     "                           corner (a facet held up by outliers); in [0, 1000] (default 0:\n"
@@ -155,7 +162,7 @@ int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "allow-volume"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
-               "dangling-support", "outlier-neighbours", "max-points", "merge-crease-angle", "initial-complex", "bins-per-area", "max-bins", "bins-per-point", "quiet",
+               "stacked-threshold", "stacked-reach", "dangling-support", "outlier-neighbours", "max-points", "merge-crease-angle", "initial-complex", "bins-per-area", "max-bins", "bins-per-point", "quiet",
                "timings", "allow-volume"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireFileOutput(".ply");  // checked before any work
@@ -168,6 +175,8 @@ int runReconstruct(int argc, char** argv) {
   p.seed = a.count("seed", p.seed);
   p.density_threshold = a.real("density-threshold", p.density_threshold);
   p.deletion_threshold = a.real("deletion-threshold", p.deletion_threshold);
+  p.stacked_threshold = a.real("stacked-threshold", p.stacked_threshold);
+  p.stacked_reach = a.real("stacked-reach", p.stacked_reach);
   p.dangling_support = a.real("dangling-support", p.dangling_support);
   p.outlier_neighbours = a.integer("outlier-neighbours", p.outlier_neighbours);
   p.max_points = a.integer("max-points", p.max_points);
@@ -185,6 +194,7 @@ int runReconstruct(int argc, char** argv) {
   p.transport.bins_per_point = a.integer("bins-per-point", p.transport.bins_per_point);
   validateAsOptions({{"target_vertices", "vertices"}, {"initial_fraction", "initial-fraction"},
                      {"density_threshold", "density-threshold"}, {"deletion_threshold", "deletion-threshold"},
+                     {"stacked_threshold", "stacked-threshold"}, {"stacked_reach", "stacked-reach"},
                      {"dangling_support", "dangling-support"}, {"outlier_neighbours", "outlier-neighbours"}, {"max_points", "max-points"},
                      {"merge_crease_angle", "merge-crease-angle"},
                      {"bins_per_area", "bins-per-area"},
@@ -206,9 +216,9 @@ int runReconstruct(int argc, char** argv) {
   if (p.outlier_neighbours > 0)
     std::printf("reconstruct: outlier weights (%d neighbours): %zu points weigh less than 1, %zu less than 0.1\n",
                 p.outlier_neighbours, r.light_points, r.outlier_points);
-  std::printf("reconstruct: %d facets deleted, %d dangling facets dropped; transport cost %.4g -> %.4g, RMS transport "
-              "distance %g m\n",
-              r.deleted_facets, r.dangling_facets, r.initial_cost, r.final_cost, r.rms_transport);
+  std::printf("reconstruct: %d facets deleted, %d stacked facets deleted, %d dangling facets dropped; transport cost "
+              "%.4g -> %.4g, RMS transport distance %g m\n",
+              r.deleted_facets, r.stacked_facets, r.dangling_facets, r.initial_cost, r.final_cost, r.rms_transport);
   std::printf("reconstruct: volume variation %.3g (a volume is refused above %g without --allow-volume)\n",
               r.volume_variation, kVolumeVariation);
   saveMeshAtomic(out_path, mesh);

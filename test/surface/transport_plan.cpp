@@ -420,6 +420,95 @@ TEST(TransportPlan, FacetDeletionTakesADoubledFacetOnly) {
   for (std::size_t i = 0; i < plan.pointCount(); ++i) ASSERT_NEAR(sent[i], 1.0, 1e-9) << i;
 }
 
+// An n x n grid of cells over the unit square at height z, two facets a cell.
+std::vector<int> squareLayer(TransportPlan& plan, int n, double z) {
+  std::vector<int> id((n + 1) * (n + 1)), facets;
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; j <= n; ++j) id[i * (n + 1) + j] = plan.addVertex(Vector3d(double(i) / n, double(j) / n, z));
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const int a = id[i * (n + 1) + j], b = id[(i + 1) * (n + 1) + j], c = id[(i + 1) * (n + 1) + j + 1],
+                d = id[i * (n + 1) + j + 1];
+      facets.push_back(plan.addFacet(a, b, c));
+      facets.push_back(plan.addFacet(a, c, d));
+    }
+  return facets;
+}
+
+// n points of the unit square with Gaussian z noise of the given sigma.
+std::vector<Vector3d> noisySquareSamples(int n, std::uint64_t seed, double sigma) {
+  paps::Random rng(seed);
+  std::vector<Vector3d> p;
+  for (int i = 0; i < n; ++i) {
+    const double z = sigma * rng.gaussian(), y = rng.uniform();
+    p.emplace_back(rng.uniform(), y, z);
+  }
+  return p;
+}
+
+// How many alive facets lie over (x, y) in the xy projection.
+int layersOver(const TransportPlan& plan, double x, double y) {
+  int n = 0;
+  for (int f = 0; f < plan.facetCount(); ++f) {
+    if (!plan.facetAlive(f)) continue;
+    const Vector3d& a = plan.vertex(plan.facet(f)[0]);
+    const Vector3d& b = plan.vertex(plan.facet(f)[1]);
+    const Vector3d& c = plan.vertex(plan.facet(f)[2]);
+    const auto side = [&](const Vector3d& u, const Vector3d& v) {
+      return (v.x() - u.x()) * (y - u.y()) - (v.y() - u.y()) * (x - u.x());
+    };
+    const double s1 = side(a, b), s2 = side(b, c), s3 = side(c, a);
+    if ((s1 >= 0 && s2 >= 0 && s3 >= 0) || (s1 <= 0 && s2 <= 0 && s3 <= 0)) ++n;
+  }
+  return n;
+}
+
+TEST(TransportPlan, StackedFacetDeletionLeavesOneLayerAndNoHole) {
+  // Noisy points of a square (sigma 0.01), and two layers over it 0.01 apart: a 2 x 2 grid
+  // below and one cell above. Both get mass; the transport alone keeps both.
+  TransportPlan plan(noisySquareSamples(2000, 11, 0.01), {}, {});
+  const std::vector<int> below = squareLayer(plan, 2, -0.005), above = squareLayer(plan, 1, 0.005);
+  plan.assignToNearestVertices();
+  plan.relax();
+  double on_above = 0;
+  for (int f : above) on_above += plan.massOnFacet(f);
+  ASSERT_GT(on_above, 100);
+  ASSERT_EQ(plan.deleteRedundantFacets(0.2), 0);  // each layer's mass would travel
+  const int deleted = plan.deleteStackedFacets(4, 3);
+  std::printf("two layers 0.01 apart over noisy points: %d facets deleted, %d left\n", deleted, plan.aliveFacetCount());
+  EXPECT_GE(deleted, 2);
+  // One sheet is left over the whole square: every point of a 9 x 9 grid (off the facets'
+  // edges) lies under exactly one facet.
+  for (int i = 0; i < 9; ++i)
+    for (int j = 0; j < 9; ++j) {
+      const double x = (i + 0.37) / 9, y = (j + 0.61) / 9;
+      EXPECT_EQ(layersOver(plan, x, y), 1) << x << " " << y;
+    }
+  const std::vector<double> sent = plan.massSent();
+  for (std::size_t i = 0; i < plan.pointCount(); ++i) ASSERT_NEAR(sent[i], 1.0, 1e-9) << i;
+}
+
+TEST(TransportPlan, StackedFacetDeletionKeepsASurfaceWithoutLayers) {
+  // A square and a wall at right angles along its edge x = 1, points on both: no facet lies
+  // over another, so none goes however large the threshold.
+  std::vector<Vector3d> pts = noisySquareSamples(1500, 12, 0.005);
+  paps::Random rng(13);
+  for (int i = 0; i < 1500; ++i) {
+    const double z = rng.uniform(), y = rng.uniform();
+    pts.emplace_back(1 + 0.005 * rng.gaussian(), y, z);
+  }
+  TransportPlan plan(pts, {}, {});
+  squareLayer(plan, 2, 0);
+  const int a = plan.addVertex(Vector3d(1, 0, 0)), b = plan.addVertex(Vector3d(1, 1, 0));
+  const int c = plan.addVertex(Vector3d(1, 1, 1)), d = plan.addVertex(Vector3d(1, 0, 1));
+  plan.addFacet(a, b, c);
+  plan.addFacet(a, c, d);
+  plan.assignToNearestVertices();
+  plan.relax();
+  EXPECT_EQ(plan.deleteStackedFacets(1e6, 3), 0);
+  EXPECT_EQ(plan.aliveFacetCount(), 10);
+}
+
 // Distance of the relocated corner to the true one, and cost before/after, for a bin density.
 struct CornerRun { double start, end, cost_before, cost_after, z; };
 CornerRun relocateCorner(double bins_per_area, int max_bins) {

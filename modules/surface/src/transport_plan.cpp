@@ -809,7 +809,23 @@ double TransportPlan::relocateAll() {
 // squared transport distance. A deletion hands mass to the neighbours (a facet fed by outliers
 // may pass it to another such facet), so passes repeat, in the new density order, until one
 // deletes nothing (at most 10). Sequential, in a fixed order: deterministic.
-int TransportPlan::deleteRedundantFacets(double threshold) {
+bool TransportPlan::deleteFacetIfCheap(int f, const Stencil& s, double allowed) {
+  Stencil without = s;  // the same simplices but f
+  without.facets.erase(std::find(without.facets.begin(), without.facets.end(), f));
+  const std::vector<Eigen::Vector3d> pts = positionsOf(s);
+  const std::vector<TransportTarget> targets = targetsOf(without);
+  // Every plan without f costs at least each point's nearest remaining bin: when that
+  // already exceeds the allowance (with a round-off margin), f stays without a program.
+  if (nearestBinCost(pts, s.mass, targets) - s.cost > allowed + 1e-6 * (std::abs(s.cost) + allowed)) return false;
+  const LocalTransport sol = solveLocalTransport(pts, s.mass, targets, params_.bins_per_point);
+  if (!sol.solved || sol.cost - s.cost > allowed) return false;
+  release(s);
+  removeFacet(f);
+  assign(s, without.vertices, without.facets, sol);
+  return true;
+}
+
+double TransportPlan::medianFacetMeanSquaredDistance() const {
   std::vector<double> mean_d2;
   for (int f = 0; f < facetCount(); ++f) {
     const double m = facetAlive(f) ? massOnFacet(f) : 0.0;
@@ -817,7 +833,12 @@ int TransportPlan::deleteRedundantFacets(double threshold) {
   }
   if (mean_d2.empty()) return 0;
   std::nth_element(mean_d2.begin(), mean_d2.begin() + mean_d2.size() / 2, mean_d2.end());
-  const double unit = mean_d2[mean_d2.size() / 2];
+  return mean_d2[mean_d2.size() / 2];
+}
+
+int TransportPlan::deleteRedundantFacets(double threshold) {
+  const double unit = medianFacetMeanSquaredDistance();
+  if (!(unit > 0)) return 0;
   int deleted = 0;
   for (int pass = 0; pass < 10; ++pass) {
     std::vector<std::pair<double, int>> order;
@@ -828,20 +849,113 @@ int TransportPlan::deleteRedundantFacets(double threshold) {
     std::sort(order.begin(), order.end());
     int deleted_now = 0;
     for (const auto& [density, f] : order) {
-      const Stencil s = facetStencil(f);
-      Stencil without = s;  // the same simplices but f
-      without.facets.erase(std::find(without.facets.begin(), without.facets.end(), f));
-      const double allowed = threshold * massOnFacet(f) * unit;
-      const std::vector<Eigen::Vector3d> pts = positionsOf(s);
-      const std::vector<TransportTarget> targets = targetsOf(without);
-      // Every plan without f costs at least each point's nearest remaining bin: when that
-      // already exceeds the allowance (with a round-off margin), f stays without a program.
-      if (nearestBinCost(pts, s.mass, targets) - s.cost > allowed + 1e-6 * (std::abs(s.cost) + allowed)) continue;
-      const LocalTransport sol = solveLocalTransport(pts, s.mass, targets, params_.bins_per_point);
-      if (!sol.solved || sol.cost - s.cost > allowed) continue;
-      release(s);
-      removeFacet(f);
-      assign(s, without.vertices, without.facets, sol);
+      if (deleteFacetIfCheap(f, facetStencil(f), threshold * massOnFacet(f) * unit)) ++deleted_now;
+    }
+    deleted += deleted_now;
+    if (deleted_now == 0) break;
+  }
+  return deleted;
+}
+
+namespace {
+
+// Facets seen from one facet's bins: each alive facet with mass, its unit normal and its box
+// grown by the reach (a cheap reject before the ray test).
+struct FacetGeometry {
+  Eigen::Vector3d a, b, c, normal, lo, hi;
+  bool usable = false;
+};
+
+// Where the line through p along direction d meets triangle (a, b, c) within |t| <= reach.
+bool hitsWithin(const Eigen::Vector3d& p, const Eigen::Vector3d& d, const FacetGeometry& g, double reach) {
+  const double dn = g.normal.dot(d);
+  if (std::abs(dn) < 1e-12) return false;
+  const double t = g.normal.dot(g.a - p) / dn;
+  if (std::abs(t) > reach) return false;
+  const Eigen::Vector3d q = p + t * d;
+  // Inside when q lies on the inner side of the three edges (in g's plane), with a margin of
+  // 1e-9 of the edges for round-off on a shared edge.
+  const Eigen::Vector3d* v[3] = {&g.a, &g.b, &g.c};
+  for (int e = 0; e < 3; ++e) {
+    const Eigen::Vector3d& u = *v[e];
+    const Eigen::Vector3d& w = *v[(e + 1) % 3];
+    if ((w - u).cross(q - u).dot(g.normal) < -1e-9 * (w - u).squaredNorm()) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+int TransportPlan::deleteStackedFacets(double threshold, double reach, double min_coverage) {
+  const double unit = medianFacetMeanSquaredDistance();
+  if (!(unit > 0)) return 0;
+  const double reach_abs = reach * std::sqrt(unit);
+  constexpr double kMinCos = 0.8;  // about 37 degrees from parallel, either orientation
+  int deleted = 0;
+  std::vector<FacetGeometry> geometry(facetCount());
+  const auto refresh = [&](int g) {
+    FacetGeometry& x = geometry[g];
+    x.usable = facetAlive(g) && massOnFacet(g) > 0;
+    if (!x.usable) return;
+    x.a = vertex(facet(g)[0]);
+    x.b = vertex(facet(g)[1]);
+    x.c = vertex(facet(g)[2]);
+    const Eigen::Vector3d n = (x.b - x.a).cross(x.c - x.a);
+    if (!(n.norm() > 0)) { x.usable = false; return; }
+    x.normal = n.normalized();
+    x.lo = x.a.cwiseMin(x.b).cwiseMin(x.c).array() - reach_abs;
+    x.hi = x.a.cwiseMax(x.b).cwiseMax(x.c).array() + reach_abs;
+  };
+  for (int g = 0; g < facetCount(); ++g) refresh(g);
+  // The facets covering f, and whether they cover at least min_coverage of its bins' capacity.
+  const auto covering = [&](int f, std::vector<int>& cover) {
+    cover.clear();
+    const FacetGeometry& x = geometry[f];
+    std::vector<int> near;
+    for (int g = 0; g < facetCount(); ++g) {
+      if (g == f || !geometry[g].usable) continue;
+      const FacetGeometry& y = geometry[g];
+      if (std::abs(y.normal.dot(x.normal)) < kMinCos) continue;
+      if ((y.lo.array() > x.hi.array()).any() || (y.hi.array() < x.lo.array()).any()) continue;
+      near.push_back(g);
+    }
+    if (near.empty()) return false;
+    const FacetBins& bf = bins(f);
+    double covered = 0;
+    std::vector<char> used(near.size(), 0);
+    for (std::size_t k = 0; k < bf.capacity.size(); ++k) {
+      const Eigen::Vector3d& w = bf.barycentric[k];
+      const Eigen::Vector3d p = w[0] * x.a + w[1] * x.b + w[2] * x.c;
+      for (std::size_t j = 0; j < near.size(); ++j)
+        if (hitsWithin(p, x.normal, geometry[near[j]], reach_abs)) {
+          covered += bf.capacity[k];
+          used[j] = 1;
+          break;
+        }
+    }
+    for (std::size_t j = 0; j < near.size(); ++j)
+      if (used[j]) cover.push_back(near[j]);
+    return covered >= min_coverage;
+  };
+  for (int pass = 0; pass < 10; ++pass) {
+    std::vector<std::pair<double, int>> order;
+    for (int f = 0; f < facetCount(); ++f) {
+      const double m = facetAlive(f) ? massOnFacet(f) : 0.0, a = facetArea(f);
+      if (m > 0 && a > 0) order.emplace_back(m / a, f);
+    }
+    std::sort(order.begin(), order.end());
+    int deleted_now = 0;
+    std::vector<int> cover, vs, fs;
+    for (const auto& [density, f] : order) {
+      if (!geometry[f].usable || !covering(f, cover)) continue;
+      facetStencilSimplices(f, vs, fs);
+      for (int g : cover) {
+        fs.push_back(g);
+        vs.insert(vs.end(), facet(g).begin(), facet(g).end());
+      }
+      const Stencil s = gather(vs, fs);
+      if (!deleteFacetIfCheap(f, s, threshold * massOnFacet(f) * unit)) continue;
+      for (int g : s.facets) refresh(g);  // their mass changed (one may have had none), and f is gone
       ++deleted_now;
     }
     deleted += deleted_now;

@@ -36,6 +36,10 @@ void TransportReconstructionParameters::validate() const {
     throw InvalidParameter("density_threshold", detail::toString(density_threshold), "in [0, 1)");
   if (!(deletion_threshold >= 0) || !std::isfinite(deletion_threshold) || deletion_threshold > 1e6)
     throw InvalidParameter("deletion_threshold", detail::toString(deletion_threshold), "in [0, 1e6]");
+  if (!(stacked_threshold >= 0) || !std::isfinite(stacked_threshold) || stacked_threshold > 1e6)
+    throw InvalidParameter("stacked_threshold", detail::toString(stacked_threshold), "in [0, 1e6]");
+  if (!(stacked_reach > 0) || !std::isfinite(stacked_reach) || stacked_reach > 1000)
+    throw InvalidParameter("stacked_reach", detail::toString(stacked_reach), "in (0, 1000]");
   if (!(dangling_support >= 0) || !(dangling_support <= 1000))
     throw InvalidParameter("dangling_support", detail::toString(dangling_support), "in [0, 1000]");
   requireInRange("outlier_neighbours", outlier_neighbours, 0, 1000);
@@ -909,6 +913,13 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   if (params.deletion_threshold > 0) {
     ProgressReporter deletion(progress, "transport facet deletion", 1);
     report.deleted_facets = plan.deleteRedundantFacets(params.deletion_threshold);
+    deletion.advance();
+    deletion.finish();
+    deletion.throwIfCancelled();
+  }
+  if (params.stacked_threshold > 0) {
+    ProgressReporter deletion(progress, "transport stacked facets", 1);
+    report.stacked_facets = plan.deleteStackedFacets(params.stacked_threshold, params.stacked_reach);
     deletion.advance();
     deletion.finish();
     deletion.throwIfCancelled();

@@ -86,6 +86,16 @@ struct TransportReconstructionParameters {
   /// outlier vertex into the cube); a facet of the surface does not (its mass would travel
   /// far). 0 disables; in [0, 1e6].
   float deletion_threshold = 0.2f;
+  /// Stacked-facet deletion (not in the manuscript; TransportPlan::deleteStackedFacets), after
+  /// the facet deletion: a facet covered along its normal, within `stacked_reach` x the
+  /// median facet's RMS transport distance, by near-parallel facets is a layer over the
+  /// surface or a fold; it goes when sending its mass to the facets around and under it
+  /// raises the cost by at most this many times its mass times the median facet's mean
+  /// squared transport distance. 0 disables; in [0, 1e6].
+  float stacked_threshold = 4.0f;
+  /// Reach of the stacked-facet test, in RMS transport distances of the median facet; in
+  /// (0, 1000].
+  float stacked_reach = 3.0f;
   /// Dangling facets (not in the manuscript), for points with outliers: after the density
   /// filter, a facet with a corner that no other kept facet uses goes when fewer than 2 input
   /// points lie within `dangling_support` x the mean point spacing (distance to the nearest
@@ -189,6 +199,7 @@ struct TransportReconstructionReport {
   /// Drawn collapses not simulated because their lower bound could not beat the best change.
   int bounded_simulations = 0;
   int deleted_facets = 0;  // by the facet deletion
+  int stacked_facets = 0;  // by the stacked-facet deletion
   int dangling_facets = 0;  // dropped at the end for want of points near a free corner
   /// With outlier weights: distinct points weighing less than 1, and less than 0.1.
   std::size_t light_points = 0, outlier_points = 0;

@@ -507,6 +507,10 @@ TEST(TransportPlan, StackedFacetDeletionKeepsASurfaceWithoutLayers) {
   plan.relax();
   EXPECT_EQ(plan.deleteStackedFacets(1e6, 3), 0);
   EXPECT_EQ(plan.aliveFacetCount(), 10);
+  EXPECT_THROW(plan.deleteStackedFacets(-1, 3), paps::InvalidParameter);
+  EXPECT_THROW(plan.deleteStackedFacets(4, 0), paps::InvalidParameter);
+  EXPECT_THROW(plan.deleteStackedFacets(4, 3, 1.5), paps::InvalidParameter);
+  EXPECT_THROW(plan.deleteStackedFacets(NAN, 3), paps::InvalidParameter);
 }
 
 // Distance of the relocated corner to the true one, and cost before/after, for a bin density.

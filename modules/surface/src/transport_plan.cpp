@@ -804,11 +804,6 @@ double TransportPlan::relocateAll() {
   return std::sqrt(sum2 / alive.size());
 }
 
-// Facet deletion: in order of increasing mass density, a facet goes when re-solving its
-// stencil without it raises the cost by at most threshold x its mass x the median facet's mean
-// squared transport distance. A deletion hands mass to the neighbours (a facet fed by outliers
-// may pass it to another such facet), so passes repeat, in the new density order, until one
-// deletes nothing (at most 10). Sequential, in a fixed order: deterministic.
 bool TransportPlan::deleteFacetIfCheap(int f, const Stencil& s, double allowed) {
   Stencil without = s;  // the same simplices but f
   without.facets.erase(std::find(without.facets.begin(), without.facets.end(), f));
@@ -836,6 +831,11 @@ double TransportPlan::medianFacetMeanSquaredDistance() const {
   return mean_d2[mean_d2.size() / 2];
 }
 
+// Facet deletion: in order of increasing mass density, a facet goes when re-solving its
+// stencil without it raises the cost by at most threshold x its mass x the median facet's mean
+// squared transport distance. A deletion hands mass to the neighbours (a facet fed by outliers
+// may pass it to another such facet), so passes repeat, in the new density order, until one
+// deletes nothing (at most 10). Sequential, in a fixed order: deterministic.
 int TransportPlan::deleteRedundantFacets(double threshold) {
   const double unit = medianFacetMeanSquaredDistance();
   if (!(unit > 0)) return 0;
@@ -886,7 +886,15 @@ bool hitsWithin(const Eigen::Vector3d& p, const Eigen::Vector3d& d, const FacetG
 
 }  // namespace
 
+// Sequential, in a fixed order (density, then facet id): deterministic. Quadratic in the
+// facets a visit (a box test each), cheap next to the programs at the sizes the decimation
+// leaves (the noisy plane's 0.45 s against 26 s of decimation).
 int TransportPlan::deleteStackedFacets(double threshold, double reach, double min_coverage) {
+  if (!(threshold >= 0) || !std::isfinite(threshold))
+    throw InvalidParameter("stacked threshold", detail::toString(threshold), "finite and >= 0");
+  if (!(reach > 0) || !std::isfinite(reach)) throw InvalidParameter("stacked reach", detail::toString(reach), "finite and > 0");
+  if (!(min_coverage > 0 && min_coverage <= 1))
+    throw InvalidParameter("min_coverage", detail::toString(min_coverage), "in (0, 1]");
   const double unit = medianFacetMeanSquaredDistance();
   if (!(unit > 0)) return 0;
   const double reach_abs = reach * std::sqrt(unit);

@@ -334,15 +334,29 @@ TEST(LocalTransport, DualLowerBoundStaysBelowTheProgramWhenTheLoadsFit) {
 }
 
 // A 3 x 3 grid of vertices and 8 facets over the unit square; returns the facet ids.
-std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
-  std::vector<int> facets;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) id[i][j] = plan.addVertex(Vector3d(0.5 * i, 0.5 * j, 0));
-  for (int i = 0; i < 2; ++i)
-    for (int j = 0; j < 2; ++j) {
-      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j], id[i + 1][j + 1]));
-      facets.push_back(plan.addFacet(id[i][j], id[i + 1][j + 1], id[i][j + 1]));
+// An n x n grid of cells over the unit square at height z, two facets a cell; returns the
+// facets, and the vertices (row-major, (n + 1)^2) in `vertex_ids` when given.
+std::vector<int> squareLayer(TransportPlan& plan, int n, double z, std::vector<int>* vertex_ids = nullptr) {
+  std::vector<int> id((n + 1) * (n + 1)), facets;
+  for (int i = 0; i <= n; ++i)
+    for (int j = 0; j <= n; ++j) id[i * (n + 1) + j] = plan.addVertex(Vector3d(double(i) / n, double(j) / n, z));
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < n; ++j) {
+      const int a = id[i * (n + 1) + j], b = id[(i + 1) * (n + 1) + j], c = id[(i + 1) * (n + 1) + j + 1],
+                d = id[i * (n + 1) + j + 1];
+      facets.push_back(plan.addFacet(a, b, c));
+      facets.push_back(plan.addFacet(a, c, d));
     }
+  if (vertex_ids) *vertex_ids = id;
+  return facets;
+}
+
+// The unit square as a 2 x 2 grid at z = 0 (8 facets), its vertices in id[i][j].
+std::vector<int> squareGrid(TransportPlan& plan, int id[3][3]) {
+  std::vector<int> ids;
+  const std::vector<int> facets = squareLayer(plan, 2, 0, &ids);
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) id[i][j] = ids[i * 3 + j];
   return facets;
 }
 
@@ -418,21 +432,6 @@ TEST(TransportPlan, FacetDeletionTakesADoubledFacetOnly) {
   EXPECT_LT(plan.cost(), 1.02 * before);
   const std::vector<double> sent = plan.massSent();
   for (std::size_t i = 0; i < plan.pointCount(); ++i) ASSERT_NEAR(sent[i], 1.0, 1e-9) << i;
-}
-
-// An n x n grid of cells over the unit square at height z, two facets a cell.
-std::vector<int> squareLayer(TransportPlan& plan, int n, double z) {
-  std::vector<int> id((n + 1) * (n + 1)), facets;
-  for (int i = 0; i <= n; ++i)
-    for (int j = 0; j <= n; ++j) id[i * (n + 1) + j] = plan.addVertex(Vector3d(double(i) / n, double(j) / n, z));
-  for (int i = 0; i < n; ++i)
-    for (int j = 0; j < n; ++j) {
-      const int a = id[i * (n + 1) + j], b = id[(i + 1) * (n + 1) + j], c = id[(i + 1) * (n + 1) + j + 1],
-                d = id[i * (n + 1) + j + 1];
-      facets.push_back(plan.addFacet(a, b, c));
-      facets.push_back(plan.addFacet(a, c, d));
-    }
-  return facets;
 }
 
 // n points of the unit square with Gaussian z noise of the given sigma.

@@ -199,9 +199,6 @@ class TransportPlan {
   double relocate(int v);
   /// relocate() on every alive vertex; returns the RMS move.
   double relocateAll();
-  /// Mean squared transport distance of the median facet with mass (0 without any): the
-  /// unit of the deletion thresholds.
-  double medianFacetMeanSquaredDistance() const;
   /// Facet deletion (not in the manuscript): visiting the facets with mass by increasing mass
   /// density, deletes a facet when re-solving its stencil without it raises the cost by at
   /// most threshold x its mass x the median facet's mean squared transport distance (its mass
@@ -233,6 +230,9 @@ class TransportPlan {
   /// Deletes facet f (one of s's facets) when re-solving stencil s without it raises the cost
   /// by at most `allowed`; returns whether it did (the facets of s then hold f's mass).
   bool deleteFacetIfCheap(int f, const Stencil& s, double allowed);
+  /// Mean squared transport distance of the median facet with mass (0 without any): the
+  /// unit of the deletion thresholds.
+  double medianFacetMeanSquaredDistance() const;
 
   TransportParameters params_;
   std::vector<Eigen::Vector3d> points_;

@@ -9,6 +9,7 @@
 #include <string_view>
 #include <unordered_map>
 
+#include <CGAL/box_intersection_d.h>
 #include <ClpSimplex.hpp>
 #include <pcl/point_types.h>
 
@@ -859,11 +860,11 @@ int TransportPlan::deleteRedundantFacets(double threshold) {
 
 namespace {
 
-// Facets seen from one facet's bins: each alive facet with mass, its unit normal and its box
-// grown by the reach (a cheap reject before the ray test).
+// Facets seen from one facet's bins: each alive facet's corners, unit normal and box grown by
+// the reach (shaped: not degenerate); usable while it is alive and has mass.
 struct FacetGeometry {
   Eigen::Vector3d a, b, c, normal, lo, hi;
-  bool usable = false;
+  bool shaped = false, usable = false;
 };
 
 // Where the line through p along direction d meets triangle (a, b, c) within |t| <= reach.
@@ -886,9 +887,10 @@ bool hitsWithin(const Eigen::Vector3d& p, const Eigen::Vector3d& d, const FacetG
 
 }  // namespace
 
-// Sequential, in a fixed order (density, then facet id): deterministic. Quadratic in the
-// facets a visit (a box test each), cheap next to the programs at the sizes the decimation
-// leaves (the noisy plane's 0.45 s against 26 s of decimation).
+// Sequential, in a fixed order (density, then facet id): deterministic. The vertices do not
+// move here, so the pairs of near-parallel facets whose grown boxes meet are listed once, by
+// CGAL's box intersection (a visit tested every facet's box before: rs1 to 3,500 vertices
+// spent 2.8 s here against 4.1 s of decimation).
 int TransportPlan::deleteStackedFacets(double threshold, double reach, double min_coverage) {
   if (!(threshold >= 0) || !std::isfinite(threshold))
     throw InvalidParameter("stacked threshold", detail::toString(threshold), "finite and >= 0");
@@ -901,32 +903,44 @@ int TransportPlan::deleteStackedFacets(double threshold, double reach, double mi
   constexpr double kMinCos = 0.8;  // about 37 degrees from parallel, either orientation
   int deleted = 0;
   std::vector<FacetGeometry> geometry(facetCount());
-  const auto refresh = [&](int g) {
+  using Box = CGAL::Box_intersection_d::Box_with_info_d<double, 3, int>;
+  std::vector<Box> boxes;
+  for (int g = 0; g < facetCount(); ++g) {
+    if (!facetAlive(g)) continue;
     FacetGeometry& x = geometry[g];
-    x.usable = facetAlive(g) && massOnFacet(g) > 0;
-    if (!x.usable) return;
     x.a = vertex(facet(g)[0]);
     x.b = vertex(facet(g)[1]);
     x.c = vertex(facet(g)[2]);
     const Eigen::Vector3d n = (x.b - x.a).cross(x.c - x.a);
-    if (!(n.norm() > 0)) { x.usable = false; return; }
+    if (!(n.norm() > 0)) continue;
+    x.shaped = true;
     x.normal = n.normalized();
     x.lo = x.a.cwiseMin(x.b).cwiseMin(x.c).array() - reach_abs;
     x.hi = x.a.cwiseMax(x.b).cwiseMax(x.c).array() + reach_abs;
-  };
+    double lo[3] = {x.lo.x(), x.lo.y(), x.lo.z()}, hi[3] = {x.hi.x(), x.hi.y(), x.hi.z()};
+    boxes.emplace_back(lo, hi, g);
+  }
+  const auto refresh = [&](int g) { geometry[g].usable = geometry[g].shaped && facetAlive(g) && massOnFacet(g) > 0; };
   for (int g = 0; g < facetCount(); ++g) refresh(g);
+  // Each facet's candidate covers: near-parallel, boxes meeting (closed boxes), by facet id.
+  std::vector<std::vector<int>> candidates(facetCount());
+  CGAL::box_self_intersection_d(boxes.begin(), boxes.end(), [&](const Box& p, const Box& q) {
+    const int f = p.info(), g = q.info();
+    if (std::abs(geometry[f].normal.dot(geometry[g].normal)) < kMinCos) return;
+    candidates[f].push_back(g);
+    candidates[g].push_back(f);
+  });
+  for (auto& c : candidates) {
+    std::sort(c.begin(), c.end());
+    c.erase(std::unique(c.begin(), c.end()), c.end());
+  }
   // The facets covering f, and whether they cover at least min_coverage of its bins' capacity.
   const auto covering = [&](int f, std::vector<int>& cover) {
     cover.clear();
     const FacetGeometry& x = geometry[f];
     std::vector<int> near;
-    for (int g = 0; g < facetCount(); ++g) {
-      if (g == f || !geometry[g].usable) continue;
-      const FacetGeometry& y = geometry[g];
-      if (std::abs(y.normal.dot(x.normal)) < kMinCos) continue;
-      if ((y.lo.array() > x.hi.array()).any() || (y.hi.array() < x.lo.array()).any()) continue;
-      near.push_back(g);
-    }
+    for (int g : candidates[f])
+      if (geometry[g].usable) near.push_back(g);
     if (near.empty()) return false;
     const FacetBins& bf = bins(f);
     double covered = 0;

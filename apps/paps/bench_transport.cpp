@@ -253,10 +253,12 @@ int runTransportWorker(int argc, char** argv) {
       p.merge_crease_angle = params.get("crease", p.merge_crease_angle);
       if (params.get("delaunay_start", 0) != 0) p.initial_complex = InitialComplex::Delaunay;
       p.stacked_threshold = static_cast<float>(params.get("stacked", p.stacked_threshold));
+      p.transport.refuse_flips = params.get("allow_flips", 0) == 0;
       TransportReconstructionReport r;
       mesh = transportReconstruct(input, p, &r);
       seconds = elapsed();
-      lf << "chosen " << r.collapses << " collapses, " << r.simulations << " simulations\n";
+      lf << "chosen " << r.collapses << " collapses, " << r.simulations << " simulations, " << r.refused_collapses
+         << " refused (they turned a facet over), " << r.restored_facets << " empty facets kept (they close a hole)\n";
     } else {
       throw InvalidParameter("method", method, "poisson, poisson-decimated, gp3, ot-recovery or ot-reconstruction");
     }
@@ -454,6 +456,8 @@ int runBenchTransport(int argc, char** argv) {
       addVariant("Delaunay start", "delaunay_start", 1, 4);
       // Without the stacked-facet deletion (stacked_threshold 0), what it changes.
       addVariant("no stacked deletion", "stacked", 0, 5);
+      // With the collapses that turn a facet over allowed (refuse_flips false), what refusing changes.
+      addVariant("flips allowed", "allow_flips", 1, 6);
       // A scan sample larger than max_points: also unmerged (max_points 0), the cost the merge saves.
       if (scan && merged)
         for (int seed = 1; seed <= seeds; ++seed)

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <memory>
 #include <string>
 #include <vector>
@@ -69,15 +70,22 @@ TEST(TransportReconstruction, ReconstructsACubeWithTheVerticesAskedCloserThanWit
 
   // Against the manuscript's quadrature (200 bins per area, up to 16 a facet) on the same
   // points and seed: coarse bins add a tangential cost that hides the cube's edges from the
-  // collapse choice.
-  auto manuscript = smallRun();
+  // collapse choice. Both with the collapses that turn a facet over allowed, as when this was
+  // measured (session 66: with them refused, this seed's mesh RMS is 0.0097 with either
+  // quadrature, coverage 0.0118 against 0.0126).
+  auto fine = smallRun();
+  fine.transport.refuse_flips = false;
+  auto manuscript = fine;
   manuscript.transport = paps::TransportParameters();
+  manuscript.transport.refuse_flips = false;
   ASSERT_EQ(manuscript.transport.bins_per_area, 200);
-  ASSERT_EQ(smallRun().transport.bins_per_area, 800);
+  ASSERT_EQ(fine.transport.bins_per_area, 800);
+  const Fit sharp = fit(paps::transportReconstruct(points, fine), cube);
   const Fit coarse = fit(paps::transportReconstruct(points, manuscript), cube);
-  std::printf("manuscript's quadrature: rms %.4f coverage %.4f\n", coarse.to_truth_rms, coarse.coverage_rms);
-  EXPECT_LT(f.to_truth_rms, 0.9 * coarse.to_truth_rms);
-  EXPECT_LT(f.coverage_rms, 0.95 * coarse.coverage_rms);
+  std::printf("flips allowed: rms %.4f coverage %.4f; with the manuscript's quadrature: rms %.4f coverage %.4f\n",
+              sharp.to_truth_rms, sharp.coverage_rms, coarse.to_truth_rms, coarse.coverage_rms);
+  EXPECT_LT(sharp.to_truth_rms, 0.9 * coarse.to_truth_rms);
+  EXPECT_LT(sharp.coverage_rms, 0.95 * coarse.coverage_rms);
 }
 
 // The advancing-front start: the same subset, only the facets of a surface over it. On a
@@ -763,9 +771,10 @@ TEST(TransportReconstruction, NoisyPlaneGivesOneSheetNotStackedLayers) {
               sheet.triangles.size(), sheet.area(), sheet.nonManifoldEdgeCount(), delaunay.triangles.size(),
               delaunay.area(), delaunay.nonManifoldEdgeCount(), r.stacked_facets, layers.triangles.size(), layers.area(),
               layers.nonManifoldEdgeCount());
-  // Measured: advancing front 25 facets, area 0.960, 0 non-manifold edges (34, 1.253, 3
-  // without the stacked-facet deletion); Delaunay start 35, 1.122, 4; without the deletion
-  // 79, 3.161, 41 (layers of facets within the noise).
+  // Measured: advancing front 30 facets, area 0.865, 0 non-manifold edges; Delaunay start 37,
+  // 0.968, 3; without the stacked-facet deletion 69, 1.825, 29 (layers of facets within the
+  // noise). Before the collapses that turn a facet over were refused (session 66): 25, 0.960,
+  // 0; 35, 1.122, 4; 79, 3.161, 41.
   EXPECT_GT(sheet.area(), 0.85);
   EXPECT_LT(sheet.area(), 1.1);
   EXPECT_LE(sheet.nonManifoldEdgeCount(), 1);
@@ -773,8 +782,55 @@ TEST(TransportReconstruction, NoisyPlaneGivesOneSheetNotStackedLayers) {
   EXPECT_LT(delaunay.area(), 1.3);
   EXPECT_LE(delaunay.nonManifoldEdgeCount(), 8);
   EXPECT_GT(r.stacked_facets, 10);
-  EXPECT_GT(layers.area(), 2 * delaunay.area());
+  EXPECT_GT(layers.area(), 1.5 * delaunay.area());
   EXPECT_GT(layers.nonManifoldEdgeCount(), 20);
+}
+
+// Edges of one facet (borders), and edges of two facets folded onto each other: the second
+// facet's free corner lies on the first facet's side of the edge (the sheet doubles back).
+struct EdgeCounts { int edges = 0, border = 0, folded = 0; };
+EdgeCounts edgeCounts(const TriangleMesh& m) {
+  std::map<std::pair<int, int>, std::vector<int>> opposite;  // edge -> free corner of each facet
+  for (const auto& t : m.triangles)
+    for (int e = 0; e < 3; ++e)
+      opposite[std::minmax(t[e], t[(e + 1) % 3])].push_back(t[(e + 2) % 3]);
+  EdgeCounts c;
+  for (const auto& [e, corners] : opposite) {
+    ++c.edges;
+    if (corners.size() == 1) ++c.border;
+    if (corners.size() != 2) continue;
+    const Eigen::Vector3f a = m.vertices[e.first], b = m.vertices[e.second];
+    const Eigen::Vector3f side = (b - a).cross(m.vertices[corners[0]] - a).cross(b - a);
+    if (side.dot(m.vertices[corners[0]] - a) * side.dot(m.vertices[corners[1]] - a) > 0) ++c.folded;
+  }
+  return c;
+}
+
+// A clean unit sphere with about 10 points a vertex (the most asked of the method): collapses
+// that turn a facet over fold the sheet back, and the points near a corner go to the vertex,
+// leaving small facets empty, which the density filter drops (holes). Refusing those collapses
+// (refuse_flips) and keeping the empty facets that close a hole give a mesh with fewer folds
+// and borders; a closed sphere should have none.
+TEST(TransportReconstruction, ManyVerticesOnASphereGiveFewBordersAndFolds) {
+  paps::Positions sphere;
+  paps::Random rng(3);
+  for (int i = 0; i < 2000; ++i) sphere.push_back(rng.gaussian3().normalized().cast<float>());
+  paps::TransportReconstructionParameters p;
+  p.target_vertices = 200;
+  p.initial_fraction = 0.4f;
+  paps::TransportReconstructionReport refused, allowed;
+  const EdgeCounts on = edgeCounts(paps::transportReconstruct(sphere, p, &refused));
+  p.transport.refuse_flips = false;
+  const EdgeCounts off = edgeCounts(paps::transportReconstruct(sphere, p, &allowed));
+  std::printf("unit sphere, 2000 points, 800 to 200 vertices: flips refused: %d edges, %d borders, %d folded "
+              "(%d collapses refused, %d empty facets kept); allowed: %d, %d, %d (%d kept)\n",
+              on.edges, on.border, on.folded, refused.refused_collapses, refused.restored_facets, off.edges, off.border,
+              off.folded, allowed.restored_facets);
+  EXPECT_GT(refused.refused_collapses, 0);
+  EXPECT_EQ(allowed.refused_collapses, 0);
+  EXPECT_GT(refused.restored_facets, 0);
+  EXPECT_LT(on.border, off.border);
+  EXPECT_LE(on.folded, off.folded);
 }
 
 TEST(TransportReconstruction, RefusesPointsFillingAVolumeUnlessAllowed) {

@@ -782,7 +782,22 @@ double TransportPlan::relocate(int v) {
   weight += vweight;
   if (!(weight > 0)) return 0;
   const Eigen::Vector3d target = num / weight;
-  const Eigen::Vector3d moved = 0.5 * (vertices_[v] + target);
+  Eigen::Vector3d moved = 0.5 * (vertices_[v] + target);
+  if (params_.refuse_flips) {
+    // A move that turns a facet of v over folds the sheet: the step is halved until none
+    // turns (at most 4 times), else v stays.
+    const auto turns = [&](const Eigen::Vector3d& to) {
+      for (int f : vertex_facets_[v]) {
+        const auto& t = facets_[f];
+        const int slot = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+        const Eigen::Vector3d &a = vertices_[t[(slot + 1) % 3]], &b = vertices_[t[(slot + 2) % 3]];
+        if ((a - vertices_[v]).cross(b - vertices_[v]).dot((a - to).cross(b - to)) < 0) return true;
+      }
+      return false;
+    };
+    for (int halvings = 0; halvings < 4 && turns(moved); ++halvings) moved = 0.5 * (vertices_[v] + moved);
+    if (turns(moved)) moved = vertices_[v];
+  }
   const double dist = (moved - vertices_[v]).norm();
   vertices_[v] = moved;
   improve(vertexStencil(v));

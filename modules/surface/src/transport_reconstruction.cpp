@@ -88,6 +88,66 @@ struct TieBrokenPriority {
   }
 };
 
+// Facets the density filter dropped come back where their emptiness is no evidence of a gap
+// and they close a hole. Candidates: alive facets with area that were dropped; those sharing
+// an edge no kept facet uses form a group. A group comes back when fewer than 3 points were to
+// be expected on it in all (the mean facet density times its area: an area that small is empty
+// by chance 5% of the time or more) and, with it, each of its edges has exactly two facets (it
+// fills a hole of the kept mesh exactly: no border, no edge of three). With many vertices for
+// the points (rs1 merged into 20,000 points to 10,000 vertices), the points near a corner go
+// to the vertex and many small facets get none: the filter alone left the mesh in shreds.
+// Deterministic (groups by facet order). Returns how many facets came back.
+int restoreEnclosedFacets(const TransportPlan& plan, double mean_density, std::vector<char>& kept) {
+  constexpr double kExpectedPoints = 3;
+  if (!(mean_density > 0)) return 0;
+  const auto edge = [&](int f, int e) {
+    const int a = plan.facet(f)[e], b = plan.facet(f)[(e + 1) % 3];
+    return std::make_pair(std::min(a, b), std::max(a, b));
+  };
+  std::map<std::pair<int, int>, int> kept_uses;
+  std::map<std::pair<int, int>, std::vector<int>> candidate_uses;
+  std::vector<int> candidates;
+  for (int f = 0; f < plan.facetCount(); ++f) {
+    if (!plan.facetAlive(f)) continue;
+    if (kept[f]) {
+      for (int e = 0; e < 3; ++e) ++kept_uses[edge(f, e)];
+    } else if (plan.facetArea(f) > 0) {
+      candidates.push_back(f);
+      for (int e = 0; e < 3; ++e) candidate_uses[edge(f, e)].push_back(f);
+    }
+  }
+  // Groups: union-find over the candidates, joined across edges without a kept facet.
+  std::map<int, int> parent;
+  for (int f : candidates) parent[f] = f;
+  const auto root = [&](int f) {
+    while (parent[f] != f) f = parent[f] = parent[parent[f]];
+    return f;
+  };
+  for (const auto& [e, fs] : candidate_uses)
+    if (kept_uses.count(e) == 0)
+      for (std::size_t k = 1; k < fs.size(); ++k) parent[root(fs[k])] = root(fs[0]);
+  std::map<int, std::vector<int>> groups;  // by root, members in facet order
+  for (int f : candidates) groups[root(f)].push_back(f);
+  int restored = 0;
+  for (const auto& [r, members] : groups) {
+    double expected = 0;
+    for (int f : members) expected += mean_density * plan.facetArea(f);
+    if (!(expected < kExpectedPoints)) continue;
+    std::map<std::pair<int, int>, int> uses;
+    for (int f : members)
+      for (int e = 0; e < 3; ++e) ++uses[edge(f, e)];
+    bool fills = true;
+    for (const auto& [e, n] : uses) {
+      const auto it = kept_uses.find(e);
+      fills = fills && n + (it == kept_uses.end() ? 0 : it->second) == 2;
+    }
+    if (!fills) continue;
+    for (int f : members) kept[f] = 1;
+    restored += static_cast<int>(members.size());
+  }
+  return restored;
+}
+
 // The decimated complex: the transport plan (vertices, facets, plan) plus the edges, which a
 // simplicial complex keeps even where no facet remains (a vertex on a bare edge can still be
 // collapsed).
@@ -137,7 +197,24 @@ class Decimation {
     LocalTransport solution;
     double lower_bound = -INFINITY;  // of delta
     double delta = INFINITY;         // INFINITY: not simulated (or the program failed)
+    bool turns_facet = false;        // refused: a facet of u would turn over (refuse_flips)
   };
+
+  // Whether moving u onto v turns one of u's facets (without v) over: its normal after makes
+  // more than 90 degrees with its normal before. Such a collapse folds the sheet back over
+  // itself, and the transport cost barely sees it when the facet carries little mass.
+  bool turnsAFacet(int u, int v) const {
+    const Eigen::Vector3d& to = plan_.vertex(v);
+    for (int f : plan_.facetsOf(u)) {
+      const auto& t = plan_.facet(f);
+      if (std::find(t.begin(), t.end(), v) != t.end()) continue;  // degenerates
+      const int slot = t[0] == u ? 0 : t[1] == u ? 1 : 2;
+      const Eigen::Vector3d &a = plan_.vertex(t[(slot + 1) % 3]), &b = plan_.vertex(t[(slot + 2) % 3]);
+      const Eigen::Vector3d before = (a - plan_.vertex(u)).cross(b - plan_.vertex(u)), after = (a - to).cross(b - to);
+      if (before.dot(after) < 0) return true;
+    }
+    return false;
+  }
 
   // The collapse's stencil, simplices after and new facets' bins, and a lower bound of its
   // cost change (nearestBinCost after, minus the cost before); no program solved yet.
@@ -145,6 +222,11 @@ class Decimation {
     Collapse c;
     c.u = u;
     c.v = v;
+    if (plan_.parameters().refuse_flips && turnsAFacet(u, v)) {
+      c.turns_facet = true;
+      c.lower_bound = INFINITY;
+      return c;
+    }
     std::vector<int> fs = plan_.facetsOf(u), vs{u, v};
     fs.insert(fs.end(), plan_.facetsOf(v).begin(), plan_.facetsOf(v).end());
     for (int f : fs) vs.insert(vs.end(), plan_.facet(f).begin(), plan_.facet(f).end());
@@ -795,11 +877,13 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   std::size_t swept_size = 0;  // the cache's size after its last sweep
   const int start = plan.aliveVertexCount();
   ProgressReporter rep(progress, "transport decimation", static_cast<std::size_t>(std::max(1, start - params.target_vertices)));
+  int fruitless_draws = 0;  // in a row: every drawn collapse refused (or its program failed)
   while (plan.aliveVertexCount() > params.target_vertices) {
     const std::int64_t half_edges = dec.halfEdgeCount();
     if (half_edges == 0) break;
     std::vector<std::pair<int, int>> candidates;
-    if (params.candidates == 0 || params.candidates >= half_edges) {
+    const bool exhaustive = params.candidates == 0 || params.candidates >= half_edges;
+    if (exhaustive) {
       for (int u = 0; u < plan.vertexCount(); ++u)
         for (int v : dec.neighbours(u)) candidates.emplace_back(u, v);
     } else {
@@ -858,6 +942,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
 #pragma omp parallel for schedule(dynamic, 1)
       for (std::int64_t j = 0; j < nb; ++j) {
         Decimation::Collapse& c = simulated[batch[j]];
+        if (c.turns_facet) { ran[j] = 0; continue; }
         if (tighten) {
           const double margin = 1e-6 * (std::abs(best_delta) + c.before.cost);
           c.lower_bound = std::max(c.lower_bound, dec.dualBound(c, c.before.cost + best_delta + 2 * margin) - c.before.cost);
@@ -871,14 +956,24 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
         run.push_back(batch[j]);
       }
     }
+    int refused = 0;
+    for (std::int64_t k : missing) refused += simulated[k].turns_facet ? 1 : 0;
+    report.refused_collapses += refused;
     report.simulations += static_cast<int>(run.size());
-    report.bounded_simulations += static_cast<int>(nm - static_cast<std::int64_t>(run.size()));
+    report.bounded_simulations += static_cast<int>(nm - static_cast<std::int64_t>(run.size())) - refused;
     if (params.reuse_simulations)
       for (std::int64_t k : run) cache[candidates[k]] = {simulated[k], dec.step()};
     std::size_t best = 0;
     for (std::size_t k = 1; k < simulated.size(); ++k)
       if (simulated[k].delta < simulated[best].delta) best = k;  // ties: the first in (u, v) order
-    if (!std::isfinite(simulated[best].delta)) break;
+    if (!std::isfinite(simulated[best].delta)) {
+      // Every drawn collapse was refused or failed: draw again (the draws are random), up to
+      // 100 times in a row; after an exhaustive step no other collapse is left.
+      if (exhaustive || ++fruitless_draws > 100) break;
+      if (rep.cancelled()) break;
+      continue;
+    }
+    fruitless_draws = 0;
     const Decimation::Collapse collapse = std::move(simulated[best]);
     dec.apply(collapse);
     ++report.collapses;
@@ -929,12 +1024,17 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
 
   // Post-processing (5.2.5): facets of low mass density go.
   const double mean_density = plan.meanFacetDensity();
-  TriangleMesh out;
-  std::vector<int> index(plan.vertexCount(), -1);
+  std::vector<char> kept(plan.facetCount(), 0);
   for (int f = 0; f < plan.facetCount(); ++f) {
     if (!plan.facetAlive(f)) continue;
     const double a = plan.facetArea(f), m = plan.massOnFacet(f);
-    if (!(m > 0) || !(a > 0) || m / a < params.density_threshold * mean_density) continue;
+    kept[f] = m > 0 && a > 0 && m / a >= params.density_threshold * mean_density;
+  }
+  report.restored_facets = restoreEnclosedFacets(plan, mean_density, kept);
+  TriangleMesh out;
+  std::vector<int> index(plan.vertexCount(), -1);
+  for (int f = 0; f < plan.facetCount(); ++f) {
+    if (!kept[f]) continue;
     Eigen::Vector3i t;
     for (int k = 0; k < 3; ++k) {
       int& id = index[plan.facet(f)[k]];

@@ -201,9 +201,14 @@ struct TransportReconstructionReport {
   int simulations = 0, reused_simulations = 0;
   /// Drawn collapses not simulated because their lower bound could not beat the best change.
   int bounded_simulations = 0;
+  /// Drawn collapses refused because they would turn a facet over (refuse_flips).
+  int refused_collapses = 0;
   int deleted_facets = 0;  // by the facet deletion
   int stacked_facets = 0;  // by the stacked-facet deletion
   int dangling_facets = 0;  // dropped at the end for want of points near a free corner
+  /// Facets the density filter dropped that came back: fewer than 3 points were to be
+  /// expected on them, and they close a hole (each edge had exactly one kept facet).
+  int restored_facets = 0;
   /// With outlier weights: distinct points weighing less than 1, and less than 0.1.
   std::size_t light_points = 0, outlier_points = 0;
   int output_vertices = 0, output_facets = 0;

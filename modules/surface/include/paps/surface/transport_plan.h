@@ -105,8 +105,9 @@ struct TransportParameters {
   /// sheet back over itself, and the transport cost barely sees it when the facet carries
   /// little mass (not in the manuscript; a classic check of mesh decimation). A relocation is
   /// shortened until no facet of the vertex turns; the reconstruction's decimation refuses
-  /// such a collapse. In `paps bench transport` (session 66) the default's mesh RMS fell to
-  /// 0.80x-0.93x on the cube and the fandisk block, 1.06x on rs1.
+  /// such a collapse. In `paps bench transport` (session 66, means of 3 seeds) the default's
+  /// mesh RMS became 0.80x-0.93x what it was on the cube and the fandisk block, in 0.73x-0.81x
+  /// the time, and 1.06x on rs1 (within its seeds' spread).
   bool refuse_flips = true;
   void validate() const;
 };

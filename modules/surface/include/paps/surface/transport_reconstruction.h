@@ -206,8 +206,8 @@ struct TransportReconstructionReport {
   int deleted_facets = 0;  // by the facet deletion
   int stacked_facets = 0;  // by the stacked-facet deletion
   int dangling_facets = 0;  // dropped at the end for want of points near a free corner
-  /// Facets the density filter dropped that came back: fewer than 3 points were to be
-  /// expected on them, and they close a hole (each edge had exactly one kept facet).
+  /// Facets the density filter dropped that came back: groups of them on which fewer than 3
+  /// points were to be expected in all, each filling a hole of the kept mesh exactly.
   int restored_facets = 0;
   /// With outlier weights: distinct points weighing less than 1, and less than 0.1.
   std::size_t light_points = 0, outlier_points = 0;

@@ -757,6 +757,17 @@ int TransportPlan::relax(const ProgressCallback& progress) {
   return sweeps;
 }
 
+bool TransportPlan::turnsAFacet(int v, const Eigen::Vector3d& to, int except) const {
+  for (int f : vertex_facets_[v]) {
+    const auto& t = facets_[f];
+    if (std::find(t.begin(), t.end(), except) != t.end()) continue;
+    const int slot = t[0] == v ? 0 : t[1] == v ? 1 : 2;
+    const Eigen::Vector3d &a = vertices_[t[(slot + 1) % 3]], &b = vertices_[t[(slot + 2) % 3]];
+    if ((a - vertices_[v]).cross(b - vertices_[v]).dot((a - to).cross(b - to)) < 0) return true;
+  }
+  return false;
+}
+
 double TransportPlan::relocate(int v) {
   // The position that minimises the cost of the current plan (5.2.4): the cost is quadratic in
   // v, sum m_ij |p_i - a_j v - (rest of b_j)|^2 over the bins of v and of its facets (a_j = 1
@@ -786,17 +797,8 @@ double TransportPlan::relocate(int v) {
   if (params_.refuse_flips) {
     // A move that turns a facet of v over folds the sheet: the step is halved until none
     // turns (at most 4 times), else v stays.
-    const auto turns = [&](const Eigen::Vector3d& to) {
-      for (int f : vertex_facets_[v]) {
-        const auto& t = facets_[f];
-        const int slot = t[0] == v ? 0 : t[1] == v ? 1 : 2;
-        const Eigen::Vector3d &a = vertices_[t[(slot + 1) % 3]], &b = vertices_[t[(slot + 2) % 3]];
-        if ((a - vertices_[v]).cross(b - vertices_[v]).dot((a - to).cross(b - to)) < 0) return true;
-      }
-      return false;
-    };
-    for (int halvings = 0; halvings < 4 && turns(moved); ++halvings) moved = 0.5 * (vertices_[v] + moved);
-    if (turns(moved)) moved = vertices_[v];
+    for (int halvings = 0; halvings < 4 && turnsAFacet(v, moved); ++halvings) moved = 0.5 * (vertices_[v] + moved);
+    if (turnsAFacet(v, moved)) moved = vertices_[v];
   }
   const double dist = (moved - vertices_[v]).norm();
   vertices_[v] = moved;

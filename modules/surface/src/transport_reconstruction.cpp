@@ -200,21 +200,6 @@ class Decimation {
     bool turns_facet = false;        // refused: a facet of u would turn over (refuse_flips)
   };
 
-  // Whether moving u onto v turns one of u's facets (without v) over: its normal after makes
-  // more than 90 degrees with its normal before. Such a collapse folds the sheet back over
-  // itself, and the transport cost barely sees it when the facet carries little mass.
-  bool turnsAFacet(int u, int v) const {
-    const Eigen::Vector3d& to = plan_.vertex(v);
-    for (int f : plan_.facetsOf(u)) {
-      const auto& t = plan_.facet(f);
-      if (std::find(t.begin(), t.end(), v) != t.end()) continue;  // degenerates
-      const int slot = t[0] == u ? 0 : t[1] == u ? 1 : 2;
-      const Eigen::Vector3d &a = plan_.vertex(t[(slot + 1) % 3]), &b = plan_.vertex(t[(slot + 2) % 3]);
-      const Eigen::Vector3d before = (a - plan_.vertex(u)).cross(b - plan_.vertex(u)), after = (a - to).cross(b - to);
-      if (before.dot(after) < 0) return true;
-    }
-    return false;
-  }
 
   // The collapse's stencil, simplices after and new facets' bins, and a lower bound of its
   // cost change (nearestBinCost after, minus the cost before); no program solved yet.
@@ -222,7 +207,9 @@ class Decimation {
     Collapse c;
     c.u = u;
     c.v = v;
-    if (plan_.parameters().refuse_flips && turnsAFacet(u, v)) {
+    // A collapse that turns a facet of u over folds the sheet back over itself; the transport
+    // cost barely sees it when the facet carries little mass.
+    if (plan_.parameters().refuse_flips && plan_.turnsAFacet(u, plan_.vertex(v), v)) {
       c.turns_facet = true;
       c.lower_bound = INFINITY;
       return c;

@@ -202,6 +202,11 @@ class TransportPlan {
   /// A progress callback hears of each sweep (of at most max_sweeps) and may cancel.
   int relax(const ProgressCallback& progress = {});
 
+  /// Whether moving v to `to` turns one of its facets over (the facet's normal by more than
+  /// 90 degrees); facets that also hold vertex `except` are not checked (a collapse of v onto
+  /// `except` removes them). The test of refuse_flips, for relocations and collapses alike.
+  bool turnsAFacet(int v, const Eigen::Vector3d& to, int except = -1) const;
+
   /// Vertex relocation (5.2.4): moves v halfway to the optimal position for the current plan,
   /// then re-solves its stencil. Returns the distance moved.
   double relocate(int v);

@@ -68,6 +68,10 @@ const char* kReconstructUsage =
     "                           0: never (default 20000: rs1 50,000 points to 100 vertices\n"
     "                           in 30-38 s instead of 129-135 s, about as close; on a sharp\n"
     "                           cube 1.5x the facets of a plain sample: docs/transport.md)\n"
+    "  --merge-points-per-vertex P\n"
+    "                           the merge keeps at least P points a vertex: at most\n"
+    "                           max(N, P x vertices) cells; in [0, 1000] (default 10; 0: N\n"
+    "                           alone). Fewer points a vertex leave holes in the mesh\n"
     "  --merge-crease-angle A   merging splits a cell whose points' normals fall in two groups\n"
     "                           more than A degrees apart (a crease), each side at its own\n"
     "                           centroid, when they are further apart than their noise; in\n"
@@ -164,7 +168,7 @@ int runReconstruct(int argc, char** argv) {
   const Arguments a = Arguments::parse(argc, argv, 2, {"quiet", "help", "timings", "allow-volume", "allow-flips"});
   if (a.has("help")) { std::fputs(kReconstructUsage, stdout); return 0; }
   a.allowOnly({"vertices", "initial-fraction", "candidates", "seed", "density-threshold", "deletion-threshold",
-               "stacked-threshold", "stacked-reach", "dangling-support", "outlier-neighbours", "max-points", "merge-crease-angle", "initial-complex", "bins-per-area", "max-bins", "bins-per-point", "quiet",
+               "stacked-threshold", "stacked-reach", "dangling-support", "outlier-neighbours", "max-points", "merge-points-per-vertex", "merge-crease-angle", "initial-complex", "bins-per-area", "max-bins", "bins-per-point", "quiet",
                "timings", "allow-volume", "allow-flips"});
   if (a.positional.size() != 2) throw InvalidParameter("arguments", std::to_string(a.positional.size()), "IN OUT.ply");
   a.requireFileOutput(".ply");  // checked before any work
@@ -182,6 +186,7 @@ int runReconstruct(int argc, char** argv) {
   p.dangling_support = a.real("dangling-support", p.dangling_support);
   p.outlier_neighbours = a.integer("outlier-neighbours", p.outlier_neighbours);
   p.max_points = a.integer("max-points", p.max_points);
+  p.merge_points_per_vertex = a.integer("merge-points-per-vertex", p.merge_points_per_vertex);
   p.merge_crease_angle = a.real("merge-crease-angle", p.merge_crease_angle);
   const std::string initial = a.text("initial-complex", "advancing-front");
   if (initial == "delaunay")
@@ -199,7 +204,7 @@ int runReconstruct(int argc, char** argv) {
                      {"density_threshold", "density-threshold"}, {"deletion_threshold", "deletion-threshold"},
                      {"stacked_threshold", "stacked-threshold"}, {"stacked_reach", "stacked-reach"},
                      {"dangling_support", "dangling-support"}, {"outlier_neighbours", "outlier-neighbours"}, {"max_points", "max-points"},
-                     {"merge_crease_angle", "merge-crease-angle"},
+                     {"merge_points_per_vertex", "merge-points-per-vertex"}, {"merge_crease_angle", "merge-crease-angle"},
                      {"bins_per_area", "bins-per-area"},
                      {"max_bins_per_facet", "max-bins"}, {"bins_per_point", "bins-per-point"}},
                     [&] { p.validate(); });
@@ -213,9 +218,9 @@ int runReconstruct(int argc, char** argv) {
               front ? "kept (all)" : "with mass", r.collapses, r.simulations, r.reused_simulations,
               r.bounded_simulations, r.refused_collapses);
   if (r.merge_cell > 0)
-    std::printf("reconstruct: %zu points merged into %zu (cells of %g m, %zu more for creases, spread %.4g in the "
-                "costs)\n",
-                r.points, r.transported_points, r.merge_cell, r.crease_points, r.merge_spread);
+    std::printf("reconstruct: %zu points merged into %zu (at most %zu asked; cells of %g m, %zu more for creases, "
+                "spread %.4g in the costs)\n",
+                r.points, r.transported_points, r.merge_target, r.merge_cell, r.crease_points, r.merge_spread);
   if (p.outlier_neighbours > 0)
     std::printf("reconstruct: outlier weights (%d neighbours): %zu points weigh less than 1, %zu less than 0.1\n",
                 p.outlier_neighbours, r.light_points, r.outlier_points);
@@ -224,11 +229,14 @@ int runReconstruct(int argc, char** argv) {
               r.deleted_facets, r.stacked_facets, r.dangling_facets, r.restored_facets, r.initial_cost, r.final_cost,
               r.rms_transport);
   // rs1 to 10,000 vertices merged into 20,000 points kept 8,986 border edges; from all its
-  // 114,373 points, 1,547 (docs/transport.md, session 66).
-  if (r.transported_points < 10 * static_cast<std::size_t>(p.target_vertices))
+  // 114,373 points, 1,547 (docs/transport.md, session 66). The merge keeps 10 a vertex by
+  // default (merge_points_per_vertex), up to the grid's steps: the warning is for inputs that
+  // have too few, or a merge asked for fewer.
+  const std::size_t wanted = 10 * static_cast<std::size_t>(p.target_vertices);
+  if (r.transported_points < wanted && !(r.merge_cell > 0 && r.merge_target >= wanted))
     std::fprintf(stderr,
                  "reconstruct: warning: %zu points for %d vertices (fewer than 10 a vertex): many small facets get no "
-                 "point and the mesh has holes; give more points (--max-points) or ask for fewer vertices\n",
+                 "point and the mesh has holes; give more points or ask for fewer vertices\n",
                  r.transported_points, p.target_vertices);
   std::printf("reconstruct: volume variation %.3g (a volume is refused above %g without --allow-volume)\n",
               r.volume_variation, kVolumeVariation);

@@ -674,6 +674,46 @@ TEST(MergeIntoCells, SplitsCellsAtCreasesSoTheirCentroidsLieOnTheFaces) {
     EXPECT_THROW(paps::mergeIntoCells(points, masses, 1500, &normals, bad), paps::InvalidParameter);
 }
 
+// The merge keeps 10 points a vertex by default: asked for many vertices, it merges into more
+// cells than max_points (rs1 at 2 points a vertex was left in shreds).
+TEST(TransportReconstruction, MergeKeepsTenPointsAVertex) {
+  paps::TransportReconstructionParameters d;
+  EXPECT_EQ(d.mergeTarget(), 20000u);  // 50 vertices: max_points
+  d.target_vertices = 3000;
+  EXPECT_EQ(d.mergeTarget(), 30000u);
+  d.merge_points_per_vertex = 0;
+  EXPECT_EQ(d.mergeTarget(), 20000u);
+  d.merge_points_per_vertex = 1000;
+  d.target_vertices = 100000000;  // no overflow: 1e11 cells asked
+  EXPECT_EQ(d.mergeTarget(), 100000000000u);
+  d.max_points = 0;
+  EXPECT_EQ(d.mergeTarget(), 0u);  // never merge
+  d = paps::TransportReconstructionParameters();
+  d.merge_points_per_vertex = 1001;
+  EXPECT_THROW(d.validate(), paps::InvalidParameter);
+  d.merge_points_per_vertex = -1;
+  EXPECT_THROW(d.validate(), paps::InvalidParameter);
+
+  const TriangleMesh cube = paps::synthetic::cube(0.5f, 4);
+  const paps::Positions points = paps::synthetic::sampleMesh(cube, 6000, 3);
+  auto p = smallRun();
+  p.transport = paps::TransportParameters();  // faster; the merge does not depend on it
+  p.max_points = 300;
+  p.target_vertices = 40;  // 400 cells at most
+  paps::TransportReconstructionReport r;
+  paps::transportReconstruct(points, p, &r);
+  EXPECT_EQ(r.merge_target, 400u);
+  EXPECT_GT(r.transported_points, 300u);
+  EXPECT_LE(r.transported_points, 400u);  // crease splits count towards it
+  EXPECT_GT(r.merge_cell, 0);
+  p.merge_points_per_vertex = 0;  // max_points alone
+  paps::TransportReconstructionReport q;
+  paps::transportReconstruct(points, p, &q);
+  EXPECT_EQ(q.merge_target, 300u);
+  EXPECT_LE(q.transported_points, 300u);
+  EXPECT_GT(q.merge_cell, r.merge_cell);
+}
+
 // 6,000 points of the cube merged into at most 600 reconstruct it as closely as 600 points
 // drawn from it do (the bounds of the first test); with max_points above the input, the mesh
 // is the unmerged one, bit for bit.
@@ -881,6 +921,7 @@ TEST(TransportReconstruction, RejectsBadInput) {
     for (int i = 0; i < 100; ++i) merging.emplace_back(5 + i % 5 * 1e-4f, 2.5f + i / 5 % 5 * 1e-4f, 1 + i / 25 * 1e-4f);
     auto merged = smallRun();
     merged.max_points = 100;
+    merged.merge_points_per_vertex = 0;  // 100 cells, not 10 a vertex (200)
     try {
       paps::transportReconstruct(merging, merged);
       ADD_FAILURE() << "a line was reconstructed";
@@ -932,6 +973,7 @@ TEST(TransportReconstruction, RejectsBadInput) {
   }
   p = smallRun();
   p.max_points = 3;  // too few points left to triangulate
+  p.merge_points_per_vertex = 0;
   EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidInput);
   paps::TransportReconstruction<pcl::PointXYZ> stage;  // no input cloud
   pcl::PolygonMesh mesh;

@@ -44,9 +44,17 @@ void TransportReconstructionParameters::validate() const {
     throw InvalidParameter("dangling_support", detail::toString(dangling_support), "in [0, 1000]");
   requireInRange("outlier_neighbours", outlier_neighbours, 0, 1000);
   requireInRange("max_points", max_points, 0, 1000000000);
+  requireInRange("merge_points_per_vertex", merge_points_per_vertex, 0, 1000);
   if (!(merge_crease_angle >= 0) || !(merge_crease_angle <= 90))
     throw InvalidParameter("merge_crease_angle", detail::toString(merge_crease_angle), "in [0, 90]");
   transport.validate();
+}
+
+std::size_t TransportReconstructionParameters::mergeTarget() const {
+  if (max_points <= 0) return 0;
+  return std::max(static_cast<std::size_t>(max_points),
+                  static_cast<std::size_t>(std::max(merge_points_per_vertex, 0)) *
+                      static_cast<std::size_t>(std::max(target_vertices, 0)));
 }
 
 namespace {
@@ -694,7 +702,9 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   // dangling filter below looks at the distinct ones.
   std::vector<Eigen::Vector3d> distinct_points;
   report.transported_points = points.size();
-  if (params.max_points > 0 && points.size() > static_cast<std::size_t>(params.max_points)) {
+  const std::size_t merge_target = params.mergeTarget();
+  report.merge_target = merge_target;
+  if (merge_target > 0 && points.size() > merge_target) {
     ProgressReporter merging(progress, "transport merge", 1);  // only when merging: a --timings line
     Normals normals;
     if (params.merge_crease_angle > 0) {
@@ -702,7 +712,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
       const SpatialIndex index(distinct);
       normals = estimateNormals(distinct, NeighbourGraph::byCount(distinct, index, kMergeNormalNeighbours));
     }
-    MergedPoints merged = mergeIntoCells(points, masses, static_cast<std::size_t>(params.max_points),
+    MergedPoints merged = mergeIntoCells(points, masses, merge_target,
                                          normals.empty() ? nullptr : &normals, params.merge_crease_angle);
     merging.advance();
     merging.throwIfCancelled();
@@ -715,7 +725,7 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
     report.merge_spread = merged.spread;
     report.crease_points = merged.crease_points;
     if (points.size() < 4)
-      throw InvalidInput("transport reconstruction: merging into at most " + std::to_string(params.max_points) +
+      throw InvalidInput("transport reconstruction: merging into at most " + std::to_string(merge_target) +
                          " points left " + std::to_string(points.size()) + " (raise max_points)");
   }
 

@@ -932,6 +932,21 @@ TEST(TransportReconstruction, RejectsBadInput) {
   }
   const Positions few = paps::synthetic::sampleMesh(paps::synthetic::cube(0.5f, 2), 100, 1);
   EXPECT_THROW(paps::transportReconstruct(few, smallRun()), paps::InvalidParameter);  // 20 start vertices, not above 20
+  // The message says what to change: the fraction while the points allow it, else the vertices.
+  const auto message = [&](const paps::TransportReconstructionParameters& q) {
+    try {
+      paps::transportReconstruct(few, q);
+    } catch (const paps::InvalidParameter& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(message(smallRun()).find("raise initial_fraction (--initial-fraction; now 0.2) to at least 0.21)"), std::string::npos)
+      << message(smallRun());
+  auto many = smallRun();
+  many.target_vertices = 100;
+  EXPECT_NE(message(many).find("the input has 100 distinct points: ask for fewer vertices"), std::string::npos)
+      << message(many);
   auto p = smallRun();
   p.initial_fraction = 0;
   EXPECT_THROW(paps::transportReconstruct(few, p), paps::InvalidParameter);

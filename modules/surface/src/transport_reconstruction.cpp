@@ -825,10 +825,24 @@ TriangleMesh transportReconstruct(const Positions& input, const TransportReconst
   for (const auto& t : dt_facets) plan.addFacet(t[0], t[1], t[2]);
   report.initial_vertices = plan.vertexCount();
   report.initial_facets = plan.facetCount();
-  if (report.initial_vertices <= params.target_vertices)
+  if (report.initial_vertices <= params.target_vertices) {
+    // What to change: the fraction, if the points allow it; else the merge or the vertices.
+    const std::size_t n = report.transported_points;
+    const double fraction = static_cast<double>(params.target_vertices + 1) / static_cast<double>(n);
+    std::string how;
+    if (fraction <= 1)
+      how = "raise initial_fraction (--initial-fraction; now " + detail::toString(params.initial_fraction) + ") to at least " +
+            detail::toString(std::ceil(fraction * 1000 - 1e-9) / 1000);
+    else if (report.merge_cell > 0)
+      how = "the input was merged into " + std::to_string(n) +
+            " points: raise max_points (--max-points) or merge_points_per_vertex (--merge-points-per-vertex), or ask "
+            "for fewer vertices";
+    else
+      how = "the input has " + std::to_string(n) + " distinct points: ask for fewer vertices";
     throw InvalidParameter("target_vertices", std::to_string(params.target_vertices),
                            "fewer than the " + std::to_string(report.initial_vertices) +
-                               " vertices of the initial triangulation (raise initial_fraction)");
+                               " vertices of the initial triangulation (" + how + ")");
+  }
 
   // Initial plan (5.2.2): nearest vertex, relaxation, then only the facets with mass remain.
   plan.assignToNearestVertices();

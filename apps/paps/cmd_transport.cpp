@@ -229,15 +229,15 @@ int runReconstruct(int argc, char** argv) {
               r.deleted_facets, r.stacked_facets, r.dangling_facets, r.restored_facets, r.initial_cost, r.final_cost,
               r.rms_transport);
   // rs1 to 10,000 vertices merged into 20,000 points kept 8,986 border edges; from all its
-  // 114,373 points, 1,547 (docs/transport.md, session 66). The merge keeps 10 a vertex by
-  // default (merge_points_per_vertex), up to the grid's steps: the warning is for inputs that
-  // have too few, or a merge asked for fewer.
-  const std::size_t wanted = 10 * static_cast<std::size_t>(p.target_vertices);
+  // 114,373 points, 1,547 (docs/transport.md, session 66). The merge keeps kPointsPerVertex
+  // by default (merge_points_per_vertex), up to the grid's steps: the warning is for inputs
+  // that have too few, or a merge asked for fewer.
+  const std::size_t wanted = kPointsPerVertex * static_cast<std::size_t>(p.target_vertices);
   if (r.transported_points < wanted && !(r.merge_cell > 0 && r.merge_target >= wanted))
     std::fprintf(stderr,
-                 "reconstruct: warning: %zu points for %d vertices (fewer than 10 a vertex): many small facets get no "
+                 "reconstruct: warning: %zu points for %d vertices (fewer than %d a vertex): many small facets get no "
                  "point and the mesh has holes; give more points or ask for fewer vertices\n",
-                 r.transported_points, p.target_vertices);
+                 r.transported_points, p.target_vertices, kPointsPerVertex);
   std::printf("reconstruct: volume variation %.3g (a volume is refused above %g without --allow-volume)\n",
               r.volume_variation, kVolumeVariation);
   saveMeshAtomic(out_path, mesh);

@@ -208,7 +208,6 @@ class Decimation {
     bool turns_facet = false;        // refused: a facet of u would turn over (refuse_flips)
   };
 
-
   // The collapse's stencil, simplices after and new facets' bins, and a lower bound of its
   // cost change (nearestBinCost after, minus the cost before); no program solved yet.
   Collapse prepare(int u, int v) const {

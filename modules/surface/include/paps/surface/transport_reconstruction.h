@@ -6,10 +6,10 @@
 // facet density. The output is a simplicial complex (possibly non-manifold) with sharp
 // creases and boundaries kept, robust to noise and outliers. Costly: meant for point sets of
 // thousands to tens of thousands of points reduced to tens to hundreds of vertices; larger
-// inputs are merged into at most max_points (20,000) cells first, or 10 a vertex if more. By default the decimation
-// starts from CGAL's advancing-front surface over the subset (InitialComplex::AdvancingFront,
-// a near-manifold output); InitialComplex::Delaunay is the manuscript's start, whose output
-// stacks layers of facets over the surface.
+// inputs are merged into at most max_points (20,000) cells first, or 10 a vertex if more. By
+// default the decimation starts from CGAL's advancing-front surface over the subset
+// (InitialComplex::AdvancingFront, a near-manifold output); InitialComplex::Delaunay is the
+// manuscript's start, whose output stacks layers of facets over the surface.
 #include <cstddef>
 #include <cstdint>
 #include <vector>
@@ -39,6 +39,11 @@ enum class InitialComplex {
   /// and output, in less time (not in the manuscript; docs/transport.md).
   AdvancingFront,
 };
+
+/// Points a vertex below which many small facets get no point and the mesh has holes: the
+/// merge keeps at least this many by default (merge_points_per_vertex), and `paps reconstruct`
+/// warns below it.
+constexpr int kPointsPerVertex = 10;
 
 struct TransportReconstructionParameters {
   /// Share of the points in the initial Delaunay triangulation, in (0, 1]; at least 4 points.
@@ -140,7 +145,7 @@ struct TransportReconstructionParameters {
   /// about 10 points a vertex many small facets get no point and are dropped: rs1 to 10,000
   /// vertices merged into 20,000 points kept 8,986 border edges, from all its 114,373 points
   /// 1,547 (docs/transport.md). 0: max_points alone; in [0, 1000].
-  int merge_points_per_vertex = 10;
+  int merge_points_per_vertex = kPointsPerVertex;
   /// Merging keeps creases: a cell whose points' normals (PCA of their kMergeNormalNeighbours
   /// nearest distinct points) fall in two clusters more than this many degrees apart is split
   /// into its sides, each merged at its own centroid, which lies on its face (mergeIntoCells).
